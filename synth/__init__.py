@@ -1,0 +1,3 @@
+"""synth: procedural synthetic face data (bpy-free core)."""
+
+__version__ = "0.1.0"

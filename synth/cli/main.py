@@ -1,0 +1,69 @@
+"""The ``synth`` command line. Each command group lives in its own module and is added here.
+
+User errors (:class:`synth.errors.SynthError`) print one line to stderr and exit with code 2.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import typer
+
+app = typer.Typer(
+    name="synth",
+    help="Procedural synthetic face data with Blender (Cafca-style), and tools around it.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def _register() -> None:
+    from synth.cli import model_cmd
+
+    app.add_typer(model_cmd.app, name="model")
+    # Optional command groups: present once their modules exist.
+    import importlib
+
+    for mod, attr in (("synth.cli.config_cmd", "register"), ("synth.cli.plan_cmd", "register"),
+                      ("synth.cli.render_cmd", "register"), ("synth.cli.assets_cmd", "register")):
+        try:
+            m = importlib.import_module(mod)
+        except ModuleNotFoundError as e:
+            if e.name == mod:
+                continue
+            raise
+        getattr(m, attr)(app)
+
+
+_register()
+
+
+def main(argv: list[str] | None = None) -> int:
+    from synth.errors import SynthError
+
+    try:
+        app(args=argv, standalone_mode=False)
+    except SynthError as e:
+        print(f"synth: error: {e}", file=sys.stderr)
+        return e.exit_code
+    except typer.Exit as e:
+        return e.exit_code
+    except typer.Abort:
+        print("synth: aborted", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:
+        print("synth: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # click usage errors
+        import click
+
+        if isinstance(e, click.ClickException):
+            e.show()
+            return 2
+        raise
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
