@@ -26,7 +26,8 @@ def _register() -> None:
     import importlib
 
     for mod, attr in (("synth.cli.config_cmd", "register"), ("synth.cli.plan_cmd", "register"),
-                      ("synth.cli.render_cmd", "register"), ("synth.cli.assets_cmd", "register")):
+                      ("synth.cli.render_cmd", "register"), ("synth.cli.dataset_cmd", "register"),
+                      ("synth.cli.assets_cmd", "register")):
         try:
             m = importlib.import_module(mod)
         except ModuleNotFoundError as e:

@@ -57,18 +57,25 @@ class HeadModel:
         dt = self.dtype
         self._template = d.template.astype(dt).reshape(1, V * 3)
         # scaled bases, flattened to (K, 3V) for one GEMM per call
-        self._id_basis = (d.identity_basis * d.identity_scale[:, None, None]).astype(dt).reshape(self.Ki, V * 3)
-        self._ex_basis = (d.expression_basis * d.expression_scale[:, None, None]).astype(dt).reshape(self.Ke, V * 3)
+        # identity and expression bases stacked into one (Ki + Ke, 3V) matrix: one GEMM per call
+        self._basis = np.concatenate([
+            (d.identity_basis * d.identity_scale[:, None, None]).reshape(self.Ki, V * 3),
+            (d.expression_basis * d.expression_scale[:, None, None]).reshape(self.Ke, V * 3)]).astype(dt)
         self._joint_rest = d.joint_rest.astype(dt).reshape(1, self.J * 3)
         self._joint_basis = (d.joint_identity_basis * d.identity_scale[:, None, None]).astype(dt).reshape(
             self.Ki, self.J * 3)
         self._parents = d.joint_parents.astype(np.int64)
-        # sparse skinning: per joint, the vertices it influences and their weights
+        # sparse skinning: vertices bound rigidly to one joint are transformed once; only the
+        # blended ones (weights split between joints) are accumulated per joint
         w = d.skin_weights
+        rigid = w.max(1) >= 1.0 - 1e-6
+        self._rigid = [np.nonzero(rigid & (w[:, j] >= 1.0 - 1e-6))[0] for j in range(self.J)]
+        self._blend_idx = np.nonzero(~rigid)[0]
+        wb = w[self._blend_idx]
         self._skin = []
         for j in range(self.J):
-            idx = np.nonzero(w[:, j] > 0)[0]
-            self._skin.append((idx, w[idx, j].astype(dt)[None, :, None]))
+            sel = np.nonzero(wb[:, j] > 0)[0]
+            self._skin.append((sel, wb[sel, j].astype(dt)[None, :, None]))
         # landmarks: vertex indices of the corners and barycentric weights
         self._lm = {s: (d.triangles[tri].astype(np.int64), bary.astype(dt)) for s, (tri, bary) in d.landmarks.items()}
         self.joint_index = {n: i for i, n in enumerate(d.joint_names)}
@@ -111,8 +118,7 @@ class HeadModel:
                 raise CodeError(f"batch sizes differ: identity {B}, expression {psi.shape[0]}", "expression",
                                 "pass equal batch sizes or a single code")
         rot, trans = self._check_pose(joint_rotations, translation, B)
-        shaped = beta @ self._id_basis
-        shaped += psi @ self._ex_basis
+        shaped = np.concatenate([beta, psi], axis=1) @ self._basis
         shaped += self._template
         shaped = shaped.reshape(B, self.V, 3)
         joints = self._joints(beta)
@@ -187,10 +193,16 @@ class HeadModel:
         if identity_pose:
             return shaped
         Rw, At = A
-        out = np.zeros_like(shaped)
-        for j, (idx, w) in enumerate(self._skin):
-            if idx.size == 0:
-                continue
-            v = shaped[:, idx]  # (B, n, 3)
-            out[:, idx] += w * (np.einsum("bnk,bik->bni", v, Rw[:, j], optimize=True) + At[:, j, None, :])
+        RwT = np.swapaxes(Rw, -1, -2)
+        out = np.empty_like(shaped)
+        for j, idx in enumerate(self._rigid):
+            if idx.size:
+                out[:, idx] = np.matmul(shaped[:, idx], RwT[:, j]) + At[:, j, None, :]
+        if self._blend_idx.size:
+            vb = shaped[:, self._blend_idx]
+            acc = np.zeros_like(vb)
+            for j, (sel, w) in enumerate(self._skin):
+                if sel.size:
+                    acc[:, sel] += w * (np.matmul(vb[:, sel], RwT[:, j]) + At[:, j, None, :])
+            out[:, self._blend_idx] = acc
         return out

@@ -1,0 +1,75 @@
+"""Build the head mesh object from model arrays; update it per expression without rebuilding."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from synth.segmentation import CLASSES
+
+#: Region -> segmentation class, in priority order (first match wins for a polygon).
+REGION_CLASSES = (("teeth", "teeth"), ("eyes", "eyes"), ("mouth_interior", "mouth_interior"))
+
+
+def polygon_classes(data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(offsets, indices, class id per polygon). A polygon takes a region's class when all
+    its corners are in that region; everything else is skin."""
+    if data.poly_offsets is not None:
+        off, idx = data.poly_offsets.astype(np.int64), data.poly_indices.astype(np.int64)
+    else:
+        off = np.arange(0, data.triangles.size + 1, 3, dtype=np.int64)
+        idx = data.triangles.reshape(-1).astype(np.int64)
+    cls = np.full(len(off) - 1, CLASSES["skin"], np.int32)
+    counts = np.diff(off)
+    assigned = np.zeros(len(cls), bool)
+    for region, name in REGION_CLASSES:
+        if region not in data.regions:
+            continue
+        member = np.zeros(data.num_vertices, bool)
+        member[data.regions[region]] = True
+        all_in = np.add.reduceat(member[idx].astype(np.int64), off[:-1]) == counts
+        sel = all_in & ~assigned
+        cls[sel] = CLASSES[name]
+        assigned |= sel
+    return off, idx, cls
+
+
+def build_head_object(data, vertices: np.ndarray, materials: dict[int, "bpy.types.Material"],
+                      name: str = "head") -> "bpy.types.Object":
+    """Create the mesh (polygons with quads kept, UVs, one material slot per class)."""
+    off, idx, cls = polygon_classes(data)
+    me = bpy.data.meshes.new(name)
+    V = vertices.shape[0]
+    me.vertices.add(V)
+    me.vertices.foreach_set("co", np.ascontiguousarray(vertices, np.float32).ravel())
+    me.loops.add(len(idx))
+    me.loops.foreach_set("vertex_index", idx.astype(np.int32))
+    P = len(off) - 1
+    me.polygons.add(P)
+    me.polygons.foreach_set("loop_start", off[:-1].astype(np.int32))
+    me.polygons.foreach_set("loop_total", np.diff(off).astype(np.int32))
+    if data.uvs is not None:
+        uv_layer = me.uv_layers.new(name="UVMap")
+        if data.poly_uv is not None and data.poly_offsets is not None:
+            corner_uv = data.uvs[data.poly_uv]
+        else:
+            corner_uv = data.uvs[data.tri_uv.reshape(-1)]
+        uv_layer.data.foreach_set("uv", np.ascontiguousarray(corner_uv, np.float32).ravel())
+    slots = sorted(set(cls.tolist()))
+    slot_of = {c: i for i, c in enumerate(slots)}
+    for c in slots:
+        me.materials.append(materials[c])
+    me.polygons.foreach_set("material_index", np.array([slot_of[c] for c in cls.tolist()], np.int32))
+    me.polygons.foreach_set("use_smooth", np.ones(P, bool))
+    me.update()
+    me.validate(clean_customdata=False)
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def set_vertices(ob, vertices: np.ndarray) -> None:
+    """Expression change: overwrite coordinates in place (no rebuild)."""
+    me = ob.data
+    me.vertices.foreach_set("co", np.ascontiguousarray(vertices, np.float32).ravel())
+    me.update()

@@ -1,0 +1,119 @@
+"""Materials for the head: physically based skin with subsurface scattering, eyes, teeth, mouth.
+
+Every material's ``pass_index`` is its segmentation class ID (rendered through the
+material-index pass), so labels come straight from the renderer.
+"""
+
+from __future__ import annotations
+
+import bpy
+
+from synth.segmentation import CLASSES
+
+
+def _principled(name: str, cls: str):
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    mat.pass_index = CLASSES[cls]
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    return mat, bsdf
+
+
+def skin_material(albedo, roughness: float = 0.45, redness: float = 0.0, pore_strength: float = 0.15,
+                  pore_scale: float = 900.0, sss_scale: float = 0.006, seed: float = 0.0):
+    """Principled skin: SSS (random walk), albedo modulated by low-frequency redness
+    variation and a high-frequency pore bump. All variation is procedural (noise textures
+    seeded by ``seed``), so it follows any identity and expression."""
+    mat, bsdf = _principled("skin", "skin")
+    nt = mat.node_tree
+    nodes, links = nt.nodes, nt.links
+    coord = nodes.new("ShaderNodeTexCoord")
+    # low-frequency blotchiness / redness
+    blotch = nodes.new("ShaderNodeTexNoise")
+    blotch.noise_dimensions = "4D"
+    blotch.inputs["W"].default_value = seed
+    blotch.inputs["Scale"].default_value = 12.0
+    blotch.inputs["Detail"].default_value = 3.0
+    links.new(coord.outputs["Object"], blotch.inputs["Vector"])
+    base = nodes.new("ShaderNodeRGB")
+    base.outputs[0].default_value = (*albedo, 1.0)
+    red = nodes.new("ShaderNodeRGB")
+    red.outputs[0].default_value = (min(1.0, albedo[0] * 1.1), albedo[1] * 0.7, albedo[2] * 0.75, 1.0)
+    mix = nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    ramp = nodes.new("ShaderNodeMath")
+    ramp.operation = "MULTIPLY"
+    ramp.inputs[1].default_value = float(redness)
+    links.new(blotch.outputs["Fac"], ramp.inputs[0])
+    links.new(ramp.outputs[0], mix.inputs["Factor"])
+    links.new(base.outputs[0], mix.inputs["A"])
+    links.new(red.outputs[0], mix.inputs["B"])
+    links.new(mix.outputs["Result"], bsdf.inputs["Base Color"])
+    # pores: fine noise into a bump
+    pores = nodes.new("ShaderNodeTexNoise")
+    pores.noise_dimensions = "4D"
+    pores.inputs["W"].default_value = seed + 17.0
+    pores.inputs["Scale"].default_value = pore_scale
+    pores.inputs["Detail"].default_value = 1.0
+    links.new(coord.outputs["Object"], pores.inputs["Vector"])
+    bump = nodes.new("ShaderNodeBump")
+    bump.inputs["Strength"].default_value = pore_strength
+    bump.inputs["Distance"].default_value = 0.0003
+    links.new(pores.outputs["Fac"], bump.inputs["Height"])
+    links.new(bump.outputs["Normal"], bsdf.inputs["Normal"])
+    # roughness varies slightly with the blotch noise (oilier T-zone look)
+    rough = nodes.new("ShaderNodeMapRange")
+    rough.inputs["To Min"].default_value = max(0.05, roughness - 0.1)
+    rough.inputs["To Max"].default_value = min(1.0, roughness + 0.1)
+    links.new(blotch.outputs["Fac"], rough.inputs["Value"])
+    links.new(rough.outputs["Result"], bsdf.inputs["Roughness"])
+    bsdf.subsurface_method = "RANDOM_WALK"
+    bsdf.inputs["Subsurface Weight"].default_value = 1.0
+    bsdf.inputs["Subsurface Radius"].default_value = (1.0, 0.35, 0.2)
+    bsdf.inputs["Subsurface Scale"].default_value = float(sss_scale)
+    bsdf.inputs["IOR"].default_value = 1.4
+    return mat
+
+
+def eye_material(iris_color=(0.2, 0.12, 0.05)):
+    """Sclera white with an iris/pupil disc around the eye's forward axis (object-space
+    gradient on the eyeball), under a glossy cornea-like coat."""
+    mat, bsdf = _principled("eye", "eyes")
+    bsdf.inputs["Base Color"].default_value = (0.8, 0.78, 0.75, 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.25
+    bsdf.inputs["Coat Weight"].default_value = 1.0
+    bsdf.inputs["Coat Roughness"].default_value = 0.02
+    bsdf.inputs["Coat IOR"].default_value = 1.376
+    mat["iris_color"] = list(iris_color)
+    return mat
+
+
+def teeth_material():
+    mat, bsdf = _principled("teeth", "teeth")
+    bsdf.inputs["Base Color"].default_value = (0.85, 0.82, 0.72, 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.3
+    bsdf.inputs["Subsurface Weight"].default_value = 0.3
+    bsdf.inputs["Subsurface Scale"].default_value = 0.002
+    return mat
+
+
+def mouth_material():
+    mat, bsdf = _principled("mouth_interior", "mouth_interior")
+    bsdf.inputs["Base Color"].default_value = (0.35, 0.06, 0.07, 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.35
+    bsdf.inputs["Subsurface Weight"].default_value = 0.5
+    bsdf.inputs["Subsurface Scale"].default_value = 0.003
+    return mat
+
+
+def head_materials(skin_params: dict, albedo) -> dict[int, "bpy.types.Material"]:
+    """Material per segmentation class for the head mesh."""
+    return {
+        CLASSES["skin"]: skin_material(albedo, roughness=skin_params.get("roughness", 0.45),
+                                       redness=skin_params.get("redness", 0.3),
+                                       pore_strength=skin_params.get("pore_strength", 0.15),
+                                       seed=float(skin_params.get("noise_seed", 0.0))),
+        CLASSES["eyes"]: eye_material(tuple(skin_params.get("iris_color", (0.2, 0.12, 0.05)))),
+        CLASSES["teeth"]: teeth_material(),
+        CLASSES["mouth_interior"]: mouth_material(),
+    }

@@ -1,0 +1,43 @@
+"""Render the current camera view with Cycles and return its passes as numpy arrays."""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from blender_scripts.scene import VIEW_LAYER
+
+BACKGROUND_DEPTH = np.inf  # depth stored for background pixels (alpha == 0): see docs/frame-format.md
+
+
+def render_view(tmp_dir: Path, seed: int) -> dict:
+    """Render with the given Cycles seed; returns rgba (H,W,4), depth (H,W) camera z in metres
+    (background: inf), normals (H,W,3) world space, segmentation (H,W) uint32 class IDs, and the
+    time Cycles spent (seconds)."""
+    import OpenEXR
+
+    scene = bpy.context.scene
+    scene.cycles.seed = int(seed) % (2 ** 31)
+    path = Path(tmp_dir) / f"render_{os.getpid()}.exr"
+    scene.render.filepath = str(path)
+    t0 = time.perf_counter()
+    bpy.ops.render.render(write_still=True)
+    t_render = time.perf_counter() - t0
+    ch = OpenEXR.File(str(path), separate_channels=True).channels()
+    os.unlink(path)
+    p = VIEW_LAYER + "."
+    rgba = np.stack([ch[p + "Combined." + c].pixels for c in "RGBA"], -1)
+    depth = ch[p + "Depth.Z"].pixels.astype(np.float32)
+    normals = np.stack([ch[p + "Normal." + c].pixels for c in "XYZ"], -1).astype(np.float32)
+    seg = np.rint(ch[p + "IndexMA.X"].pixels).astype(np.uint32)
+    alpha = rgba[..., 3]
+    background = alpha <= 0.0
+    depth = np.where(background | (depth >= 1e9), BACKGROUND_DEPTH, depth).astype(np.float32)
+    seg[background] = 0
+    normals[background] = 0.0
+    return {"rgba": rgba.astype(np.float32), "depth": depth, "normals": normals, "segmentation": seg,
+            "render_seconds": t_render}

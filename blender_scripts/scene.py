@@ -1,0 +1,137 @@
+"""Scene lifecycle and Cycles settings. The only place (with its siblings) that imports bpy.
+
+One scene is built per identity; expressions are applied as vertex updates and views as
+camera moves, so a scene is never rebuilt per view.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import bpy
+
+VIEW_LAYER = "ViewLayer"
+
+
+def reset() -> None:
+    """Empty factory scene and purge orphan data (keeps memory flat across scenes)."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    purge()
+
+
+def purge() -> None:
+    for _ in range(3):
+        removed = bpy.data.orphans_purge(do_local_ids=True, do_linked_ids=True, do_recursive=True)
+        if not removed:
+            break
+
+
+def _pick_device(scene, wanted: str) -> str:
+    """'auto' -> OptiX, then CUDA, else CPU. Returns what was chosen."""
+    if wanted == "cpu":
+        scene.cycles.device = "CPU"
+        return "cpu"
+    try:
+        prefs = bpy.context.preferences.addons["cycles"].preferences
+    except KeyError:
+        scene.cycles.device = "CPU"
+        return "cpu"
+    order = ["OPTIX", "CUDA"] if wanted == "auto" else [wanted.upper()]
+    for backend in order:
+        try:
+            prefs.compute_device_type = backend
+            prefs.refresh_devices()
+        except (TypeError, ValueError):
+            continue
+        gpus = [d for d in prefs.devices if d.type == backend]
+        if gpus:
+            for d in prefs.devices:
+                d.use = d.type == backend
+            scene.cycles.device = "GPU"
+            return backend.lower()
+    if wanted not in ("auto", "cpu"):
+        raise RuntimeError(f"render device '{wanted}' requested but no such GPU is available")
+    scene.cycles.device = "CPU"
+    return "cpu"
+
+
+def configure_render(settings: dict[str, Any], width: int, height: int) -> dict[str, Any]:
+    """Apply render settings; returns the effective settings (recorded in frame JSON)."""
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    device = _pick_device(scene, str(settings.get("device", "auto")).lower())
+    c = scene.cycles
+    c.samples = int(settings["samples"])
+    c.use_adaptive_sampling = bool(settings.get("adaptive", False))
+    if c.use_adaptive_sampling:
+        c.adaptive_threshold = float(settings.get("adaptive_threshold", 0.01))
+    c.use_denoising = bool(settings.get("denoise", False))
+    if c.use_denoising:
+        c.denoiser = "OPENIMAGEDENOISE" if device == "cpu" else str(settings.get("gpu_denoiser", "OPTIX")).upper()
+        c.denoising_input_passes = "RGB_ALBEDO_NORMAL"
+    c.max_bounces = int(settings.get("max_bounces", 8))
+    c.use_animated_seed = False
+    c.seed = 0
+    c.sample_clamp_indirect = float(settings.get("clamp_indirect", 10.0))
+    c.pixel_filter_width = float(settings.get("filter_width", 1.5))
+    scene.render.resolution_x = int(width)
+    scene.render.resolution_y = int(height)
+    scene.render.resolution_percentage = 100
+    scene.render.film_transparent = True
+    scene.render.use_persistent_data = True  # keep BVH/shaders between the views of a scene
+    scene.render.threads_mode = "AUTO"
+    scene.view_settings.view_transform = "Standard"  # EXR stores linear scene-referred values
+    scene.display_settings.display_device = "sRGB"
+    vl = scene.view_layers[0]
+    vl.name = VIEW_LAYER
+    vl.use_pass_z = True
+    vl.use_pass_normal = True
+    vl.use_pass_material_index = True
+    settings_out = {
+        "engine": "CYCLES",
+        "device": device,
+        "samples": c.samples,
+        "adaptive": c.use_adaptive_sampling,
+        "denoise": c.use_denoising,
+        "denoiser": c.denoiser if c.use_denoising else None,
+        "max_bounces": c.max_bounces,
+        "filter_width": c.pixel_filter_width,
+    }
+    if c.use_adaptive_sampling:
+        settings_out["adaptive_threshold"] = c.adaptive_threshold
+    img = scene.render.image_settings
+    img.file_format = "OPEN_EXR_MULTILAYER"
+    img.color_depth = "32"
+    img.exr_codec = "NONE"  # intermediate file, repacked by synth.exr
+    return settings_out
+
+
+def uniform_environment(strength: float = 1.0, color=(1.0, 1.0, 1.0)) -> None:
+    """One uniform, well-lit environment (the paper's setting): no directional shadows."""
+    scene = bpy.context.scene
+    world = bpy.data.worlds.new("synth_uniform")
+    world.use_nodes = True
+    bg = world.node_tree.nodes["Background"]
+    bg.inputs["Color"].default_value = (*color, 1.0)
+    bg.inputs["Strength"].default_value = float(strength)
+    scene.world = world
+
+
+def hdr_environment(path: str, strength: float = 1.0, rotation_z_deg: float = 0.0) -> None:
+    """An HDR environment map (optional diversity, as in the paper's ablation)."""
+    scene = bpy.context.scene
+    world = bpy.data.worlds.new("synth_hdr")
+    world.use_nodes = True
+    nt = world.node_tree
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(path, check_existing=True)
+    mapping = nt.nodes.new("ShaderNodeMapping")
+    coord = nt.nodes.new("ShaderNodeTexCoord")
+    mapping.inputs["Rotation"].default_value[2] = math.radians(rotation_z_deg)
+    nt.links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+    nt.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+    bg = nt.nodes["Background"]
+    bg.inputs["Strength"].default_value = float(strength)
+    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
+    scene.world = world
