@@ -12,6 +12,7 @@ import numpy as np
 def _atomic_write(path: Path, data: bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    os.chmod(tmp, 0o644)  # mkstemp creates 0600; a model or mesh is meant to be shared
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)

@@ -291,6 +291,7 @@ def write_model(m: HeadModelData, path: str | os.PathLike, compress: bool = Fals
     path.parent.mkdir(parents=True, exist_ok=True)
     members = _to_members(m)
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    os.chmod(tmp, 0o644)  # mkstemp creates 0600; a model or mesh is meant to be shared
     try:
         with os.fdopen(fd, "wb") as f:
             (np.savez_compressed if compress else np.savez)(f, **members)

@@ -1,0 +1,282 @@
+"""General mesh utilities (numpy/scipy, no Blender): sphere fit, rigid fit, farthest-point
+sampling, connectivity, boundaries, vertex-to-triangle landmarks.
+
+Every function is deterministic (no random numbers) and works on plain arrays:
+``vertices`` (V, 3) float, ``triangles`` (T, 3) int. Nothing here knows about a specific
+head model; importers and builders combine these with their own rules.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components as _cc
+
+
+# --------------------------------------------------------------------------- fitting
+
+def fit_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """Least-squares sphere through ``points`` (N >= 4, not coplanar): (centre (3,), radius).
+
+    Algebraic fit: |p|^2 = 2 c.p + (r^2 - |c|^2) is linear in (c, r^2 - |c|^2), solved in
+    float64 after centring the points for conditioning. The centre is a smooth function
+    of the points, so small per-vertex offsets give (nearly) linear centre offsets.
+    """
+    p = np.asarray(points, np.float64)
+    if p.ndim != 2 or p.shape[1] != 3 or p.shape[0] < 4:
+        raise ValueError("fit_sphere needs (N >= 4, 3) points")
+    mu = p.mean(0)
+    q = p - mu
+    A = np.c_[2.0 * q, np.ones(len(q))]
+    b = np.einsum("ij,ij->i", q, q)
+    x, *_ = np.linalg.lstsq(A, b, rcond=None)
+    c = x[:3]
+    r = float(np.sqrt(max(x[3] + c @ c, 0.0)))
+    return c + mu, r
+
+
+def fit_sphere_robust(points: np.ndarray, trim_sigma: float = 2.0,
+                      iters: int = 2) -> tuple[np.ndarray, float, np.ndarray]:
+    """:func:`fit_sphere`, then refit on the points whose radial residual is within
+    ``trim_sigma`` standard deviations (drops bulges such as a cornea). Returns
+    (centre, radius, mask of the points kept). The mask is fixed after the first call,
+    so refitting the same vertex subset of a deformed mesh is a smooth function."""
+    p = np.asarray(points, np.float64)
+    keep = np.ones(len(p), bool)
+    c, r = fit_sphere(p)
+    for _ in range(iters):
+        res = np.linalg.norm(p - c, axis=1) - r
+        s = res[keep].std()
+        new = np.abs(res) <= trim_sigma * max(s, 1e-12)
+        if new.sum() < 4 or np.array_equal(new, keep):
+            break
+        keep = new
+        c, r = fit_sphere(p[keep])
+    return c, r, keep
+
+
+def fit_rigid(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Kabsch/Umeyama without scale: (R (3,3), t (3,)) minimising sum w |R src + t - dst|^2."""
+    P = np.asarray(src, np.float64)
+    Q = np.asarray(dst, np.float64)
+    w = np.ones(len(P)) if weights is None else np.asarray(weights, np.float64)
+    w = w / w.sum()
+    pc, qc = w @ P, w @ Q
+    H = ((P - pc) * w[:, None]).T @ (Q - qc)
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    R = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
+    return R, qc - R @ pc
+
+
+def rotation_pivot(R: np.ndarray, t: np.ndarray, axis_point_coord: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
+    """For a rigid motion x -> R x + t, the screw axis: (point on the axis, unit axis, slide).
+
+    The point is the one whose coordinate ``axis_point_coord`` is 0 (e.g. 0 = the point on
+    the midsagittal plane x = 0) when the axis is not parallel to that plane; ``slide`` is
+    the translation along the axis (0 for a pure rotation)."""
+    from synth.geometry import matrix_to_axis_angle
+
+    aa = matrix_to_axis_angle(np.asarray(R, np.float64))
+    ang = float(np.linalg.norm(aa))
+    if ang < 1e-9:
+        raise ValueError("rotation_pivot: the motion has no rotation")
+    n = aa / ang
+    slide = float(t @ n)
+    c, *_ = np.linalg.lstsq(np.eye(3) - R, t - slide * n, rcond=None)
+    if abs(n[axis_point_coord]) > 1e-6:
+        c = c - (c[axis_point_coord] / n[axis_point_coord]) * n
+    return c, n, slide
+
+
+# --------------------------------------------------------------------------- sampling
+
+def farthest_point_sampling(points: np.ndarray, n: int, start: int = 0) -> np.ndarray:
+    """Indices of ``n`` points picked greedily, each farthest (Euclidean) from those picked
+    so far, starting at index ``start``. Deterministic (ties go to the lowest index)."""
+    p = np.asarray(points, np.float64)
+    n = int(min(n, len(p)))
+    out = np.empty(n, np.int64)
+    if n == 0:
+        return out
+    out[0] = start
+    d = np.sum((p - p[start]) ** 2, axis=1)
+    for i in range(1, n):
+        j = int(np.argmax(d))
+        out[i] = j
+        np.minimum(d, np.sum((p - p[j]) ** 2, axis=1), out=d)
+    return out
+
+
+# --------------------------------------------------------------------------- connectivity
+
+def polygon_edges(poly_offsets: np.ndarray, poly_indices: np.ndarray) -> np.ndarray:
+    """(N, 2) directed edges of polygons given as offsets/indices (each polygon closed)."""
+    off = np.asarray(poly_offsets, np.int64)
+    idx = np.asarray(poly_indices, np.int64)
+    nxt = np.arange(len(idx)) + 1
+    last = off[1:] - 1
+    nxt[last] = off[:-1]
+    return np.stack([idx, idx[nxt]], axis=1)
+
+
+def triangle_edges(triangles: np.ndarray) -> np.ndarray:
+    t = np.asarray(triangles, np.int64)
+    return np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
+
+
+def adjacency(edges: np.ndarray, n: int) -> sp.csr_matrix:
+    """Symmetric (n, n) 0/1 vertex adjacency from (E, 2) edges."""
+    e = np.asarray(edges, np.int64)
+    A = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
+    A.data[:] = 1.0
+    return A
+
+
+def connected_components(edges: np.ndarray, n: int, subset: np.ndarray | None = None) -> np.ndarray:
+    """(n,) component label per vertex. With ``subset`` (vertex indices), only edges with
+    both ends in the subset count; vertices outside get label -1."""
+    e = np.asarray(edges, np.int64)
+    if subset is not None:
+        m = np.zeros(n, bool)
+        m[subset] = True
+        e = e[m[e[:, 0]] & m[e[:, 1]]]
+    _, lab = _cc(adjacency(e, n), directed=False)
+    if subset is not None:
+        out = np.full(n, -1, np.int64)
+        _, inv = np.unique(lab[subset], return_inverse=True)
+        out[subset] = inv
+        return out
+    return lab
+
+
+def boundary_edges(triangles: np.ndarray) -> np.ndarray:
+    """(B, 2) edges used by exactly one triangle (oriented as in that triangle)."""
+    e = triangle_edges(triangles)
+    key = np.sort(e, axis=1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    return e[cnt[inv.ravel()] == 1]
+
+
+def boundary_loops(triangles: np.ndarray) -> list[np.ndarray]:
+    """Boundary edges chained into vertex loops (each an ordered index array), longest first.
+    Non-manifold boundaries are split where a vertex has several outgoing edges."""
+    b = boundary_edges(triangles)
+    nxt: dict[int, int] = {}
+    for a, c in b.tolist():
+        nxt.setdefault(a, c)
+    loops = []
+    seen: set[int] = set()
+    for s in sorted(nxt):
+        if s in seen:
+            continue
+        loop = [s]
+        seen.add(s)
+        v = nxt[s]
+        while v != s and v in nxt and v not in seen:
+            loop.append(v)
+            seen.add(v)
+            v = nxt[v]
+        loops.append(np.asarray(loop, np.int64))
+    loops.sort(key=len, reverse=True)
+    return loops
+
+
+# --------------------------------------------------------------------------- landmarks
+
+def vertex_landmarks(triangles: np.ndarray, vertex_ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Landmarks on vertices as (triangle (L,) int32, one-hot barycentric (L, 3) float32):
+    for each vertex the lowest-numbered triangle containing it."""
+    t = np.asarray(triangles, np.int64)
+    vid = np.asarray(vertex_ids, np.int64)
+    flat = t.ravel()
+    order = np.argsort(flat, kind="stable")
+    first = np.searchsorted(flat[order], vid)
+    if np.any(first >= len(flat)) or np.any(flat[order][np.minimum(first, len(flat) - 1)] != vid):
+        missing = vid[(first >= len(flat)) | (flat[order][np.minimum(first, len(flat) - 1)] != vid)]
+        raise ValueError(f"vertices {missing[:5].tolist()} are in no triangle")
+    pos = order[first]
+    tri = pos // 3
+    bary = np.zeros((len(vid), 3), np.float32)
+    bary[np.arange(len(vid)), pos % 3] = 1.0
+    return tri.astype(np.int32), bary
+
+
+def barycentric_points(vertices: np.ndarray, triangles: np.ndarray, tri: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """(L, 3) positions of barycentric landmarks."""
+    return np.einsum("lkc,lk->lc", np.asarray(vertices)[np.asarray(triangles)[tri]], bary)
+
+
+def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(V, 3) area-weighted unit vertex normals (zero for unused vertices)."""
+    v = np.asarray(vertices, np.float64)
+    t = np.asarray(triangles, np.int64)
+    fn = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, t[:, k], fn)
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+
+def ray_hit_counts(origins: np.ndarray, directions: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
+                   t_min: float = 1e-4, t_max: float = np.inf, chunk: int = 2_000_000) -> np.ndarray:
+    """(N,) number of triangles each ray o + t d (t_min < t < t_max) crosses (Moller-Trumbore,
+    brute force over all triangles in chunks: meant for a few thousand rays and triangles)."""
+    o = np.asarray(origins, np.float64)
+    d = np.asarray(directions, np.float64)
+    v = np.asarray(vertices, np.float64)
+    t = np.asarray(triangles, np.int64)
+    a, e1, e2 = v[t[:, 0]], v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]
+    counts = np.zeros(len(o), np.int64)
+    rows = max(1, chunk // max(len(t), 1))
+    for s in range(0, len(o), rows):
+        oo, dd = o[s:s + rows, None, :], d[s:s + rows, None, :]
+        p = np.cross(dd, e2[None])
+        det = np.einsum("nti,ti->nt", p, e1)
+        ok = np.abs(det) > 1e-15
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        tv = oo - a[None]
+        u = np.einsum("nti,nti->nt", tv, p) * inv
+        q = np.cross(tv, e1[None])
+        w = np.einsum("nti,nti->nt", np.broadcast_to(dd, q.shape), q) * inv
+        tt = np.einsum("ti,nti->nt", e2, q) * inv
+        hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1) & (tt > t_min) & (tt < t_max)
+        counts[s:s + rows] = hit.sum(1)
+    return counts
+
+
+def point_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """(N,) bool: 2-D points inside a closed polygon (M, 2) by the even-odd rule."""
+    p = np.asarray(points, np.float64)
+    poly = np.asarray(polygon, np.float64)
+    x, y = p[:, 0:1], p[:, 1:2]
+    x0, y0 = poly[:, 0][None], poly[:, 1][None]
+    x1, y1 = np.roll(poly[:, 0], -1)[None], np.roll(poly[:, 1], -1)[None]
+    crosses = (y0 > y) != (y1 > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xint = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+    return (np.sum(crosses & (x < xint), axis=1) % 2) == 1
+
+
+def convex_hull_2d(points: np.ndarray) -> np.ndarray:
+    """(H, 2) convex hull of 2-D points in counter-clockwise order (monotone chain)."""
+    p = np.unique(np.asarray(points, np.float64), axis=0)
+    if len(p) < 3:
+        return p
+
+    def half(pts):
+        h: list[np.ndarray] = []
+        for q in pts:
+            while len(h) >= 2 and np.cross(h[-1] - h[-2], q - h[-2]) <= 0:
+                h.pop()
+            h.append(q)
+        return h
+
+    lower, upper = half(p), half(p[::-1])
+    return np.asarray(lower[:-1] + upper[:-1])
+
+
+def smoothstep(x: np.ndarray) -> np.ndarray:
+    """3x^2 - 2x^3 on [0, 1], clamped outside."""
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
