@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     from synth.errors import SynthError
 
     try:
-        app(args=argv, standalone_mode=False)
+        rc = app(args=argv, standalone_mode=False)
     except SynthError as e:
         print(f"synth: error: {e}", file=sys.stderr)
         return e.exit_code
@@ -56,14 +56,16 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("synth: interrupted", file=sys.stderr)
         return 130
-    except Exception as e:  # click usage errors
-        import click
-
-        if isinstance(e, click.ClickException):
+    except Exception as e:  # usage errors (typer bundles its own click)
+        try:
+            from typer._click.exceptions import ClickException
+        except ImportError:  # older typer: plain click
+            from click import ClickException
+        if isinstance(e, ClickException):
             e.show()
             return 2
         raise
-    return 0
+    return rc if isinstance(rc, int) else 0
 
 
 if __name__ == "__main__":

@@ -1,0 +1,86 @@
+"""``synth validate DIR`` and ``synth preview DIR``: check and look at a rendered dataset."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from synth.errors import SynthError
+
+
+def validate_cmd(
+    directory: Path = typer.Argument(..., help="Dataset directory (the --out of `synth render`)."),
+    quick: bool = typer.Option(False, "--quick", help="Skip sha256 hashing (sizes are still checked)."),
+    partial: bool = typer.Option(False, "--partial", help="Planned shards not yet committed are warnings, "
+                                                         "not defects (check a render in progress)."),
+    jobs: int = typer.Option(1, "--jobs", "-j", min=1, max=256, help="Check shards in this many processes."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON report instead of lines."),
+) -> None:
+    """Check every committed shard: checksums, EXR layers/size/NaN, JSON schema, counts vs the plan.
+
+    Exit code 0 when clean, 1 when defects were found, 2 for usage errors.
+    """
+    from synth.validate import validate_dataset
+
+    if not directory.exists():
+        raise SynthError("dataset directory not found", str(directory), "pass the --out directory of `synth render`")
+    if as_json:
+        rep = validate_dataset(directory, quick=quick, partial=partial, jobs=jobs)
+        typer.echo(json.dumps(rep.to_json(), indent=1))
+        _finish(rep)
+        return
+
+    from rich.console import Console
+    from rich.progress import Progress
+
+    err = Console(stderr=True)
+    with Progress(console=err, transient=True, disable=not err.is_terminal) as prog:
+        task = prog.add_task("validating", total=None)
+        rep = validate_dataset(directory, quick=quick, partial=partial, jobs=jobs,
+                               progress=lambda s: prog.advance(task))
+    out = Console(highlight=False, soft_wrap=True)
+    for d in rep.defects:
+        out.print(f"[red]DEFECT[/red]  {d.line()}", markup=True)
+    for w in rep.warnings:
+        out.print(f"[yellow]warning[/yellow] {w.line()}", markup=True)
+    kinds: dict[str, int] = {}
+    for d in rep.defects:
+        kinds[d.kind] = kinds.get(d.kind, 0) + 1
+    by_kind = ", ".join(f"{k} {n}" for k, n in sorted(kinds.items()))
+    status = "[green]OK[/green]" if rep.ok else f"[red]{len(rep.defects)} defect(s)[/red] ({by_kind})"
+    out.print(f"{rep.root}: {rep.shards_checked}/{rep.shards_expected} shards, "
+              f"{rep.frames_checked}/{rep.frames_expected} frames checked"
+              f"{'' if rep.hashed else ' (no hashing: --quick)'}; {status}; {len(rep.warnings)} warning(s)",
+              markup=True)
+    _finish(rep)
+
+
+def _finish(rep) -> None:
+    """Exit code 1 when defects were found (raised as an error so every entry point sees it)."""
+    from synth.validate import DefectsFound
+
+    if not rep.ok:
+        raise DefectsFound(f"{len(rep.defects)} defect(s) found", rep.root,
+                           "re-render the affected shards (delete them from shards/ and rerun the render)")
+
+
+def preview_cmd(
+    directory: Path = typer.Argument(..., help="Dataset directory."),
+    shard: Optional[str] = typer.Option(None, "--shard", help="Shard id (default: the first committed shard)."),
+    output: Optional[Path] = typer.Option(None, "-o", "--output", help="PNG to write (default: DIR/preview_<shard>.png)."),
+    max_views: Optional[int] = typer.Option(None, "--max-views", min=1, help="Show at most this many views."),
+    tile: int = typer.Option(96, "--tile", min=8, max=1024, help="Tile height in pixels."),
+) -> None:
+    """Write a contact-sheet PNG of a shard: rows expressions, columns views; colour | segmentation | depth."""
+    from synth.dataset.preview import contact_sheet
+
+    p = contact_sheet(directory, shard, output, max_views=max_views, tile=tile)
+    typer.echo(str(p))
+
+
+def register(app: typer.Typer) -> None:
+    app.command("validate")(validate_cmd)
+    app.command("preview")(preview_cmd)

@@ -1,0 +1,258 @@
+"""Datasets of shards: create/check, stage frames, commit atomically, resume (docs/shard-format.md).
+
+Typical worker loop::
+
+    ds = open_dataset(out, plan_hash, expected={shard_id: [keys...], ...}, meta={...})
+    for shard_id in ds.pending_shards():
+        with ds.staging(shard_id) as st:          # flock: one process per shard
+            done = st.frames_done()               # frames finished by an interrupted run
+            for key in st.expected_keys:
+                if key not in done:
+                    st.write_frame(key, rgba, depth, normals, seg, frame_json)
+            st.commit(manifest_extra={"seeds": ..., "versions": ...})
+
+Crash safety (kill -9 at any instant):
+
+- a frame is written as ``KEY.exr`` then ``KEY.json``, each via temp file + fsync + rename;
+  a frame counts as done only when its JSON exists and its EXR header reads with the JSON's
+  size, so an interrupted frame is redone and a finished one never is;
+- a commit fsyncs every file, writes ``manifest.json`` (sha256 of every file) atomically,
+  fsyncs, then renames the whole staging directory to ``shards/<id>`` in one ``rename(2)``:
+  a shard is either committed complete or not at all;
+- the index is updated last, under a lock, and is repaired from the files on the next open.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import synth
+from synth.dataset.fsio import atomic_write_json, is_temp_name, loads_json
+from synth.dataset.index import ManifestError, parse_manifest, read_index, update_index
+from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, LOCK_FILE, MANIFEST_FILE, PLAN_FILE, SHARDS_DIR,
+                                  STAGING_DIR, check_shard_id, flock, utc_now)
+from synth.dataset.staging import ShardBusy, ShardCommitted, StagingShard
+from synth.errors import SynthError
+from synth.frames import FRAME_KEY_RE, jsonable
+
+
+def _normalise_expected(expected: Mapping[str, Sequence[str]]) -> dict[str, list[str]]:
+    out: dict[str, list[str]] = {}
+    seen: dict[str, str] = {}
+    if not isinstance(expected, Mapping) or not expected:
+        raise SynthError("the plan has no shards to render", None, "check the plan (expected shard -> frame keys)")
+    for sid in sorted(expected):
+        check_shard_id(sid)
+        keys = list(expected[sid])
+        if not keys:
+            raise SynthError(f"shard {sid} has no frames in the plan", None, "drop empty shards from the plan")
+        for k in keys:
+            if not isinstance(k, str) or not FRAME_KEY_RE.match(k):
+                raise SynthError(f"bad frame key {k!r} in shard {sid}", None, "keys look like id000042_ex07_v13")
+            if k in seen:
+                raise SynthError(f"frame {k} is in shards {seen[k]} and {sid}", None, "each frame belongs to one shard")
+            seen[k] = sid
+        out[sid] = sorted(keys)
+    return out
+
+
+def _read_dataset_json(root: Path) -> dict:
+    p = root / DATASET_FILE
+    try:
+        d = loads_json(p.read_bytes())
+    except (ValueError, UnicodeDecodeError) as e:
+        raise SynthError(f"dataset.json does not parse ({e})", str(p),
+                         "restore it or render into a new --out directory") from None
+    if not isinstance(d, dict) or d.get("format") != DATASET_FORMAT or not isinstance(d.get("plan_hash"), str) \
+            or not isinstance(d.get("expected"), dict):
+        raise SynthError(f"dataset.json is not a {DATASET_FORMAT} file", str(p),
+                         "restore it or render into a new --out directory")
+    return d
+
+
+class Dataset:
+    """A dataset directory. Use :func:`open_dataset` (writers) or :func:`load_dataset` (readers)."""
+
+    def __init__(self, root: Path, info: dict, *, writable: bool):
+        self.root = Path(root)
+        self.info = info
+        self.plan_hash: str = info["plan_hash"]
+        self.expected: dict[str, list[str]] = {k: list(v) for k, v in info["expected"].items()}
+        self.writable = writable
+
+    # -- paths -------------------------------------------------------------------------------
+    def shard_dir(self, shard_id: str) -> Path:
+        return self.root / SHARDS_DIR / check_shard_id(shard_id)
+
+    def staging_dir(self, shard_id: str) -> Path:
+        return self.root / STAGING_DIR / check_shard_id(shard_id)
+
+    # -- state (always read from the files) --------------------------------------------------
+    def committed_shards(self) -> set[str]:
+        """Shards under ``shards/`` with a valid manifest. Reads the files, not the index.
+
+        A manifest whose size matches the index entry is trusted (it was parsed when indexed;
+        committed shards never change); any other is parsed. Directories without a valid
+        manifest are not committed (``synth validate`` reports them).
+        """
+        base = self.root / SHARDS_DIR
+        try:
+            names = sorted(os.listdir(base))
+        except FileNotFoundError:
+            return set()
+        idx = read_index(self.root)
+        known = idx["shards"] if idx and idx.get("plan_hash") == self.plan_hash else {}
+        out = set()
+        for name in names:
+            mp = base / name / MANIFEST_FILE
+            try:
+                size = mp.stat().st_size
+            except OSError:
+                continue
+            ent = known.get(name)
+            if ent is not None and ent.get("manifest_bytes") == size:
+                out.add(name)
+                continue
+            try:
+                parse_manifest(mp.read_bytes(), name)
+            except (OSError, ManifestError):
+                continue
+            out.add(name)
+        return out
+
+    def pending_shards(self) -> list[str]:
+        """Planned shards not yet committed, in order."""
+        done = self.committed_shards()
+        return [s for s in self.expected if s not in done]
+
+    def read_manifest(self, shard_id: str) -> dict:
+        p = self.shard_dir(shard_id) / MANIFEST_FILE
+        try:
+            return parse_manifest(p.read_bytes(), shard_id)
+        except FileNotFoundError:
+            raise SynthError(f"shard {shard_id} is not committed", str(p.parent), "render it first") from None
+        except ManifestError as e:
+            raise SynthError(str(e), str(p), "run `synth validate`; re-render the shard into a new --out") from None
+
+    def update_index(self) -> dict:
+        self._need_writable()
+        return update_index(self.root, self.plan_hash)
+
+    # -- writing -----------------------------------------------------------------------------
+    def _need_writable(self) -> None:
+        if not self.writable:
+            raise SynthError("dataset opened read-only", str(self.root), "use open_dataset() to write")
+
+    def staging(self, shard_id: str) -> StagingShard:
+        """Lock and open the staging area of one shard (use as a context manager).
+
+        Refuses a shard that is not in the plan, one already committed, and one another
+        process is rendering right now.
+        """
+        self._need_writable()
+        check_shard_id(shard_id)
+        if shard_id not in self.expected:
+            raise SynthError(f"shard {shard_id} is not in this dataset's plan", str(self.root),
+                             "use a shard id from the plan")
+        st = StagingShard(self, shard_id)
+        st._open()
+        return st
+
+    def try_staging(self, shard_id: str) -> StagingShard | None:
+        """Like :meth:`staging`, but ``None`` when another process is rendering the shard or has
+        committed it meanwhile: the loop for several workers sharing one dataset is
+        ``for s in ds.pending_shards(): st = ds.try_staging(s); if st is None: continue; with st: ...``."""
+        try:
+            return self.staging(shard_id)
+        except (ShardBusy, ShardCommitted):
+            return None
+
+    def summary(self) -> dict:
+        """Counts for progress displays, read from the files."""
+        done = self.committed_shards()
+        return {"shards": len(self.expected), "shards_committed": len(done & set(self.expected)),
+                "frames": sum(len(v) for v in self.expected.values()),
+                "frames_committed": sum(len(self.expected[s]) for s in done if s in self.expected)}
+
+    def __repr__(self) -> str:
+        return f"Dataset({str(self.root)!r}, plan_hash={self.plan_hash[:12]}..., shards={len(self.expected)})"
+
+
+def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], meta: dict | None = None, *,
+                 plan: dict | None = None) -> Dataset:
+    """Create the dataset directory for a plan, or reopen it to resume.
+
+    - ``plan_hash``: a stable hash of the plan (the lead's plan module computes it).
+    - ``expected``: shard id -> the frame keys planned for that shard.
+    - ``meta``: JSON-able facts recorded once in dataset.json (plan path, config, versions).
+    - ``plan``: a JSON-able copy of the plan, written to ``DIR/plan.json``.
+
+    Refuses (:class:`SynthError`) a directory that holds a dataset from another plan, and a
+    non-empty directory that is not a dataset. Safe when several workers open it at once.
+    """
+    root = Path(root)
+    if not isinstance(plan_hash, str) or not plan_hash:
+        raise SynthError("plan hash is empty", str(root), "pass the plan's hash")
+    exp = _normalise_expected(expected)
+    if root.exists() and not root.is_dir():
+        raise SynthError("output path exists and is not a directory", str(root), "choose a directory for --out")
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise SynthError(f"cannot create the dataset directory ({e.strerror})", str(root),
+                         "choose a writable --out") from None
+    with flock(root / LOCK_FILE):
+        if (root / DATASET_FILE).exists():
+            info = _read_dataset_json(root)
+            if info["plan_hash"] != plan_hash:
+                raise SynthError(f"{root} holds a dataset from a different plan (hash {info['plan_hash'][:16]}, "
+                                 f"this plan {plan_hash[:16]})", str(root / DATASET_FILE),
+                                 "use a new --out or the original plan")
+            if info["expected"] != exp:
+                raise SynthError("dataset.json's expected shards differ from this plan's although the hashes match",
+                                 str(root / DATASET_FILE), "the plan hash must cover the shard layout; use a new --out")
+            if plan is not None and not (root / PLAN_FILE).exists():
+                atomic_write_json(root / PLAN_FILE, jsonable(plan))
+        else:
+            leftovers = [n for n in os.listdir(root) if is_temp_name(n)]  # a creation killed half-way
+            others = sorted(n for n in os.listdir(root) if n != LOCK_FILE and n not in leftovers)
+            if others:
+                raise SynthError(f"directory is not empty and holds no dataset.json (found {others[0]!r})",
+                                 str(root), "use an empty or new --out directory")
+            info = {
+                "format": DATASET_FORMAT,
+                "plan_hash": plan_hash,
+                "created": utc_now(),
+                "synth_version": synth.__version__,
+                "python": platform.python_version(),
+                "num_shards": len(exp),
+                "num_frames": sum(len(v) for v in exp.values()),
+                "meta": jsonable(meta or {}),
+                "expected": exp,
+            }
+            for n in leftovers:
+                os.unlink(root / n)
+            try:
+                atomic_write_json(root / DATASET_FILE, info)
+            except (TypeError, ValueError) as e:
+                raise SynthError(f"meta is not JSON-serialisable: {e}", str(root), "pass plain data") from None
+            if plan is not None:  # after dataset.json: a reopen writes it if this one was interrupted
+                atomic_write_json(root / PLAN_FILE, jsonable(plan))
+        (root / SHARDS_DIR).mkdir(exist_ok=True)
+        (root / STAGING_DIR).mkdir(exist_ok=True)
+    ds = Dataset(root, info, writable=True)
+    update_index(root, plan_hash)
+    return ds
+
+
+def load_dataset(root) -> Dataset:
+    """Open an existing dataset read-only (validate, preview, training readers)."""
+    root = Path(root)
+    if not root.is_dir():
+        raise SynthError("dataset directory not found", str(root), "pass the --out directory of `synth render`")
+    if not (root / DATASET_FILE).is_file():
+        raise SynthError("not a synth dataset (no dataset.json)", str(root), "pass the --out directory of `synth render`")
+    return Dataset(root, _read_dataset_json(root), writable=False)

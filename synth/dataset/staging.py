@@ -1,0 +1,345 @@
+"""The staging area of one shard: write frames, find finished ones, commit atomically.
+
+See :mod:`synth.dataset.shards` for the worker loop and docs/shard-format.md for the
+crash-safety argument.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import hashlib
+import os
+import shutil
+import platform
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+import synth
+from synth.dataset.fsio import (atomic_write_bytes, atomic_write_json, dumps_json, fsync_dir, fsync_file,
+                                is_temp_name, loads_json, sha256_bytes, temp_name)
+from synth.dataset.index import update_index
+from synth.dataset.layout import MANIFEST_FILE, SHARD_FORMAT, frame_files, utc_now
+from synth.errors import SynthError
+from synth.frames import check_frame_json, jsonable
+
+if TYPE_CHECKING:
+    from synth.dataset.shards import Dataset
+
+class ShardBusy(SynthError):
+    """Another process holds the shard's lock (it is rendering that shard)."""
+
+
+class ShardCommitted(SynthError):
+    """The shard is already committed; committed shards are never modified."""
+
+
+_RESERVED_MANIFEST = {"format", "shard_id", "plan_hash", "frames", "files", "created", "synth_version", "writer"}
+
+
+def _writer_versions() -> dict:
+    try:
+        import OpenEXR
+
+        exr = OpenEXR.__version__
+    except ImportError:  # pragma: no cover
+        exr = None
+    return {"synth": synth.__version__, "python": platform.python_version(), "numpy": np.__version__,
+            "OpenEXR": exr}
+
+
+class StagingShard:
+    """One shard being rendered: ``.staging/<id>/`` plus the lock ``.staging/<id>.lock``."""
+
+    def __init__(self, ds: Dataset, shard_id: str):
+        self.dataset = ds
+        self.shard_id = shard_id
+        self.dir = ds.staging_dir(shard_id)
+        self.expected_keys: list[str] = ds.expected[shard_id]
+        self._expected_set = set(self.expected_keys)
+        self._lock_path = self.dir.with_name(f"{shard_id}.lock")
+        self._lock_fd: int | None = None
+        self._committed = False
+        #: Files removed when the staging area was opened (temp files, half-finished frames).
+        self.cleaned: list[str] = []
+
+    # -- lifecycle ---------------------------------------------------------------------------
+    def _open(self) -> None:
+        self.dir.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self._lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise ShardBusy(f"shard {self.shard_id} is being rendered by another process", str(self.dir),
+                            "wait for it, or stop it first") from None
+        self._lock_fd = fd
+        try:
+            target = self.dataset.shard_dir(self.shard_id)
+            if target.exists():
+                raise ShardCommitted(f"shard {self.shard_id} is already committed", str(target),
+                                     "committed shards are never modified; skip it")
+            self.dir.mkdir(exist_ok=True)
+            self._clean()
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        """Release the lock (the staging files stay for a later resume)."""
+        if self._lock_fd is not None:
+            fcntl.flock(self._lock_fd, fcntl.LOCK_UN)
+            os.close(self._lock_fd)
+            self._lock_fd = None
+
+    def __enter__(self) -> StagingShard:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _need_lock(self) -> None:
+        if self._committed:
+            raise ShardCommitted(f"shard {self.shard_id} is already committed",
+                                 str(self.dataset.shard_dir(self.shard_id)), "committed shards are never modified")
+        if self._lock_fd is None:
+            raise SynthError(f"staging area of {self.shard_id} is closed", str(self.dir),
+                             "call dataset.staging() again")
+
+    def _clean(self) -> set[str]:
+        """Remove leftovers of a killed process: temp files and frames without a valid pair."""
+        names = os.listdir(self.dir)
+        for n in names:
+            if is_temp_name(n):
+                self._remove(n)
+        return self._frames_done(cleanup=True)
+
+    def _remove(self, name: str) -> None:
+        try:
+            os.unlink(self.dir / name)
+            self.cleaned.append(name)
+        except FileNotFoundError:
+            pass
+
+    # -- frames ------------------------------------------------------------------------------
+    def frames_done(self) -> set[str]:
+        """Frames fully written (in this run or an interrupted earlier one): reuse, don't redo."""
+        return self._frames_done(cleanup=False)
+
+    def _frames_done(self, cleanup: bool) -> set[str]:
+        from synth.exr import read_frame_exr_header
+
+        names = set(os.listdir(self.dir))
+        done = set()
+        for n in sorted(names):
+            stem, dot, ext = n.rpartition(".")
+            if not dot or is_temp_name(n) or ext not in ("exr", "json"):
+                continue
+            if stem not in self._expected_set:
+                if cleanup:
+                    self._remove(n)
+                continue
+            if ext != "json":
+                continue
+            exr, js = frame_files(stem)
+            ok = exr in names
+            if ok:
+                try:
+                    fj = loads_json((self.dir / js).read_bytes())
+                    hdr = read_frame_exr_header(self.dir / exr)
+                    ok = (fj.get("frame_id") == stem and (hdr["width"], hdr["height"])
+                          == (fj["image"]["width"], fj["image"]["height"]))
+                except (OSError, ValueError, KeyError, TypeError, AttributeError, SynthError):
+                    ok = False
+            if ok:
+                done.add(stem)
+            elif cleanup:
+                self._remove(js)
+                self._remove(exr)
+        if cleanup:  # EXRs whose JSON never landed: the frame was in flight
+            for n in names:
+                if n.endswith(".exr") and n[:-4] in self._expected_set and n[:-4] not in done:
+                    self._remove(n)
+        return done
+
+    def write_frame(self, key: str, rgba, depth, normals, segmentation, frame_json: dict, *,
+                    exr_header: dict | None = None, durable: bool = True) -> None:
+        """Write one frame (EXR, then JSON; both atomic). See :func:`synth.exr.write_frame_exr`.
+
+        ``frame_json`` is validated against the schema first (numpy values are converted), and
+        must agree with ``key`` and the image size. Rewriting a done frame is allowed.
+        """
+        from synth.exr import encode_frame_exr
+
+        self._need_lock()
+        fj = self._check_frame(key, frame_json)
+        exr, js = frame_files(key)
+        shape = np.shape(rgba)
+        h, w = (shape[0], shape[1]) if len(shape) == 3 else (None, None)
+        if (w, h) != (fj["image"]["width"], fj["image"]["height"]):
+            raise SynthError(f"frame {key}: image is {w}x{h} but the frame JSON says "
+                             f"{fj['image']['width']}x{fj['image']['height']}", str(self.dir),
+                             "pass the rendered size in image.width/height")
+        hdr = {"synthFrameKey": key, "synthShard": self.shard_id, **(exr_header or {})}
+        data = encode_frame_exr(rgba, depth, normals, segmentation, hdr, where=str(self.dir / exr))
+        try:  # an existing JSON would pair with a new EXR if we died in between
+            os.unlink(self.dir / js)
+        except FileNotFoundError:
+            pass
+        atomic_write_bytes(self.dir / exr, data, durable=durable)
+        atomic_write_json(self.dir / js, fj, durable=durable, indent=None)
+
+    def add_frame(self, key: str, exr_path, frame_json: dict, *, move: bool = False, durable: bool = True) -> None:
+        """Add a frame whose EXR was already written (e.g. to a temp file by the worker).
+
+        The EXR is checked (channels, size, no NaN) and copied (or moved, when on the same
+        filesystem and ``move``) into the staging area; then the JSON is written.
+        """
+        from synth.exr import pixel_defects, read_frame_exr
+
+        self._need_lock()
+        fj = self._check_frame(key, frame_json)
+        src = Path(exr_path)
+        px = read_frame_exr(src)
+        if (px["width"], px["height"]) != (fj["image"]["width"], fj["image"]["height"]):
+            raise SynthError(f"frame {key}: EXR is {px['width']}x{px['height']}, the JSON says otherwise", str(src),
+                             "write the JSON's image size")
+        bad = pixel_defects(px)
+        if bad:
+            raise SynthError(f"frame {key}: {bad[0]}", str(src), "fix the render before adding it")
+        exr, js = frame_files(key)
+        try:
+            os.unlink(self.dir / js)
+        except FileNotFoundError:
+            pass
+        tmp = temp_name(self.dir / exr)
+        moved = False
+        try:
+            if move:
+                try:
+                    os.replace(src, tmp)
+                    moved = True
+                except OSError as e:
+                    if e.errno != errno.EXDEV:  # another filesystem: copy instead
+                        raise
+            if not moved:
+                shutil.copyfile(src, tmp)
+            if durable:
+                fsync_file(tmp)
+            os.replace(tmp, self.dir / exr)
+        except BaseException:
+            try:
+                os.unlink(tmp)
+            except FileNotFoundError:
+                pass
+            raise
+        if durable:
+            fsync_dir(self.dir)
+        atomic_write_json(self.dir / js, fj, durable=durable, indent=None)
+        if move and not moved:
+            os.unlink(src)
+
+    def _check_frame(self, key: str, frame_json: dict) -> dict:
+        if key not in self._expected_set:
+            raise SynthError(f"frame {key} is not planned for shard {self.shard_id}", str(self.dir),
+                             "write only the shard's planned frames (StagingShard.expected_keys)")
+        fj = jsonable(frame_json)
+        if not isinstance(fj, dict) or fj.get("frame_id") != key:
+            raise SynthError(f"frame JSON's frame_id {fj.get('frame_id') if isinstance(fj, dict) else None!r} "
+                             f"is not {key!r}", str(self.dir), "set frame_id to the frame key")
+        check_frame_json(fj, str(self.dir / f"{key}.json"))
+        return fj
+
+    # -- commit ------------------------------------------------------------------------------
+    def commit(self, expected_keys: Sequence[str] | None = None, manifest_extra: dict | None = None, *,
+               durable: bool = True) -> dict:
+        """Commit the shard atomically and return its manifest.
+
+        Checks that exactly the planned frames are present (``expected_keys``, when given, must
+        equal the plan's), fsyncs every file, writes ``manifest.json`` (frames, sha256 and size of
+        every file, plan hash, versions, plus ``manifest_extra`` such as seeds), renames the
+        staging directory to ``shards/<id>`` and updates the index. Nothing is committed when
+        anything is missing.
+        """
+        self._need_lock()
+        ds = self.dataset
+        where = str(self.dir)
+        if expected_keys is not None and sorted(expected_keys) != self.expected_keys:
+            raise SynthError(f"shard {self.shard_id}: the keys to commit differ from the plan's", where,
+                             "commit the shard's planned frames (StagingShard.expected_keys)")
+        extra = jsonable(manifest_extra or {})
+        clash = _RESERVED_MANIFEST & set(extra)
+        if clash:
+            raise SynthError(f"manifest_extra uses reserved key(s) {sorted(clash)}", where, "rename them")
+        done = self._clean()
+        missing = [k for k in self.expected_keys if k not in done]
+        if missing:
+            raise SynthError(f"shard {self.shard_id}: {len(missing)} of {len(self.expected_keys)} frame(s) missing "
+                             f"(first: {missing[0]}); not committed", where, "render the missing frames first")
+        wanted = {n for k in self.expected_keys for n in frame_files(k)}
+        stray = sorted(set(os.listdir(self.dir)) - wanted - {MANIFEST_FILE})
+        if stray:
+            raise SynthError(f"shard {self.shard_id}: unexpected file(s) in staging: {', '.join(stray[:3])}", where,
+                             "remove them (only KEY.exr and KEY.json belong to a shard)")
+        files = {}
+        for name in sorted(wanted):
+            files[name] = self._hash_and_sync(self.dir / name, durable)
+        manifest = {
+            "format": SHARD_FORMAT,
+            "shard_id": self.shard_id,
+            "plan_hash": ds.plan_hash,
+            "frames": list(self.expected_keys),
+            "files": files,
+            "created": utc_now(),
+            "synth_version": synth.__version__,
+            "writer": _writer_versions(),
+            **extra,
+        }
+        try:
+            data = dumps_json(manifest)
+        except (TypeError, ValueError) as e:
+            raise SynthError(f"manifest_extra is not JSON-serialisable: {e}", where, "pass plain data") from None
+        atomic_write_bytes(self.dir / MANIFEST_FILE, data, durable=durable)
+        for name in list(files) + [MANIFEST_FILE]:
+            os.chmod(self.dir / name, 0o444)  # read-only by convention (and by mode)
+        if durable:
+            fsync_dir(self.dir)
+        target = ds.shard_dir(self.shard_id)
+        target.parent.mkdir(exist_ok=True)
+        if target.exists():
+            raise ShardCommitted(f"shard {self.shard_id} is already committed", str(target),
+                                 "committed shards are never modified")
+        os.rename(self.dir, target)  # the commit point
+        self._committed = True
+        if durable:
+            fsync_dir(target.parent)
+            fsync_dir(self.dir.parent)
+        update_index(ds.root, ds.plan_hash, durable=durable)
+        try:  # nobody can use the lock any more: anyone who takes it sees the committed shard
+            os.unlink(self._lock_path)
+        except FileNotFoundError:
+            pass
+        self.close()
+        manifest["manifest_sha256"] = sha256_bytes(data)
+        return manifest
+
+    @staticmethod
+    def _hash_and_sync(path: Path, durable: bool) -> dict:
+        h = hashlib.sha256()
+        n = 0
+        fd = os.open(path, os.O_RDONLY)
+        try:
+            while True:
+                b = os.read(fd, 1 << 20)
+                if not b:
+                    break
+                h.update(b)
+                n += len(b)
+            if durable:
+                os.fsync(fd)
+        finally:
+            os.close(fd)
+        return {"sha256": h.hexdigest(), "bytes": n}

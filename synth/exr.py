@@ -1,0 +1,300 @@
+"""One multi-layer EXR per frame: the pixel half of the frame format (docs/frame-format.md).
+
+Channels (one single-part scanline file, sorted by name as OpenEXR stores them):
+
+=================  ======  ==========================================================
+``R G B A``        HALF    scene-linear Rec.709 primaries, D65 white, premultiplied
+                           alpha (Cycles' film output); RGB clamped to +-65504
+``depth.Z``        FLOAT   camera-space z along the optical axis, metres (planar
+                           depth, not ray length); ``0.0`` = no surface (background)
+``normal.X/Y/Z``   HALF    unit surface normal in world space (Blender world: Z up,
+                           metres); ``(0, 0, 0)`` = background
+``segmentation.id`` UINT   class ID from :mod:`synth.segmentation` (0 = background)
+=================  ======  ==========================================================
+
+The header carries ``chromaticities`` (Rec.709 primaries, D65 white) and
+``colorInteropID = "lin_rec709_scene"``, the conventions as string attributes
+(``synthFormat``, ``depthConvention``, ``normalConvention``) and any string/int/float
+attributes the caller passes (e.g. the frame key). Compression is ZIP (lossless, readable by
+every OpenEXR >= 1.x reader; see docs/frame-format.md for the size/speed comparison).
+
+Writes are atomic (temp file, fsync, rename): a reader sees the complete file or none.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from synth.dataset.fsio import atomic_write_bytes
+from synth.errors import SynthError
+from synth.segmentation import NAMES
+
+FORMAT = "synth-frame-exr/1"
+HALF_MAX = 65504.0
+#: Depth values at or above this (and +inf) are background: Cycles writes 1e10 there.
+BACKGROUND_DEPTH_THRESHOLD = 1e9
+#: The value stored for "no surface" in ``depth.Z``.
+BACKGROUND_DEPTH = 0.0
+
+RGBA_CHANNELS = ("R", "G", "B", "A")
+DEPTH_CHANNEL = "depth.Z"
+NORMAL_CHANNELS = ("normal.X", "normal.Y", "normal.Z")
+SEG_CHANNEL = "segmentation.id"
+#: Every channel of a frame EXR, in the order used for ``image.layers`` in the frame JSON.
+CHANNELS: tuple[str, ...] = RGBA_CHANNELS + (DEPTH_CHANNEL,) + NORMAL_CHANNELS + (SEG_CHANNEL,)
+
+#: Linear Rec.709 / sRGB primaries with a D65 white point, in OpenEXR's 8-tuple order.
+REC709_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
+COLOR_INTEROP_ID = "lin_rec709_scene"
+DEPTH_CONVENTION = "camera-space z along the optical axis (OpenCV camera, +z forward), metres; 0 = background"
+NORMAL_CONVENTION = "unit normal, world space (Blender world, Z up); 0,0,0 = background"
+
+_RESERVED = {"channels", "compression", "dataWindow", "displayWindow", "lineOrder", "pixelAspectRatio",
+             "screenWindowCenter", "screenWindowWidth", "type", "chromaticities", "colorInteropID",
+             "synthFormat", "depthConvention", "normalConvention", "name", "tiles", "version", "chunkCount"}
+
+
+def _openexr():
+    try:
+        import OpenEXR
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise SynthError("the OpenEXR Python package is not installed", None,
+                         "install it with `.venv/bin/pip install 'OpenEXR>=3.3'` (or `make setup`)") from e
+    if not hasattr(OpenEXR, "File"):  # pragma: no cover
+        raise SynthError(f"OpenEXR {getattr(OpenEXR, '__version__', '?')} is too old (no OpenEXR.File)", None,
+                         "install OpenEXR>=3.3")
+    return OpenEXR
+
+
+def _check_array(name: str, a: Any, shape: tuple, where: str) -> np.ndarray:
+    a = np.asarray(a)
+    if a.shape != shape:
+        raise SynthError(f"{name} has shape {a.shape}, expected {shape}", where, "pass arrays of one image size")
+    return a
+
+
+def encode_frame_exr(rgba, depth, normals, segmentation, header: dict | None = None, *,
+                     where: str = "<memory>", compression: str = "ZIP") -> bytes:
+    """Validate and encode one frame to EXR bytes (see :func:`write_frame_exr`)."""
+    OpenEXR = _openexr()
+    rgba = np.asarray(rgba)
+    if rgba.ndim != 3 or rgba.shape[2] != 4 or rgba.shape[0] < 1 or rgba.shape[1] < 1:
+        raise SynthError(f"rgba has shape {rgba.shape}, expected (H, W, 4)", where, "pass an RGBA image")
+    h, w = rgba.shape[:2]
+    depth = _check_array("depth", depth, (h, w), where)
+    normals = _check_array("normals", normals, (h, w, 3), where)
+    seg = _check_array("segmentation", segmentation, (h, w), where)
+    for name, a in (("rgba", rgba), ("depth", depth), ("normals", normals)):
+        if a.dtype.kind not in "fiu":
+            raise SynthError(f"{name} has dtype {a.dtype}, expected a float array", where, "pass float pixels")
+        if a.dtype.kind == "f" and np.isnan(a).any():
+            n = int(np.isnan(a).sum())
+            raise SynthError(f"{name} contains {n} NaN pixel value(s); refusing to write", where,
+                             "fix the render (NaNs are never stored)")
+    if np.isinf(rgba).any() or np.isinf(normals).any():
+        raise SynthError("rgba or normals contain infinite values; refusing to write", where,
+                         "clamp the render output (fireflies) before writing")
+    if seg.dtype.kind not in "iu" or (seg.size and (int(seg.min()) < 0 or int(seg.max()) > 0xFFFFFFFF)):
+        raise SynthError(f"segmentation must hold non-negative integer class IDs (dtype {seg.dtype})", where,
+                         "pass an integer array of synth.segmentation IDs")
+    d = depth.astype(np.float32)  # float64 -> float32 first, so 1e10 stays "large", not inf
+    if (d < 0).any():
+        raise SynthError(f"depth has {int((d < 0).sum())} negative value(s) (camera-space z must be >= 0)",
+                         where, "store z along the optical axis in metres (background: 0 or +inf)")
+    d = np.where(d >= BACKGROUND_DEPTH_THRESHOLD, np.float32(BACKGROUND_DEPTH), d).astype(np.float32)
+
+    c = rgba.astype(np.float32)
+    c[..., :3] = np.clip(c[..., :3], -HALF_MAX, HALF_MAX)
+    c[..., 3] = np.clip(c[..., 3], 0.0, 1.0)
+    c16 = c.astype(np.float16)
+    n16 = np.clip(normals.astype(np.float32), -1.0, 1.0).astype(np.float16)
+    channels = {name: np.ascontiguousarray(c16[..., i]) for i, name in enumerate(RGBA_CHANNELS)}
+    channels[DEPTH_CHANNEL] = np.ascontiguousarray(d)
+    for i, name in enumerate(NORMAL_CHANNELS):
+        channels[name] = np.ascontiguousarray(n16[..., i])
+    channels[SEG_CHANNEL] = np.ascontiguousarray(seg.astype(np.uint32))
+
+    try:
+        comp = getattr(OpenEXR, f"{compression.upper()}_COMPRESSION")
+    except AttributeError:
+        raise SynthError(f"unknown EXR compression {compression!r}", where, "use ZIP, PIZ, ZIPS or NO") from None
+    hdr: dict[str, Any] = {
+        "compression": comp,
+        "type": OpenEXR.scanlineimage,
+        "chromaticities": REC709_CHROMATICITIES,
+        "colorInteropID": COLOR_INTEROP_ID,
+        "synthFormat": FORMAT,
+        "depthConvention": DEPTH_CONVENTION,
+        "normalConvention": NORMAL_CONVENTION,
+    }
+    for k, v in (header or {}).items():
+        if not isinstance(k, str) or not k or k in _RESERVED:
+            raise SynthError(f"EXR header attribute name {k!r} is reserved or invalid", where,
+                             "pick another attribute name")
+        if isinstance(v, bool) or not isinstance(v, (str, int, float)):
+            raise SynthError(f"EXR header attribute {k!r} has type {type(v).__name__}", where,
+                             "pass str, int or float values (put structured data in the frame JSON)")
+        hdr[k] = v
+    buf = io.BytesIO()
+    OpenEXR.File(hdr, channels).write(buf)
+    return buf.getvalue()
+
+
+def write_frame_exr(path, rgba, depth, normals, segmentation, header: dict | None = None, *,
+                    durable: bool = True, compression: str = "ZIP") -> int:
+    """Write one frame's EXR atomically; returns the file size in bytes.
+
+    - ``rgba``: (H, W, 4) float, scene-linear Rec.709, premultiplied alpha. Stored as HALF: RGB
+      is clamped to +-65504 (half max; larger finite values would become inf), alpha to [0, 1].
+      NaN or inf anywhere is refused (:class:`SynthError`), never silently stored.
+    - ``depth``: (H, W) camera-space z in metres (float). Values >= 1e9 or +inf (Cycles writes
+      1e10 where no surface was hit) are stored as ``0.0`` = background. NaN or negative: refused.
+    - ``normals``: (H, W, 3) world-space unit normals (Blender world, Z up), stored as HALF.
+    - ``segmentation``: (H, W) integer class IDs (:mod:`synth.segmentation`), stored as UINT.
+    - ``header``: extra attributes (str -> str | int | float), e.g. ``{"synthFrameKey": key}``.
+    """
+    path = Path(path)
+    data = encode_frame_exr(rgba, depth, normals, segmentation, header, where=str(path), compression=compression)
+    atomic_write_bytes(path, data, durable=durable)
+    return len(data)
+
+
+def _plain(v):
+    """Header values as plain Python (JSON-friendly) types."""
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, tuple):
+        return [_plain(x) for x in v]
+    if isinstance(v, (str, int, float, bool)) or v is None:
+        return v
+    name = getattr(v, "name", None)
+    return name if isinstance(name, str) else str(v)
+
+
+@contextlib.contextmanager
+def _silenced():
+    """Swallow what the OpenEXR binding prints while decoding a damaged file (a Python-level
+    "Warning: ..." on stdout and C-level lines on fd 2). Process-wide: single-threaded use only."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = os.dup(2)
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 2)
+        with contextlib.redirect_stdout(io.StringIO()):
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(null)
+
+
+def _open(path: Path, header_only: bool, quiet: bool = False):
+    OpenEXR = _openexr()
+    if not path.is_file():
+        raise SynthError("EXR file not found", str(path), "check the path (or re-render the frame)")
+    try:
+        with _silenced() if quiet else contextlib.nullcontext():
+            f = OpenEXR.File(str(path), separate_channels=True, header_only=header_only)
+            hdr = f.header()
+            chans = {} if header_only else f.channels()
+    except Exception as e:  # the binding raises RuntimeError/ValueError with C-level messages
+        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+        if "has 0 parts" in msg:
+            msg = "pixel data does not decode"
+        raise SynthError(f"cannot read EXR: {msg}", str(path),
+                         "the file is corrupt or truncated; re-render the frame") from None
+    return hdr, chans
+
+
+def read_frame_exr_header(path, *, quiet: bool = False) -> dict:
+    """Read only the header (fast): ``{"width", "height", "channels": {name: None}, "header": {...}}``."""
+    path = Path(path)
+    hdr, _ = _open(path, header_only=True, quiet=quiet)
+    return _describe(hdr, path)
+
+
+def _describe(hdr: dict, path: Path, chans: dict | None = None) -> dict:
+    (x0, y0), (x1, y1) = (np.asarray(hdr["dataWindow"][0]).tolist(), np.asarray(hdr["dataWindow"][1]).tolist())
+    if chans:
+        types = {name: c.type().name for name, c in chans.items()}
+    else:  # header-only reads carry no pixel types in this binding
+        types = {c.name: None for c in hdr.get("channels", [])}
+    plain = {k: _plain(v) for k, v in hdr.items() if k != "channels"}
+    return {"path": str(path), "width": int(x1 - x0 + 1), "height": int(y1 - y0 + 1), "channels": types,
+            "header": plain}
+
+
+def read_frame_exr(path, *, quiet: bool = False) -> dict:
+    """Read a frame EXR written by :func:`write_frame_exr`.
+
+    Returns ``{"rgba": (H,W,4) float16, "depth": (H,W) float32, "normals": (H,W,3) float16 or
+    float32 (as stored), "segmentation": (H,W) uint32, "width", "height", "channels": {name:
+    pixel type}, "header": {attribute: plain value}, "path"}``. Raises :class:`SynthError` for a
+    missing, unreadable or truncated file or missing channels. Pixel values are returned as
+    stored; checks on them (NaN, IDs) belong to ``synth validate``. ``quiet`` swallows what the
+    OpenEXR library prints about a damaged file (process-wide while reading; for CLI tools).
+    """
+    path = Path(path)
+    hdr, chans = _open(path, header_only=False, quiet=quiet)
+    desc = _describe(hdr, path, chans)
+    missing = [c for c in CHANNELS if c not in chans]
+    if missing:
+        raise SynthError(f"EXR lacks channel(s) {', '.join(missing)}", str(path),
+                         "it was not written by synth.exr.write_frame_exr; re-render the frame")
+    h, w = desc["height"], desc["width"]
+    px = {}
+    for name in CHANNELS:
+        p = chans[name].pixels
+        if p is None or p.shape != (h, w):
+            raise SynthError(f"EXR channel {name} has no pixel data of size {w}x{h}", str(path),
+                             "the file is corrupt; re-render the frame")
+        px[name] = p
+    desc["rgba"] = np.stack([px[c] for c in RGBA_CHANNELS], axis=-1)
+    desc["depth"] = px[DEPTH_CHANNEL]
+    desc["normals"] = np.stack([px[c] for c in NORMAL_CHANNELS], axis=-1)
+    desc["segmentation"] = px[SEG_CHANNEL]
+    types = {"rgba": desc["rgba"].dtype, "depth": desc["depth"].dtype, "segmentation": desc["segmentation"].dtype}
+    if types["segmentation"] != np.uint32 or types["depth"] != np.float32:
+        raise SynthError(f"EXR channel types are wrong ({types})", str(path),
+                         "depth.Z must be FLOAT and segmentation.id UINT; re-render the frame")
+    return desc
+
+
+def pixel_defects(px: dict) -> list[str]:
+    """Problems in the pixels of a frame read by :func:`synth.exr.read_frame_exr`."""
+    out = []
+    rgba = px["rgba"].astype(np.float32)
+    normals = px["normals"].astype(np.float32)
+    depth = px["depth"]
+    seg = px["segmentation"]
+    for name, a in (("RGBA", rgba), ("normals", normals), ("depth", depth)):
+        bad = ~np.isfinite(a)
+        if bad.any():
+            n_nan = int(np.isnan(a).sum())
+            where = ""
+            if name == "depth":
+                where = f", {int((bad & (rgba[..., 3] > 0)).sum())} where alpha > 0"
+            out.append(f"{name} has {n_nan} NaN and {int(bad.sum()) - n_nan} Inf value(s){where}")
+    fin = np.isfinite(depth)
+    if (depth[fin] < 0).any():
+        out.append(f"depth has {int((depth[fin] < 0).sum())} negative value(s)")
+    a = rgba[..., 3]
+    if ((a < 0) | (a > 1)).any():
+        out.append("alpha outside [0, 1]")
+    ids = np.unique(seg)
+    unknown = [int(i) for i in ids if int(i) not in NAMES]
+    if unknown:
+        out.append(f"segmentation has unknown class ID(s) {unknown[:5]} (known: 0..{max(NAMES)})")
+    return out
+
+
+__all__ = ["CHANNELS", "REC709_CHROMATICITIES", "HALF_MAX", "BACKGROUND_DEPTH", "encode_frame_exr",
+           "write_frame_exr", "read_frame_exr", "read_frame_exr_header", "pixel_defects"]

@@ -1,0 +1,197 @@
+"""Frame EXR writer/reader: round trip, half-float limits, NaN refusal, atomic writes."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from synth.errors import SynthError
+from synth.exr import (CHANNELS, HALF_MAX, REC709_CHROMATICITIES, encode_frame_exr, read_frame_exr,
+                       read_frame_exr_header, write_frame_exr)
+
+OpenEXR = pytest.importorskip("OpenEXR")
+
+
+def frame(h=12, w=20, seed=0):
+    rng = np.random.default_rng(seed)
+    rgba = rng.uniform(0, 4, (h, w, 4)).astype(np.float32)
+    rgba[..., 3] = rng.uniform(0, 1, (h, w))
+    depth = rng.uniform(0.3, 3.0, (h, w)).astype(np.float32)
+    n = rng.normal(size=(h, w, 3))
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    seg = rng.integers(0, 12, (h, w)).astype(np.uint32)
+    return rgba, depth, n.astype(np.float32), seg
+
+
+def test_round_trip(tmp_path):
+    rgba, depth, n, seg = frame()
+    p = tmp_path / "f.exr"
+    nbytes = write_frame_exr(p, rgba, depth, n, seg, {"synthFrameKey": "id000001_ex02_v03", "count": 3, "x": 0.5})
+    assert nbytes == p.stat().st_size
+    r = read_frame_exr(p)
+    assert (r["width"], r["height"]) == (20, 12)
+    assert set(r["channels"]) == set(CHANNELS)
+    assert r["channels"]["R"] == "HALF" and r["channels"]["depth.Z"] == "FLOAT"
+    assert r["channels"]["segmentation.id"] == "UINT"
+    assert r["rgba"].dtype == np.float16 and r["rgba"].shape == (12, 20, 4)
+    np.testing.assert_array_equal(r["rgba"], rgba.astype(np.float16))
+    np.testing.assert_array_equal(r["depth"], depth)  # float32: exact
+    np.testing.assert_allclose(r["normals"].astype(np.float32), n, atol=1e-3)
+    np.testing.assert_array_equal(r["segmentation"], seg)
+    hdr = r["header"]
+    assert hdr["synthFrameKey"] == "id000001_ex02_v03" and hdr["count"] == 3 and hdr["x"] == 0.5
+    np.testing.assert_allclose(hdr["chromaticities"], REC709_CHROMATICITIES, atol=1e-6)
+    assert hdr["colorInteropID"] == "lin_rec709_scene"
+    assert hdr["synthFormat"] == "synth-frame-exr/1"
+    assert "ZIP" in hdr["compression"]
+    h = read_frame_exr_header(p)
+    assert (h["width"], h["height"]) == (20, 12) and set(h["channels"]) == set(CHANNELS)
+    # the colour metadata is self-consistent by OpenEXR's own check
+    assert OpenEXR.checkColorMetadata(OpenEXR.File(str(p), header_only=True).header()) == 0
+
+
+def test_float64_and_int_inputs_are_accepted(tmp_path):
+    rgba, depth, n, seg = frame()
+    write_frame_exr(tmp_path / "f.exr", rgba.astype(np.float64), depth.astype(np.float64), n.astype(np.float64),
+                    seg.astype(np.int64))
+    r = read_frame_exr(tmp_path / "f.exr")
+    np.testing.assert_array_equal(r["segmentation"], seg)
+
+
+def test_half_limits_clamp_rgb_and_alpha(tmp_path):
+    rgba, depth, n, seg = frame()
+    rgba[0, 0, :3] = [1e6, -1e6, 70000.0]   # beyond half range: clamped, never inf
+    rgba[0, 1, 0] = 65504.0                 # exactly the max: kept
+    rgba[0, 2, 3] = 1.5                     # alpha clamped to [0, 1]
+    write_frame_exr(tmp_path / "f.exr", rgba, depth, n, seg)
+    r = read_frame_exr(tmp_path / "f.exr")
+    assert np.isfinite(r["rgba"]).all()
+    np.testing.assert_array_equal(r["rgba"][0, 0, :3].astype(np.float32), [HALF_MAX, -HALF_MAX, HALF_MAX])
+    assert float(r["rgba"][0, 1, 0]) == HALF_MAX
+    assert float(r["rgba"][0, 2, 3]) == 1.0
+
+
+def test_background_depth_stored_as_zero(tmp_path):
+    rgba, depth, n, seg = frame()
+    depth[0, 0] = np.inf
+    depth[0, 1] = 1e10  # what Cycles writes where no surface was hit
+    depth[0, 2] = 1e20
+    write_frame_exr(tmp_path / "f.exr", rgba, depth.astype(np.float64), n, seg)
+    r = read_frame_exr(tmp_path / "f.exr")
+    assert r["depth"][0, :3].tolist() == [0.0, 0.0, 0.0]
+    assert np.isfinite(r["depth"]).all()
+
+
+@pytest.mark.parametrize("what", ["rgba", "depth", "normals"])
+def test_nan_is_refused_and_nothing_written(tmp_path, what):
+    rgba, depth, n, seg = frame()
+    {"rgba": rgba, "depth": depth, "normals": n}[what].flat[5] = np.nan
+    p = tmp_path / "f.exr"
+    with pytest.raises(SynthError, match="NaN"):
+        write_frame_exr(p, rgba, depth, n, seg)
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("case", ["rgba_inf", "normal_inf", "neg_depth", "neg_seg", "float_seg", "shape", "header"])
+def test_bad_inputs_refused(tmp_path, case):
+    rgba, depth, n, seg = frame()
+    hdr = None
+    if case == "rgba_inf":
+        rgba[1, 1, 1] = np.inf
+    elif case == "normal_inf":
+        n[1, 1, 1] = -np.inf
+    elif case == "neg_depth":
+        depth[2, 2] = -0.1
+    elif case == "neg_seg":
+        seg = seg.astype(np.int32)
+        seg[0, 0] = -1
+    elif case == "float_seg":
+        seg = seg.astype(np.float32)
+    elif case == "shape":
+        depth = depth[:-1]
+    elif case == "header":
+        hdr = {"compression": "x"}
+    with pytest.raises(SynthError):
+        write_frame_exr(tmp_path / "f.exr", rgba, depth, n, seg, hdr)
+    assert os.listdir(tmp_path) == []
+
+
+def test_overwrite_is_atomic_and_leaves_no_temp(tmp_path):
+    p = tmp_path / "f.exr"
+    write_frame_exr(p, *frame(seed=1))
+    write_frame_exr(p, *frame(seed=2))
+    assert os.listdir(tmp_path) == ["f.exr"]
+    np.testing.assert_array_equal(read_frame_exr(p)["segmentation"], frame(seed=2)[3])
+
+
+def test_failed_write_keeps_old_file(tmp_path, monkeypatch):
+    p = tmp_path / "f.exr"
+    write_frame_exr(p, *frame(seed=1))
+    before = p.read_bytes()
+
+    def boom(*a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "replace", boom)
+    with pytest.raises(OSError):
+        write_frame_exr(p, *frame(seed=2))
+    assert p.read_bytes() == before
+    assert os.listdir(tmp_path) == ["f.exr"]
+
+
+@pytest.mark.parametrize("damage", ["truncate", "garbage", "missing"])
+def test_unreadable_files_raise_synth_error(tmp_path, damage):
+    p = tmp_path / "f.exr"
+    write_frame_exr(p, *frame(h=32, w=32))
+    data = p.read_bytes()
+    if damage == "truncate":
+        p.write_bytes(data[: len(data) // 2])
+    elif damage == "garbage":
+        p.write_bytes(b"not an exr at all" * 10)
+    else:
+        p.unlink()
+    with pytest.raises(SynthError, match=str(p)):
+        read_frame_exr(p)
+
+
+def test_missing_channel_reported(tmp_path):
+    p = tmp_path / "f.exr"
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
+                 {"R": np.zeros((4, 4), np.float16)}).write(str(p))
+    with pytest.raises(SynthError, match="lacks channel"):
+        read_frame_exr(p)
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.floats(allow_nan=False, allow_infinity=False, width=32), min_size=4, max_size=4),
+       st.integers(0, 2**32 - 1))
+def test_round_trip_property(values, seg_id):
+    """Any finite colour comes back as its half-float rounding (clamped), any uint32 ID exactly."""
+    rgba = np.array(values, np.float32).reshape(1, 1, 4)
+    clamped = rgba.copy()
+    clamped[..., :3] = np.clip(clamped[..., :3], -HALF_MAX, HALF_MAX)
+    clamped[..., 3] = np.clip(clamped[..., 3], 0, 1)
+    data = encode_frame_exr(rgba, np.ones((1, 1)), np.zeros((1, 1, 3)), np.array([[seg_id]], np.uint32))
+    f = OpenEXR.File(__import__("io").BytesIO(data), separate_channels=True)
+    ch = f.channels()
+    got = np.array([ch[c].pixels[0, 0] for c in "RGBA"], np.float16)
+    np.testing.assert_array_equal(got, clamped.reshape(4).astype(np.float16))
+    assert np.isfinite(got.astype(np.float32)).all()
+    assert int(ch["segmentation.id"].pixels[0, 0]) == seg_id
+
+
+def test_quiet_read_of_a_damaged_file_prints_nothing(tmp_path, capfd):
+    p = tmp_path / "f.exr"
+    write_frame_exr(p, *frame(h=32, w=32))
+    data = p.read_bytes()
+    p.write_bytes(data[: len(data) // 2])
+    with pytest.raises(SynthError, match="does not decode"):
+        read_frame_exr(p, quiet=True)
+    out, err = capfd.readouterr()
+    assert out == "" and err == ""
+    print("still printing")
+    assert capfd.readouterr().out == "still printing\n"
