@@ -24,6 +24,10 @@ from pathlib import Path
 import numpy as np
 
 
+#: Classes listed under "assets" in every frame JSON (null where absent).
+ASSET_CLASSES = ("hair", "beard", "eyebrows", "eyelashes", "garment", "glasses", "headwear", "makeup", "iris", "skin")
+
+
 def emit(**ev) -> None:
     sys.stdout.write(json.dumps(ev) + "\n")
     sys.stdout.flush()
@@ -58,6 +62,7 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> in
     from synth.frames import frame_key
     from synth.labels import visibility
     from synth.conventions import project
+    from synth.exr import CHANNELS
     from synth.skin import skin_albedo
 
     spec = plan.shard(shard_id)
@@ -121,8 +126,7 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> in
                     vis = visibility(uv, z, out["depth"], out["rgba"][..., 3])
                     fj = dict(f)
                     fj["image"] = {"width": width, "height": height, "file": f"{key}.exr",
-                                   "layers": ["R", "G", "B", "A", "depth.Z", "normal.X", "normal.Y", "normal.Z",
-                                              "segmentation.id"]}
+                                   "layers": list(CHANNELS)}
                     fj["model"] = {**model_info, "identity": beta.tolist(), "expression": psi.tolist(),
                                    "expression_preset": e.get("preset"),
                                    "joint_rotations": {n: rot[j].tolist() for n, j in hm.joint_index.items()},
@@ -130,7 +134,7 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> in
                     fj["landmarks_3d"] = lm3d.tolist()
                     fj["landmarks_2d"] = uv.tolist()
                     fj["landmarks_visible"] = vis.tolist()
-                    fj["assets"] = ident.get("assets") or {}
+                    fj["assets"] = {c: None for c in ASSET_CLASSES} | dict(ident.get("assets") or {})
                     fj["skin"] = skin_record
                     fj["render"] = {"preset": render_cfg.get("preset"), "resolution": [width, height],
                                     "seed": int(f["seed"]), **effective}
