@@ -93,7 +93,8 @@ def sample(n: int = typer.Option(4, "--n", min=1, max=100000, help="Number of me
     data, path = _load(model)
     hm = HeadModel(data)
     gmm = GaussianMixture(data.prior_weights, data.prior_means, data.prior_covs)
-    tmp = Path(tempfile.mkdtemp(prefix=".synth-sample-", dir=out.parent if out.parent.exists() else None))
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=".synth-sample-", dir=out.parent))  # same filesystem: atomic rename
     try:
         records = []
         for i in range(n):
