@@ -1,0 +1,258 @@
+"""Plan directories: writer, reader and schema (docs/plan-format.md).
+
+::
+
+    DIR/plan.json                 header: format, seed, resolved config, model and catalogue
+                                  hashes, shard list with sha256 per shard file, plan_hash
+    DIR/summary.json              deterministic statistics (no timings)
+    DIR/shards/shard_000000.json  one spec per shard: everything a worker needs
+
+The writer builds everything in a sibling temporary directory and renames it into place,
+so a failed or interrupted run leaves nothing half-written. Shard files are compact JSON
+(orjson); the header and summary are indented with sorted keys. ``plan_hash`` is the
+sha256 of the header's canonical JSON without ``plan_hash`` itself; the header lists the
+sha256 of every shard file, so the hash covers the whole plan.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Callable, Iterable
+
+import orjson
+
+from synth.errors import SynthError
+
+PLAN_FORMAT = "synth-plan"
+PLAN_FORMAT_VERSION = 1
+HEADER_FILE = "plan.json"
+SUMMARY_FILE = "summary.json"
+SHARDS_DIR = "shards"
+SCHEMA_PATH = Path(__file__).resolve().parents[1] / "schemas" / "plan.schema.json"
+
+
+@lru_cache(maxsize=1)
+def plan_schema() -> dict:
+    return json.loads(SCHEMA_PATH.read_text(encoding="utf-8"))
+
+
+def _validator(definition: str):
+    import jsonschema
+
+    schema = {**plan_schema(), "$ref": f"#/$defs/{definition}"}
+    return jsonschema.Draft202012Validator(schema)
+
+
+def validate(obj: Any, definition: str, where: str) -> None:
+    """Check ``obj`` against ``$defs/<definition>`` of plan.schema.json (header, shard, frame, ...)."""
+    err = next(iter(sorted(_validator(definition).iter_errors(obj), key=lambda e: list(e.absolute_path))), None)
+    if err is not None:
+        loc = "/".join(str(p) for p in err.absolute_path) or "top level"
+        raise SynthError(f"plan {definition} invalid at {loc}: {err.message[:200]}", where,
+                         "re-run 'synth plan' (see docs/plan-format.md)")
+
+
+def dumps_compact(obj: Any) -> bytes:
+    return orjson.dumps(obj, option=orjson.OPT_SERIALIZE_NUMPY)
+
+
+def dumps_pretty(obj: Any) -> bytes:
+    return orjson.dumps(obj, option=orjson.OPT_INDENT_2 | orjson.OPT_SORT_KEYS) + b"\n"
+
+
+def header_hash(header: dict) -> str:
+    body = {k: v for k, v in header.items() if k != "plan_hash"}
+    return hashlib.sha256(orjson.dumps(body, option=orjson.OPT_SORT_KEYS)).hexdigest()
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+# --------------------------------------------------------------------------- writer
+
+
+def check_out_dir(out: Path) -> str | None:
+    """Refuse an unusable --out early. Returns the plan_hash already there, if any."""
+    if out.exists() and not out.is_dir():
+        raise SynthError("output path exists and is not a directory", str(out), "choose a directory for --out")
+    if not out.exists() or not any(out.iterdir()):
+        return None
+    hp = out / HEADER_FILE
+    if not hp.is_file():
+        raise SynthError("output directory is not empty and holds no plan", str(out), "use an empty or new --out")
+    try:
+        return str(json.loads(hp.read_text(encoding="utf-8"))["plan_hash"])
+    except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError):
+        raise SynthError("output directory holds an unreadable plan.json", str(out), "use a new --out") from None
+
+
+def write_shards(tmp: Path, shards: Iterable[tuple[str, dict]]) -> list[dict]:
+    """Write shard specs into ``tmp/shards/``; returns their header listing entries."""
+    listing = []
+    for shard_id, spec in shards:
+        data = dumps_compact(spec)
+        name = f"{SHARDS_DIR}/{shard_id}.json"
+        (tmp / name).write_bytes(data)
+        idents = spec["identities"]
+        n_frames = sum(len(e["frames"]) for i in idents for e in i["expressions"])
+        listing.append({"shard_id": shard_id, "file": name,
+                        "identities": [idents[0]["identity_index"], idents[-1]["identity_index"] + 1],
+                        "frames": n_frames, "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()})
+    return listing
+
+
+def write_plan(out: str | os.PathLike, header: dict,
+               produce: Callable[[Path], tuple[list[dict], dict]]) -> tuple[dict, dict]:
+    """Write a plan directory atomically. ``produce(tmp)`` writes the shard files into
+    ``tmp/shards/`` (see :func:`write_shards`) and returns (listing, summary); ``header``
+    lacks ``shards`` and ``plan_hash``, which are filled in here. Returns (header, summary).
+    If ``out`` already holds the identical plan nothing is written; a different plan there
+    is refused (SynthError)."""
+    out = Path(out)
+    existing = check_out_dir(out)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise SynthError(f"cannot create the output's parent directory ({e.strerror})", str(out.parent),
+                         "choose a writable --out") from None
+    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    try:
+        (tmp / SHARDS_DIR).mkdir(parents=True)
+        listing, summary = produce(tmp)
+        header = {**header, "shards": listing}
+        header["plan_hash"] = header_hash(header)
+        summary = {**summary, "plan_hash": header["plan_hash"]}
+        (tmp / SUMMARY_FILE).write_bytes(dumps_pretty(summary))
+        with open(tmp / HEADER_FILE, "wb") as f:
+            f.write(dumps_pretty(header))
+            f.flush()
+            os.fsync(f.fileno())
+        if existing is not None:
+            if existing != header["plan_hash"]:
+                raise SynthError(f"output directory holds a different plan (hash {existing[:16]}, this plan "
+                                 f"{header['plan_hash'][:16]})", str(out), "use a new --out or delete the old plan")
+            shutil.rmtree(tmp)
+            return header, summary
+        if out.exists():
+            out.rmdir()  # empty (checked above)
+        os.replace(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return header, summary
+
+
+# --------------------------------------------------------------------------- reader
+
+
+class Plan:
+    """A plan directory opened for reading (what workers and the render command use)."""
+
+    def __init__(self, root: str | os.PathLike, validate_header: bool = True):
+        self.root = Path(root)
+        hp = self.root / HEADER_FILE
+        if not hp.is_file():
+            raise SynthError("no plan.json in the plan directory", str(self.root), "run 'synth plan --out DIR' first")
+        try:
+            self.header: dict = orjson.loads(hp.read_bytes())
+        except orjson.JSONDecodeError as e:
+            raise SynthError(f"plan.json is not valid JSON ({e})", str(hp), "re-run 'synth plan'") from None
+        if not isinstance(self.header, dict) or self.header.get("format") != PLAN_FORMAT:
+            raise SynthError("not a synth plan (format field)", str(hp), "point at a directory written by 'synth plan'")
+        if self.header.get("format_version") != PLAN_FORMAT_VERSION:
+            raise SynthError(f"plan format version {self.header.get('format_version')} is not supported "
+                             f"(this synth reads {PLAN_FORMAT_VERSION})", str(hp), "re-run 'synth plan'")
+        if validate_header:
+            validate(self.header, "header", str(hp))
+        if header_hash(self.header) != self.header["plan_hash"]:
+            raise SynthError("plan.json was modified after planning (plan_hash mismatch)", str(hp),
+                             "re-run 'synth plan'")
+        self._shards = {s["shard_id"]: s for s in self.header["shards"]}
+
+    @property
+    def plan_hash(self) -> str:
+        return self.header["plan_hash"]
+
+    @property
+    def seed(self) -> int:
+        return int(self.header["run_seed"])
+
+    @property
+    def config(self) -> dict:
+        return self.header["config"]
+
+    def shard_ids(self) -> list[str]:
+        return list(self._shards)
+
+    def shard(self, shard_id: str, validate_spec: bool = False) -> dict:
+        """One shard spec, checked against the sha256 recorded in the header."""
+        if shard_id not in self._shards:
+            raise SynthError(f"unknown shard '{shard_id}'", str(self.root), f"the plan has {len(self._shards)} shards")
+        entry = self._shards[shard_id]
+        p = self.root / entry["file"]
+        try:
+            data = p.read_bytes()
+        except OSError as e:
+            raise SynthError(f"cannot read shard spec ({e.strerror})", str(p), "re-run 'synth plan'") from None
+        if hashlib.sha256(data).hexdigest() != entry["sha256"]:
+            raise SynthError("shard spec does not match its sha256 in plan.json", str(p), "re-run 'synth plan'")
+        spec = orjson.loads(data)
+        if validate_spec:
+            validate(spec, "shard", str(p))
+        return spec
+
+    def frame_keys(self, shard_id: str) -> list[str]:
+        """Frame keys of a shard, from the header alone (no shard file read)."""
+        a, b = self._shards[shard_id]["identities"]
+        E = self.config["dataset"]["expressions_per_identity"]
+        V = self.config["dataset"]["views_per_expression"]
+        return [f"id{i:06d}_ex{e:02d}_v{v:02d}" for i in range(a, b) for e in range(E) for v in range(V)]
+
+    def expected(self) -> dict[str, list[str]]:
+        """shard id -> frame keys (what a dataset directory expects)."""
+        return {s: self.frame_keys(s) for s in self._shards}
+
+    def render_settings(self) -> dict:
+        return dict(self.config["render"])
+
+    def lighting(self) -> dict:
+        return dict(self.config["lighting"])
+
+    def model_sha256(self) -> str:
+        return self.header["model"]["sha256"]
+
+    def model_path(self) -> Path:
+        p = self.header["model"]["path"]
+        if p is None:
+            from synth.model.default import default_model_path
+
+            return default_model_path()
+        return Path(p)
+
+    def model_data(self):
+        """The head model the plan was made with (refused if the file changed since)."""
+        from synth.model.format import read_model
+
+        path = self.model_path()
+        if not path.is_file():
+            raise SynthError("the plan's model file is missing", str(path), "restore it or re-run 'synth plan'")
+        if file_sha256(path) != self.model_sha256():
+            raise SynthError("the model file changed since planning (sha256 mismatch)", str(path),
+                             "re-run 'synth plan' with this model")
+        return read_model(path)
+
+
+def load_plan(root: str | os.PathLike) -> Plan:
+    return Plan(root)

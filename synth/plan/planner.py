@@ -1,0 +1,262 @@
+"""Build a plan: every random choice of a dataset as plain data, one spec per shard.
+
+Identity i's data depends only on (run seed, i) and the inputs (config, model, asset
+catalogue); frame (i, e, v) only on (run seed, i, e, v) (the views of one expression are
+drawn together, since each is rejected against the earlier ones). So a plan of identities
+[a, b) equals the matching slice of any larger plan, whatever the shard size.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from synth import seeds
+from synth.config import Config
+from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
+from synth.errors import SynthError
+from synth.model.format import HeadModelData
+from synth.plan import assets as assets_mod
+from synth.plan import cameras, expressions, identities, parallel
+
+
+def frame_key(identity: int, expression: int, view: int) -> str:
+    return f"id{identity:06d}_ex{expression:02d}_v{view:02d}"
+
+
+def shard_key(index: int) -> str:
+    return f"shard_{index:06d}"
+
+
+def check_counts(cfg: Config, first_identity: int, n_identities: int) -> None:
+    d = cfg.dataset
+    if n_identities < 1:
+        raise SynthError(f"--identities must be at least 1, got {n_identities}", "--identities", "plan one or more")
+    if first_identity < 0 or first_identity + n_identities > 1_000_000:
+        raise SynthError("identity indices must lie in [0, 1000000) (frame keys have 6 digits)", "--start",
+                         "plan fewer identities")
+    if d.expressions_per_identity > 100 or d.views_per_expression > 100:
+        raise SynthError("expressions_per_identity and views_per_expression must be at most 100 (frame keys have "
+                         "2 digits)", "dataset", "lower them")
+    if first_identity % d.identities_per_shard:
+        raise SynthError(f"--start {first_identity} is not a multiple of dataset.identities_per_shard "
+                         f"({d.identities_per_shard})", "--start", "start at a shard boundary")
+
+
+@dataclass
+class PlanArrays:
+    """Everything sampled, as arrays over identities (N), expression pairs (P = N * E) and views (V)."""
+
+    identity: np.ndarray  # (N,) identity indices
+    codes: np.ndarray  # (N, Ki)
+    targets: np.ndarray  # (N, 3)
+    assets: list[dict[str, Any]]
+    lighting: list[dict[str, Any]]
+    expr: expressions.Expressions  # over P
+    expr_model: expressions.ExpressionModel
+    views: cameras.Views  # (P, V)
+    roll_deg: np.ndarray  # (P, V)
+    K: np.ndarray  # (P, V, 3, 3)
+    c2w: np.ndarray  # (P, V, 4, 4)
+    w2c: np.ndarray  # (P, V, 4, 4)
+    frame_seeds: np.ndarray  # (P, V)
+    width: int
+    height: int
+
+
+def sample_plan(cfg: Config, model: HeadModelData, catalogue: assets_mod.Catalogue, seed: int,
+                first_identity: int, n_identities: int) -> PlanArrays:
+    """Sample identities [first_identity, first_identity + n_identities) (vectorised)."""
+    cfg = cfg.resolved()
+    d, cam = cfg.dataset, cfg.camera
+    E, V = d.expressions_per_identity, d.views_per_expression
+    cameras.check_feasible(cam, V)
+    ids = np.arange(first_identity, first_identity + n_identities, dtype=np.int64)
+    radius = identities.truncation_radius(model.identity_dims, cfg.identity)
+    codes = identities.sample_identities(seed, ids, identities.prior_of(model), radius)
+    targets = identities.look_at_targets(model, codes, cam.target, cam.target_offset_m)
+    ii = np.repeat(ids, E)
+    ee = np.tile(np.arange(E, dtype=np.int64), n_identities)
+    em = expressions.resolve(model.expression_names, cfg.expression)
+    expr = expressions.sample_expressions(seed, ii, ee, em, cfg.expression)
+    if ii.size > 64:  # fail fast: a hopeless request shows on a few expressions (same result as below)
+        cameras.sample_views(seed, ii[:16], ee[:16], V, cam)
+    views = cameras.sample_views(seed, ii, ee, V, cam)
+    vv = np.arange(V, dtype=np.int64)[None, :]
+    extra = seeds.uniforms(seed, seeds.Stream.CAMERA_EXTRA, ii[:, None], ee[:, None], vv, n=3)
+    roll = cam.roll_deg[0] + extra[..., 0] * (cam.roll_deg[1] - cam.roll_deg[0])
+    jit = cam.principal_point_jitter_px * (2.0 * extra[..., 1:3] - 1.0)
+    W, H = cfg.render.resolution
+    K = intrinsics(W, H, cfg.fov_deg, jit)
+    tgt = np.repeat(targets, E, axis=0)[:, None, :]
+    c2w = orbit_camera_to_world(views.azimuth_deg, views.elevation_deg, views.radius_m, tgt, roll)
+    w2c = invert_rigid(c2w)
+    fseeds = seeds.frame_seeds(seed, ii[:, None], ee[:, None], vv)
+    disabled = cfg.assets.disabled_classes
+    assets = assets_mod.sample_assets_batch(seed, ids, catalogue, disabled)
+    lighting = [assets_mod.sample_lighting(seed, int(i), cfg.lighting) for i in ids]
+    return PlanArrays(ids, codes, targets, assets, lighting, expr, em, views, roll, K, c2w, w2c, fseeds, W, H)
+
+
+DECIMALS = 8  # every float of a plan is rounded to 8 decimal places (byte-stable output)
+
+
+def _r(a) -> list:
+    """Round and convert to nested lists; +0.0 turns -0.0 into 0.0."""
+    return _rn(a).tolist()
+
+
+def _rn(a) -> np.ndarray:
+    """Rounded float64 array (C-contiguous, serialised natively by orjson)."""
+    return np.ascontiguousarray(np.round(np.asarray(a, np.float64), DECIMALS) + 0.0)
+
+
+class ShardSpecs:
+    """Turns PlanArrays into shard specs. The bulk rounding and conversion happens once, here;
+    :meth:`specs` then assembles shards [a, b) (cheap per shard, and fork-friendly)."""
+
+    def __init__(self, cfg: Config, arr: PlanArrays, seed: int):
+        cfg = cfg.resolved()
+        d, cam = cfg.dataset, cfg.camera
+        self.E, self.V, self.S = d.expressions_per_identity, d.views_per_expression, d.identities_per_shard
+        self.arr, self.seed = arr, seed
+        ex = arr.expr
+        # matrices stay float64 numpy arrays (orjson serialises them natively); scalars become lists
+        self.K, self.w2c, self.c2w = _rn(arr.K), _rn(arr.w2c), _rn(arr.c2w)
+        self.az, self.el, self.rad = _r(arr.views.azimuth_deg), _r(arr.views.elevation_deg), _r(arr.views.radius_m)
+        self.fseeds = arr.frame_seeds.tolist()
+        self.codes_e = _rn(ex.codes)
+        self.rots = {k: _r(v) for k, v in ex.joint_rotations().items()}
+        self.pose = {k: _r(getattr(ex, k)) for k in ("jaw_open_deg", "jaw_lateral_deg", "gaze_yaw_deg",
+                                                      "gaze_pitch_deg", "vergence_deg")}
+        self.kinds = [expressions.KINDS[k] for k in ex.kind.tolist()]
+        self.presets = [arr.expr_model.preset_names[p] if p >= 0 else None for p in ex.preset.tolist()]
+        self.cand, self.rest = arr.views.candidates.tolist(), arr.views.restarts.tolist()
+        self.id_codes, self.targets = _rn(arr.codes), _r(arr.targets)
+        self.near, self.far = cam.near_m, cam.far_m
+        self.n_shards = -(-arr.identity.size // self.S)
+
+    def specs(self, a: int = 0, b: int | None = None):
+        """Yield (shard_id, spec) for shards [a, b) of this plan (counted from its first shard)."""
+        E, V, S, arr = self.E, self.V, self.S, self.arr
+        N = arr.identity.size
+        W, H, near, far = arr.width, arr.height, self.near, self.far
+        b = self.n_shards if b is None else b
+        for s0 in range(a * S, min(N, b * S), S):
+            idents = []
+            for n in range(s0, min(N, s0 + S)):
+                i = int(arr.identity[n])
+                tgt = self.targets[n]
+                exprs = []
+                for e in range(E):
+                    p = n * E + e
+                    Kp, w2cp, c2wp = self.K[p], self.w2c[p], self.c2w[p]
+                    azp, elp, radp, sp = self.az[p], self.el[p], self.rad[p], self.fseeds[p]
+                    frames = [{
+                        "frame_id": f"id{i:06d}_ex{e:02d}_v{v:02d}", "identity_index": i, "expression_index": e,
+                        "view_index": v, "seed": sp[v],
+                        "camera": {"K": Kp[v], "world_to_camera": w2cp[v], "camera_to_world": c2wp[v],
+                                   "width": W, "height": H, "near": near, "far": far, "azimuth_deg": azp[v],
+                                   "elevation_deg": elp[v], "radius_m": radp[v], "target": tgt}} for v in range(V)]
+                    exprs.append({
+                        "expression_index": e, "kind": self.kinds[p], "preset": self.presets[p],
+                        "expression_code": self.codes_e[p],
+                        "joint_rotations": {k: r[p] for k, r in self.rots.items()},
+                        "pose": {k: q[p] for k, q in self.pose.items()},
+                        "camera_sampling": {"candidates": self.cand[p], "restarts": self.rest[p]},
+                        "frames": frames})
+                asset = arr.assets[n]
+                idents.append({"identity_index": i, "identity_code": self.id_codes[n], "target": tgt,
+                               "assets": asset, "skin": dict(asset["skin"]["params"]) if asset.get("skin") else None,
+                               "lighting": arr.lighting[n], "expressions": exprs})
+            sid = shard_key(int(arr.identity[s0]) // S)
+            yield sid, {"format": "synth-plan-shard", "format_version": 1, "shard_id": sid, "run_seed": self.seed,
+                        "identities": idents}
+
+
+def shard_specs(cfg: Config, arr: PlanArrays, seed: int):
+    """All (shard_id, spec) pairs of a plan, in order (matrices as numpy arrays)."""
+    return ShardSpecs(cfg, arr, seed).specs()
+
+
+def replan_frame(cfg: Config, model: HeadModelData, catalogue: assets_mod.Catalogue, seed: int, identity: int,
+                 expression: int, view: int) -> dict[str, Any]:
+    """Re-plan one frame alone (as plain JSON data): the same object as in any plan with this
+    seed, config, model and catalogue that contains the frame."""
+    import orjson
+
+    arr = sample_plan(cfg, model, catalogue, seed, identity, 1)
+    (_, spec), = ShardSpecs(cfg, arr, seed).specs()
+    frame = spec["identities"][0]["expressions"][expression]["frames"][view]
+    return orjson.loads(orjson.dumps(frame, option=orjson.OPT_SERIALIZE_NUMPY))
+
+
+def model_record(model_path) -> tuple[HeadModelData, dict[str, Any]]:
+    """Read the model (``None`` = the embedded default) and describe it for the plan header."""
+
+    from synth.model.format import read_model
+    from synth.plan.io import file_sha256
+
+    if model_path is None:
+        from synth.model.default import default_model_path
+
+        p, rec = default_model_path(), None
+    else:
+        p = Path(model_path).resolve()
+        rec = str(p)
+    data = read_model(p)
+    return data, {"name": data.name, "sha256": file_sha256(p), "path": rec, "identity_dims": data.identity_dims,
+                  "expression_dims": data.expression_dims, "expression_names": list(data.expression_names),
+                  "joint_names": list(data.joint_names)}
+
+
+def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first_identity: int = 0,
+             model_path=None, jobs: int | None = None) -> tuple[dict, dict]:
+    """Sample and write a plan directory; returns (header, summary).
+
+    Identities are planned in chunks of whole shards, in up to ``jobs`` forked processes
+    (default: up to 4 cores); each chunk samples and writes its own shards. Every number
+    depends only on (seed, indices), so ``jobs`` and the chunking never change the output."""
+    import dataclasses
+
+    import synth
+    from synth.config import to_dict
+    from synth.plan import io, stats
+
+    if seed is not None:
+        cfg = dataclasses.replace(cfg, dataset=dataclasses.replace(cfg.dataset, seed=seeds.check_seed(seed)))
+    cfg = cfg.resolved()
+    seed = cfg.dataset.seed
+    check_counts(cfg, first_identity, n_identities)
+    cameras.check_feasible(cfg.camera, cfg.dataset.views_per_expression)
+    io.check_out_dir(Path(out))  # fail fast, before the sampling
+    model, model_rec = model_record(model_path)
+    cat = assets_mod.load_catalogue(cfg.assets.manifest_dir or None)
+    d = cfg.dataset
+    S = d.identities_per_shard
+    n_shards = -(-n_identities // S)
+    jobs = parallel.default_jobs() if jobs is None else max(1, int(jobs))
+
+    def produce(tmp: Path) -> tuple[list[dict], dict]:
+        def chunk(r: tuple[int, int]):
+            lo, hi = first_identity + r[0] * S, min(first_identity + r[1] * S, first_identity + n_identities)
+            arr = sample_plan(cfg, model, cat, seed, lo, hi - lo)
+            listing = io.write_shards(tmp, ShardSpecs(cfg, arr, seed).specs())
+            return listing, stats.partial(arr)
+
+        parts = parallel.chunks(n_shards, 1 if jobs == 1 else 2 * jobs)
+        res = parallel.fork_map(chunk, parts, jobs)
+        return [x for listing, _ in res for x in listing], stats.merge(cfg, [p for _, p in res])
+
+    header = {
+        "format": io.PLAN_FORMAT, "format_version": io.PLAN_FORMAT_VERSION, "synth_version": synth.__version__,
+        "run_seed": seed, "first_identity": first_identity, "num_identities": n_identities,
+        "identities_per_shard": S, "expressions_per_identity": d.expressions_per_identity,
+        "views_per_expression": d.views_per_expression,
+        "num_frames": n_identities * d.expressions_per_identity * d.views_per_expression,
+        "model": model_rec, "catalogue": {"sha256": cat.digest}, "config": to_dict(cfg, drop_none=False),
+    }
+    return io.write_plan(out, header, produce)

@@ -1,0 +1,114 @@
+"""The typed configuration: paper defaults, TOML + --set overrides, one-line refusals."""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from synth.cli.main import main
+from synth.config import RENDER_PRESETS, Config, explain, load_config, to_toml
+from synth.errors import SynthError
+
+DOCS = Path(__file__).resolve().parents[1] / "docs" / "config.md"
+
+
+def test_defaults_mirror_the_paper():
+    c = Config()
+    assert c.dataset.expressions_per_identity == 13
+    assert c.dataset.views_per_expression == 30
+    assert c.camera.min_separation_deg == 25.0
+    assert c.lighting.environment == "uniform" and c.lighting.hdri_files == ()
+    assert c.render.preset == "preview" and c.dataset.identities_per_shard == 1
+
+
+def test_render_presets_resolve_and_can_be_overridden():
+    r = load_config().resolved().render
+    assert r.resolution == (256, 256) and r.samples == 16 and r.denoise is True
+    ci = load_config(overrides=["render.preset=ci"]).resolved().render
+    assert (ci.resolution, ci.samples) == ((64, 64), 4) and ci.samples <= 4
+    prod = load_config(overrides=["render.preset=production", "render.samples=64"]).resolved().render
+    assert prod.resolution == (512, 512) and prod.adaptive_sampling and prod.denoise and prod.samples == 64
+    assert set(RENDER_PRESETS) == {"ci", "preview", "production"}
+
+
+def test_toml_then_overrides(tmp_path):
+    f = tmp_path / "c.toml"
+    f.write_text('[camera]\nfov_deg = 30\nazimuth_deg = [-90, 90]\n[dataset]\nviews_per_expression = 12\n')
+    c = load_config(f, ["camera.fov_deg=40", "lighting.environment=uniform", "expression.presets=['smile']"])
+    assert c.camera.fov_deg == 40.0 and c.camera.azimuth_deg == (-90.0, 90.0)
+    assert c.dataset.views_per_expression == 12 and c.expression.presets == ("smile",)
+    assert c.fov_deg == 40.0
+    assert abs(Config().fov_deg - 23.9) < 0.1  # 85 mm on a 36 mm sensor
+
+
+def test_round_trip_through_toml(tmp_path):
+    c = load_config(overrides=["camera.roll_deg=[-5, 5]", "render.preset=ci", "identity.max_mahalanobis=4"])
+    f = tmp_path / "r.toml"
+    f.write_text(to_toml(c.resolved()))
+    assert load_config(f) == c.resolved()
+
+
+@pytest.mark.parametrize("text, key", [
+    ("[camera]\nfovv_deg = 3\n", "camera.fovv_deg"),
+    ("[cameras]\nfov_deg = 3\n", "cameras"),
+    ("[camera]\nmin_separation_deg = 200\n", "camera.min_separation_deg"),
+    ("[camera]\nelevation_deg = [-100, 10]\n", "camera.elevation_deg"),
+    ("[camera]\nradius_m = [2.0, 1.0]\n", "camera.radius_m"),
+    ("[camera]\nelevation_sampling = 'cube'\n", "camera.elevation_sampling"),
+    ("[dataset]\nviews_per_expression = 2.5\n", "dataset.views_per_expression"),
+    ("[dataset]\nseed = -1\n", "dataset.seed"),
+    ("[render]\ndenoise = 1\n", "render.denoise"),
+    ("[camera]\nnear_m = 2.0\n", "camera.near_m"),
+    ("[lighting]\nenvironment = 'hdri'\n", "lighting.hdri_files"),
+    ("[expression]\npresets = ['grin']\n", "expression.presets"),
+    ("[assets]\ndisabled_classes = ['shoes']\n", "assets.disabled_classes"),
+])
+def test_bad_files_are_refused_naming_the_key(tmp_path, text, key):
+    f = tmp_path / "bad.toml"
+    f.write_text(text)
+    with pytest.raises(SynthError) as e:
+        load_config(f)
+    msg = str(e.value)
+    assert key in msg and "\n" not in msg and str(f) in msg
+
+
+def test_bad_overrides_are_refused():
+    for item, key in (("camera.nope=1", "camera.nope"), ("camera.fov_deg=500", "camera.fov_deg"),
+                      ("nosection", "nosection"), ("render.resolution=[64]", "render.resolution")):
+        with pytest.raises(SynthError) as e:
+            load_config(overrides=[item])
+        assert key in str(e.value) and "--set" in str(e.value)
+
+
+def test_every_field_is_documented_and_docs_are_in_sync():
+    rows = explain()
+    n_fields = sum(len(dataclasses.fields(getattr(Config(), f.name))) for f in dataclasses.fields(Config))
+    assert len(rows) == n_fields
+    assert all(doc for _, _, _, doc in rows)
+    text = DOCS.read_text()
+    for key, *_ in rows:
+        assert f"`{key}`" in text, f"docs/config.md lacks {key}: regenerate it (see its first lines)"
+
+
+def test_cli_config_show(tmp_path, capsys):
+    assert main(["config", "show", "--set", "camera.fov_deg=30"]) == 0
+    out = capsys.readouterr().out
+    data = tomllib.loads(out)
+    assert data["camera"]["fov_deg"] == 30.0 and data["render"]["resolution"] == [256, 256]
+    f = tmp_path / "c.toml"
+    f.write_text("[dataset]\nexpressions_per_identity = 3\n")
+    assert main(["config", "show", "--config", str(f)]) == 0
+    assert tomllib.loads(capsys.readouterr().out)["dataset"]["expressions_per_identity"] == 3
+    assert main(["config", "show", "--explain"]) == 0
+    assert "camera.min_separation_deg" in capsys.readouterr().out
+
+
+def test_cli_config_errors_are_one_line(tmp_path, capsys):
+    assert main(["config", "show", "--set", "camera.min_separation_deg=-3"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "camera.min_separation_deg" in err[0] and "out of range" in err[0]
+    assert main(["config", "show", "--config", str(tmp_path / "missing.toml")]) == 2
+    assert "not found" in capsys.readouterr().err
