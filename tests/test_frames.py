@@ -121,3 +121,13 @@ def test_landmark_visibility():
     # on the surface; within tolerance; over background; outside (x = W); outside (x < 0); behind a surface;
     # behind the camera
     assert vis.tolist() == [True, True, True, False, False, False, False]
+
+
+def test_frames_module_imports_on_its_own():
+    """Regression: synth.frames <-> synth.dataset used to be a circular import."""
+    import subprocess
+    import sys
+
+    for mod in ("synth.frames", "synth.dataset", "synth.shards", "synth.validate"):
+        r = subprocess.run([sys.executable, "-c", f"import {mod}"], capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
