@@ -52,6 +52,7 @@ class Stream(enum.IntEnum):
     CAMERA_EXTRA = 5  # per-frame roll and principal-point jitter
     FRAME = 6  # the per-frame render seed
     LIGHTING = 7
+    ASSET_GEOMETRY = 8  # per-identity, per-class geometry randomness of asset rigs (strand roots, ...)
 
 
 def check_seed(seed: int) -> int:

@@ -1,0 +1,107 @@
+"""Asset rigs: one module per class, one small shared interface.
+
+A rig module ``blender_scripts.assets.<module>`` exposes::
+
+    def build(ctx: HeadContext, entry: dict) -> Rig
+
+``entry`` is the plan's choice for the class: ``{"id", "generator", "params", ...}`` (see the
+shard spec, docs/plan-format.md). ``build`` creates only what that asset needs, links its
+objects into the scene, gives every material ``pass_index = CLASSES[segmentation class]``,
+and returns a :class:`Rig`. After an expression change the worker updates the head mesh in
+place and calls ``rig.update(ctx)``; rigs attached to the surface (hair curves with
+Deform Curves on Surface) may have nothing to do there. Shader-layer classes (makeup, iris,
+skin) edit ``ctx.materials`` instead of creating objects.
+
+Randomness inside a rig (strand roots, jitter) comes only from ``ctx.rng(cls)``, a
+generator derived from (run seed, identity index, class): never from a global RNG.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from synth import seeds
+from synth.config import ASSET_CLASSES
+
+#: asset class -> segmentation class name (synth.segmentation.CLASSES)
+SEGMENTATION_CLASS = {"hair": "hair", "beard": "beard", "eyebrows": "eyebrows", "eyelashes": "eyelashes",
+                      "garment": "clothing", "glasses": "glasses", "headwear": "headwear",
+                      "makeup": "skin", "iris": "eyes", "skin": "skin"}
+
+#: asset class -> rig module (relative to this package)
+MODULES = {"hair": "hair", "beard": "beard", "eyebrows": "eyebrows", "eyelashes": "eyelashes",
+           "garment": "garment", "glasses": "glasses", "headwear": "headwear", "makeup": "makeup",
+           "iris": "iris", "skin": "skin_detail"}
+
+#: build order: shader layers first (they edit head materials), then geometry.
+BUILD_ORDER = ("skin", "iris", "makeup", "eyelashes", "eyebrows", "beard", "hair", "garment", "headwear",
+               "glasses")
+
+
+@dataclass
+class HeadContext:
+    """What a rig may read about the head it dresses. Arrays are float64, world metres."""
+
+    data: Any  # synth.model.format.HeadModelData (regions, triangles, uvs, landmarks, extra)
+    head: Any  # bpy Object of the head mesh (vertices updated in place per expression)
+    materials: dict[int, Any]  # head materials by segmentation class id
+    rest_vertices: np.ndarray  # (V, 3) identity applied, neutral expression, no joint rotation
+    vertices: np.ndarray  # (V, 3) the current expression
+    joint_transforms: np.ndarray  # (J, 4, 4) current
+    joint_index: dict[str, int]
+    landmarks: dict[str, np.ndarray]  # set -> (L, 3), current
+    resolution: int  # max(width, height) of the render, pixels (strand counts scale with it)
+    identity_index: int
+    run_seed: int
+    assets: dict[str, Any] = field(default_factory=dict)  # the identity's full asset choice (class -> entry)
+
+    def rng(self, cls: str) -> np.random.Generator:
+        return seeds.generator(self.run_seed, seeds.Stream.ASSET_GEOMETRY, self.identity_index,
+                               expression=ASSET_CLASSES.index(cls))
+
+
+class Rig:
+    """Base rig: objects it created, an update hook, and a JSON record of what was built."""
+
+    cls: str = ""
+
+    def __init__(self, cls: str, objects: list | None = None, info: dict | None = None):
+        self.cls = cls
+        self.objects = list(objects or [])
+        self.info = dict(info or {})
+
+    def update(self, ctx: HeadContext) -> None:  # noqa: D401 - hook
+        """Follow an expression change (ctx.vertices already applied to ctx.head)."""
+
+    def record(self) -> dict:
+        """JSON-able facts about the built asset (strand counts, fitted pose...), for the frame JSON."""
+        return dict(self.info)
+
+
+def rig_module(cls: str, entry: dict):
+    gen = str(entry.get("generator", ""))
+    if gen.endswith(".blend") or gen.startswith("blend:"):
+        return importlib.import_module(f"{__name__}.external")
+    return importlib.import_module(f"{__name__}.{MODULES[cls]}")
+
+
+def dress(ctx: HeadContext, assets: dict[str, Any]) -> dict[str, Rig]:
+    """Build the chosen assets (only those; absent classes are None) in BUILD_ORDER."""
+    ctx.assets = dict(assets)
+    rigs: dict[str, Rig] = {}
+    for cls in BUILD_ORDER:
+        entry = assets.get(cls)
+        if not entry:
+            continue
+        rigs[cls] = rig_module(cls, entry).build(ctx, entry)
+    return rigs
+
+
+def update(rigs: dict[str, Rig], ctx: HeadContext) -> None:
+    for cls in BUILD_ORDER:
+        if cls in rigs:
+            rigs[cls].update(ctx)
