@@ -73,3 +73,15 @@ def set_vertices(ob, vertices: np.ndarray) -> None:
     me = ob.data
     me.vertices.foreach_set("co", np.ascontiguousarray(vertices, np.float32).ravel())
     me.update()
+
+
+def set_rest_positions(ob, rest: np.ndarray) -> None:
+    """Store the identity's neutral shape as the ``rest_position`` point attribute: Geometry
+    Nodes (Deform Curves on Surface) compare it with the current shape to carry attached
+    strands along when an expression changes the vertices."""
+    me = ob.data
+    attr = me.attributes.get("rest_position")
+    if attr is None:
+        attr = me.attributes.new("rest_position", "FLOAT_VECTOR", "POINT")
+    attr.data.foreach_set("vector", np.ascontiguousarray(rest, np.float32).ravel())
+    me.update()

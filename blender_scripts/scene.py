@@ -37,7 +37,7 @@ def _pick_device(scene, wanted: str) -> str:
     except KeyError:
         scene.cycles.device = "CPU"
         return "cpu"
-    order = ["OPTIX", "CUDA"] if wanted == "auto" else [wanted.upper()]
+    order = ["OPTIX", "CUDA"] if wanted in ("auto", "gpu") else [wanted.upper()]
     for backend in order:
         try:
             prefs.compute_device_type = backend
@@ -51,7 +51,10 @@ def _pick_device(scene, wanted: str) -> str:
             scene.cycles.device = "GPU"
             return backend.lower()
     if wanted not in ("auto", "cpu"):
-        raise RuntimeError(f"render device '{wanted}' requested but no such GPU is available")
+        from synth.errors import SynthError
+
+        raise SynthError(f"render device '{wanted}' requested but no OptiX/CUDA GPU is available", "render.device",
+                         "set render.device = \"auto\" or \"cpu\"")
     scene.cycles.device = "CPU"
     return "cpu"
 
@@ -63,9 +66,10 @@ def configure_render(settings: dict[str, Any], width: int, height: int) -> dict[
     device = _pick_device(scene, str(settings.get("device", "auto")).lower())
     c = scene.cycles
     c.samples = int(settings["samples"])
-    c.use_adaptive_sampling = bool(settings.get("adaptive", False))
+    c.time_limit = 0.0
+    c.use_adaptive_sampling = bool(settings.get("adaptive_sampling", settings.get("adaptive", False)))
     if c.use_adaptive_sampling:
-        c.adaptive_threshold = float(settings.get("adaptive_threshold", 0.01))
+        c.adaptive_threshold = float(settings.get("adaptive_threshold") or 0.01)
     c.use_denoising = bool(settings.get("denoise", False))
     if c.use_denoising:
         c.denoiser = "OPENIMAGEDENOISE" if device == "cpu" else str(settings.get("gpu_denoiser", "OPTIX")).upper()

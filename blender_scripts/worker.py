@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from synth.errors import SynthError
+
 
 #: Classes listed under "assets" in every frame JSON (null where absent).
 ASSET_CLASSES = ("hair", "beard", "eyebrows", "eyelashes", "garment", "glasses", "headwear", "makeup", "iris", "skin")
@@ -52,50 +54,87 @@ def software_versions() -> dict:
     return {"synth": synth.__version__, "blender": bpy.app.version_string, "python": platform.python_version()}
 
 
+def _dress(ident: dict, ctx, rigs_out: dict) -> dict:
+    """Build the identity's chosen assets (only those). Returns class -> frame-JSON record."""
+    from blender_scripts import assets as basset
+
+    chosen = {c: ident.get("assets", {}).get(c) for c in ASSET_CLASSES}
+    rigs = basset.dress(ctx, {c: e for c, e in chosen.items() if e})
+    rigs_out.update(rigs)
+    record = {}
+    for c in ASSET_CLASSES:
+        e = chosen[c]
+        if not e:
+            record[c] = None
+            continue
+        record[c] = {**e, "build": rigs[c].record()} if c in rigs else {**e, "build": {"built": False}}
+    return record
+
+
+def _set_environment(ident: dict, plan) -> dict:
+    from blender_scripts import scene as bscene
+
+    env = dict(ident.get("lighting") or plan.lighting())
+    strength = float(env.get("strength", 1.0))
+    if env.get("environment", "uniform") == "uniform":
+        bscene.uniform_environment(strength, tuple(env.get("color", (1.0, 1.0, 1.0))))
+    else:
+        path = env.get("file")
+        if not path:
+            raise SynthError("the plan's lighting names no HDR file", "lighting", "re-plan with lighting.hdri_files")
+        if not Path(path).is_file():
+            raise SynthError("HDR environment file not found", str(path),
+                             "restore the file or remove it from lighting.hdri_files and re-plan")
+        bscene.hdr_environment(str(path), strength, float(env.get("rotation_deg", 0.0)))
+    return env
+
+
 def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> int:
     """Render the missing frames of one shard and commit it. Returns frames rendered."""
     from blender_scripts import camera as bcam
     from blender_scripts import head as bhead
     from blender_scripts import materials as bmat
     from blender_scripts import scene as bscene
+    from blender_scripts.assets import HeadContext
+    from blender_scripts.assets import update as update_rigs
     from blender_scripts.render_frame import render_view
-    from synth.frames import frame_key
-    from synth.labels import visibility
     from synth.conventions import project
     from synth.exr import CHANNELS
+    from synth.labels import visibility
     from synth.skin import skin_albedo
 
     spec = plan.shard(shard_id)
     render_cfg = plan.render_settings()
-    env_cfg = plan.lighting()
     versions = software_versions()
     rendered = 0
-    seeds = {}
-    with ds.staging(shard_id) as st:
+    seeds = {f["frame_id"]: f["seed"] for ident in spec["identities"] for e in ident["expressions"]
+             for f in e["frames"]}
+    st = ds.try_staging(shard_id)
+    if st is None:  # committed meanwhile, or another process holds it
+        emit(event="skip", shard=shard_id)
+        return 0
+    with st:
         done = st.frames_done()
         for ident in spec["identities"]:
             i = ident["identity_index"]
             keys = [f["frame_id"] for e in ident["expressions"] for f in e["frames"]]
-            for e in ident["expressions"]:
-                for f in e["frames"]:
-                    seeds[f["frame_id"]] = f["seed"]
             if all(k in done for k in keys):
                 continue
             bscene.reset()
             f0 = ident["expressions"][0]["frames"][0]["camera"]
             width, height = int(f0["width"]), int(f0["height"])
             effective = bscene.configure_render(render_cfg, width, height)
-            if env_cfg.get("environment", "uniform") == "uniform":
-                bscene.uniform_environment(float(env_cfg.get("strength", 1.0)))
-            else:
-                bscene.hdr_environment(env_cfg["environment"], float(env_cfg.get("strength", 1.0)),
-                                       float(ident.get("environment_rotation_deg", 0.0)))
+            env = _set_environment(ident, plan)
             skin = dict(ident.get("skin") or {})
             albedo = skin_albedo(float(skin.get("melanin", 0.05)), float(skin.get("haemoglobin", 0.015)))
             skin_record = {**skin, "albedo_linear_srgb": [round(a, 6) for a in albedo]}
             mats = bmat.head_materials(skin, albedo)
             beta = np.asarray(ident["identity_code"], np.float64)
-            head_ob = None
+            zero_psi = np.zeros(hm.data.expression_dims)
+            rest = hm.evaluate(beta, zero_psi, np.zeros((hm.J, 3)), landmarks=False).vertices[0].astype(np.float64)
+            head_ob = ctx = None
+            rigs: dict = {}
+            assets_record: dict = {}
             cam_ob = bcam.make_camera()
             for e in ident["expressions"]:
                 ekeys = [f["frame_id"] for f in e["frames"]]
@@ -106,13 +145,23 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> in
                 for name, r in (e.get("joint_rotations") or {}).items():
                     rot[hm.joint_index[name]] = r
                 ev = hm.evaluate(beta, psi, rot)
-                verts = ev.vertices[0]
+                verts = ev.vertices[0].astype(np.float64)
+                lms = {k: v[0].astype(np.float64) for k, v in ev.landmarks.items()}
+                joints = ev.joint_transforms[0].astype(np.float64)
                 if head_ob is None:
                     head_ob = bhead.build_head_object(hm.data, verts, mats)
+                    bhead.set_rest_positions(head_ob, rest)
+                    ctx = HeadContext(data=hm.data, head=head_ob, materials=mats, rest_vertices=rest,
+                                      vertices=verts, joint_transforms=joints, joint_index=dict(hm.joint_index),
+                                      landmarks=lms, resolution=max(width, height), identity_index=i,
+                                      run_seed=int(spec["run_seed"]))
+                    assets_record = _dress(ident, ctx, rigs)
                 else:
                     bhead.set_vertices(head_ob, verts)
-                lm3d = ev.landmarks["ibug68"][0].astype(np.float64)
-                head_pose = ev.joint_transforms[0, hm.joint_index["head"]].astype(np.float64)
+                    ctx.vertices, ctx.joint_transforms, ctx.landmarks = verts, joints, lms
+                    update_rigs(rigs, ctx)
+                lm3d = lms["ibug68"]
+                head_pose = joints[hm.joint_index["head"]]
                 for f in e["frames"]:
                     key = f["frame_id"]
                     if key in done:
@@ -125,23 +174,27 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> in
                     uv, z = project(K, w2c, lm3d)
                     vis = visibility(uv, z, out["depth"], out["rgba"][..., 3])
                     fj = dict(f)
+                    fj["shard_id"] = shard_id
                     fj["image"] = {"width": width, "height": height, "file": f"{key}.exr",
                                    "layers": list(CHANNELS)}
                     fj["model"] = {**model_info, "identity": beta.tolist(), "expression": psi.tolist(),
-                                   "expression_preset": e.get("preset"),
+                                   "expression_preset": e.get("preset"), "expression_kind": e.get("kind"),
                                    "joint_rotations": {n: rot[j].tolist() for n, j in hm.joint_index.items()},
+                                   "pose": e.get("pose"),
                                    "head_pose": head_pose.tolist()}
                     fj["landmarks_3d"] = lm3d.tolist()
                     fj["landmarks_2d"] = uv.tolist()
                     fj["landmarks_visible"] = vis.tolist()
-                    fj["assets"] = {c: None for c in ASSET_CLASSES} | dict(ident.get("assets") or {})
+                    fj["assets"] = assets_record
                     fj["skin"] = skin_record
+                    fj["lighting"] = env
                     fj["render"] = {"preset": render_cfg.get("preset"), "resolution": [width, height],
                                     "seed": int(f["seed"]), **effective}
                     fj["software"] = versions
                     st.write_frame(key, out["rgba"], out["depth"], out["normals"], out["segmentation"], fj)
                     rendered += 1
                     emit(event="frame", shard=shard_id, key=key, render_seconds=out["render_seconds"])
+            rigs.clear()
             emit(event="rss", rss_mb=rss_mb())
         st.commit(manifest_extra={"seeds": seeds, "versions": versions})
     emit(event="commit", shard=shard_id)
@@ -158,14 +211,13 @@ def main(argv: list[str] | None = None) -> int:
     # SIGTERM (Ctrl-C in the parent) -> stop between frames; staged frames are kept.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
 
-    from synth.errors import SynthError
     from synth.model.head import HeadModel
     from synth.plan.io import load_plan
-    from synth.shards import load_dataset
+    from synth.shards import open_dataset
 
     try:
         plan = load_plan(Path(args.plan))
-        ds = load_dataset(Path(args.dataset))
+        ds = open_dataset(Path(args.dataset), plan.plan_hash, plan.expected())
         data = plan.model_data()
         hm = HeadModel(data)
         model_info = {"name": data.name, "sha256": plan.model_sha256()}
@@ -175,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
                 n = render_shard(ds, plan, shard_id, hm, model_info, Path(tmp))
                 print(f"worker: {shard_id}: {n} frames in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     except SynthError as e:
-        emit(event="error", message=str(e))
+        emit(event="error", shard=args.shards, message=str(e))
         print(f"synth worker: error: {e}", file=sys.stderr)
         return 2
     return 0

@@ -39,6 +39,10 @@ from synth.errors import SynthError
 from synth.frames import FRAME_KEY_RE, jsonable
 
 
+#: ``synth render`` keeps the plan directory it renders next to the shards (DIR/plan/).
+PLAN_DIR = "plan"
+
+
 def _normalise_expected(expected: Mapping[str, Sequence[str]]) -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}
     seen: dict[str, str] = {}
@@ -218,7 +222,8 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
                 atomic_write_json(root / PLAN_FILE, jsonable(plan))
         else:
             leftovers = [n for n in os.listdir(root) if is_temp_name(n)]  # a creation killed half-way
-            others = sorted(n for n in os.listdir(root) if n != LOCK_FILE and n not in leftovers)
+            others = sorted(n for n in os.listdir(root)
+                            if n not in (LOCK_FILE, PLAN_DIR) and n not in leftovers and not n.startswith(".plan-"))
             if others:
                 raise SynthError(f"directory is not empty and holds no dataset.json (found {others[0]!r})",
                                  str(root), "use an empty or new --out directory")

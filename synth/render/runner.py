@@ -130,6 +130,10 @@ def run_workers(dataset: Path, plan_dir: Path, shard_ids: list[str], frames_tota
 
 def raise_on_failures(stats: RunStats) -> None:
     if stats.failures:
+        import sys
+
+        for f in stats.failures:
+            print(f, file=sys.stderr)
         first = stats.failures[0]
         raise SynthError(f"{len(stats.failures)} worker(s) failed; first: {first.splitlines()[0]}",
                          "render", "see the worker log above; rerun the same command to resume") from None
