@@ -89,20 +89,109 @@ def _set_environment(ident: dict, plan) -> dict:
     return env
 
 
+class IdentityScene:
+    """One identity's scene: built once (head, materials, lighting, assets, camera); each
+    expression is a vertex update (+ rig updates) and each view a camera move."""
+
+    def __init__(self, ident: dict, hm, plan, render_cfg: dict, run_seed: int, model_info: dict,
+                 versions: dict, shard_id: str = ""):
+        from blender_scripts import camera as bcam
+        from blender_scripts import materials as bmat
+        from blender_scripts import scene as bscene
+        from synth.skin import skin_albedo
+
+        self.ident, self.hm, self.render_cfg = ident, hm, render_cfg
+        self.run_seed, self.model_info, self.versions, self.shard_id = run_seed, model_info, versions, shard_id
+        bscene.reset()
+        f0 = ident["expressions"][0]["frames"][0]["camera"]
+        self.width, self.height = int(f0["width"]), int(f0["height"])
+        self.effective = bscene.configure_render(render_cfg, self.width, self.height)
+        self.env = _set_environment(ident, plan)
+        skin = dict(ident.get("skin") or {})
+        albedo = skin_albedo(float(skin.get("melanin", 0.05)), float(skin.get("haemoglobin", 0.015)))
+        self.skin_record = {**skin, "albedo_linear_srgb": [round(a, 6) for a in albedo]}
+        self.materials = bmat.head_materials(skin, albedo)
+        self.beta = np.asarray(ident["identity_code"], np.float64)
+        zero_psi = np.zeros(hm.data.expression_dims)
+        self.rest = hm.evaluate(self.beta, zero_psi, np.zeros((hm.J, 3)), landmarks=False).vertices[0].astype(np.float64)
+        self.head_ob = self.ctx = None
+        self.rigs: dict = {}
+        self.assets_record: dict = {}
+        self.cam_ob = bcam.make_camera()
+        self.expr = None
+
+    def set_expression(self, e: dict) -> None:
+        from blender_scripts import head as bhead
+        from blender_scripts.assets import HeadContext
+        from blender_scripts.assets import update as update_rigs
+
+        hm = self.hm
+        psi = np.asarray(e["expression_code"], np.float64)
+        rot = np.zeros((hm.J, 3))
+        for name, r in (e.get("joint_rotations") or {}).items():
+            rot[hm.joint_index[name]] = r
+        ev = hm.evaluate(self.beta, psi, rot)
+        verts = ev.vertices[0].astype(np.float64)
+        lms = {k: v[0].astype(np.float64) for k, v in ev.landmarks.items()}
+        joints = ev.joint_transforms[0].astype(np.float64)
+        if self.head_ob is None:
+            self.head_ob = bhead.build_head_object(hm.data, verts, self.materials)
+            bhead.set_rest_positions(self.head_ob, self.rest)
+            self.ctx = HeadContext(data=hm.data, head=self.head_ob, materials=self.materials,
+                                   rest_vertices=self.rest, vertices=verts, joint_transforms=joints,
+                                   joint_index=dict(hm.joint_index), landmarks=lms,
+                                   resolution=max(self.width, self.height),
+                                   identity_index=int(self.ident["identity_index"]), run_seed=self.run_seed)
+            self.assets_record = _dress(self.ident, self.ctx, self.rigs)
+        else:
+            bhead.set_vertices(self.head_ob, verts)
+            self.ctx.vertices, self.ctx.joint_transforms, self.ctx.landmarks = verts, joints, lms
+            update_rigs(self.rigs, self.ctx)
+        self.expr = {"e": e, "psi": psi, "rot": rot, "lm3d": lms["ibug68"],
+                     "head_pose": joints[hm.joint_index["head"]]}
+
+    def render(self, f: dict, tmp: Path, seed: int | None = None) -> tuple[dict, dict]:
+        """Render one planned frame of the current expression: (passes, frame JSON)."""
+        from blender_scripts import camera as bcam
+        from blender_scripts.render_frame import render_view
+        from synth.conventions import project
+        from synth.exr import CHANNELS
+        from synth.labels import visibility
+
+        hm, x = self.hm, self.expr
+        key = f["frame_id"]
+        c = f["camera"]
+        K = np.asarray(c["K"], np.float64)
+        w2c = np.asarray(c["world_to_camera"], np.float64)
+        bcam.set_camera(self.cam_ob, K, w2c, self.width, self.height, c["near"], c["far"])
+        out = render_view(tmp, int(f["seed"] if seed is None else seed))
+        uv, z = project(K, w2c, x["lm3d"])
+        vis = visibility(uv, z, out["depth"], out["rgba"][..., 3])
+        fj = dict(f)
+        fj["shard_id"] = self.shard_id
+        fj["image"] = {"width": self.width, "height": self.height, "file": f"{key}.exr", "layers": list(CHANNELS)}
+        fj["model"] = {**self.model_info, "identity": self.beta.tolist(), "expression": x["psi"].tolist(),
+                       "expression_preset": x["e"].get("preset"), "expression_kind": x["e"].get("kind"),
+                       "joint_rotations": {n: x["rot"][j].tolist() for n, j in hm.joint_index.items()},
+                       "pose": x["e"].get("pose"), "head_pose": x["head_pose"].tolist()}
+        fj["landmarks_3d"] = x["lm3d"].tolist()
+        fj["landmarks_2d"] = uv.tolist()
+        fj["landmarks_visible"] = vis.tolist()
+        fj["assets"] = self.assets_record
+        fj["skin"] = self.skin_record
+        fj["lighting"] = self.env
+        fj["render"] = {"preset": self.render_cfg.get("preset"), "resolution": [self.width, self.height],
+                        "seed": int(f["seed"]), **self.effective}
+        fj["software"] = self.versions
+        return out, fj
+
+    def close(self) -> None:
+        self.rigs.clear()
+        self.ctx = self.head_ob = None
+
+
 def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> int:
     """Render the missing frames of one shard and commit it. Returns frames rendered."""
-    from blender_scripts import camera as bcam
-    from blender_scripts import head as bhead
-    from blender_scripts import materials as bmat
-    from blender_scripts import scene as bscene
-    from blender_scripts.assets import HeadContext
-    from blender_scripts.assets import update as update_rigs
-    from blender_scripts.render_frame import render_view
-    from synth.conventions import project
-    from synth.exr import CHANNELS
-    from synth.labels import visibility
-    from synth.skin import skin_albedo
-
     spec = plan.shard(shard_id)
     render_cfg = plan.render_settings()
     versions = software_versions()
@@ -116,85 +205,22 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> in
     with st:
         done = st.frames_done()
         for ident in spec["identities"]:
-            i = ident["identity_index"]
             keys = [f["frame_id"] for e in ident["expressions"] for f in e["frames"]]
             if all(k in done for k in keys):
                 continue
-            bscene.reset()
-            f0 = ident["expressions"][0]["frames"][0]["camera"]
-            width, height = int(f0["width"]), int(f0["height"])
-            effective = bscene.configure_render(render_cfg, width, height)
-            env = _set_environment(ident, plan)
-            skin = dict(ident.get("skin") or {})
-            albedo = skin_albedo(float(skin.get("melanin", 0.05)), float(skin.get("haemoglobin", 0.015)))
-            skin_record = {**skin, "albedo_linear_srgb": [round(a, 6) for a in albedo]}
-            mats = bmat.head_materials(skin, albedo)
-            beta = np.asarray(ident["identity_code"], np.float64)
-            zero_psi = np.zeros(hm.data.expression_dims)
-            rest = hm.evaluate(beta, zero_psi, np.zeros((hm.J, 3)), landmarks=False).vertices[0].astype(np.float64)
-            head_ob = ctx = None
-            rigs: dict = {}
-            assets_record: dict = {}
-            cam_ob = bcam.make_camera()
+            sc = IdentityScene(ident, hm, plan, render_cfg, int(spec["run_seed"]), model_info, versions, shard_id)
             for e in ident["expressions"]:
-                ekeys = [f["frame_id"] for f in e["frames"]]
-                if all(k in done for k in ekeys):
+                if all(f["frame_id"] in done for f in e["frames"]):
                     continue
-                psi = np.asarray(e["expression_code"], np.float64)
-                rot = np.zeros((hm.J, 3))
-                for name, r in (e.get("joint_rotations") or {}).items():
-                    rot[hm.joint_index[name]] = r
-                ev = hm.evaluate(beta, psi, rot)
-                verts = ev.vertices[0].astype(np.float64)
-                lms = {k: v[0].astype(np.float64) for k, v in ev.landmarks.items()}
-                joints = ev.joint_transforms[0].astype(np.float64)
-                if head_ob is None:
-                    head_ob = bhead.build_head_object(hm.data, verts, mats)
-                    bhead.set_rest_positions(head_ob, rest)
-                    ctx = HeadContext(data=hm.data, head=head_ob, materials=mats, rest_vertices=rest,
-                                      vertices=verts, joint_transforms=joints, joint_index=dict(hm.joint_index),
-                                      landmarks=lms, resolution=max(width, height), identity_index=i,
-                                      run_seed=int(spec["run_seed"]))
-                    assets_record = _dress(ident, ctx, rigs)
-                else:
-                    bhead.set_vertices(head_ob, verts)
-                    ctx.vertices, ctx.joint_transforms, ctx.landmarks = verts, joints, lms
-                    update_rigs(rigs, ctx)
-                lm3d = lms["ibug68"]
-                head_pose = joints[hm.joint_index["head"]]
+                sc.set_expression(e)
                 for f in e["frames"]:
-                    key = f["frame_id"]
-                    if key in done:
+                    if f["frame_id"] in done:
                         continue
-                    c = f["camera"]
-                    K = np.asarray(c["K"], np.float64)
-                    w2c = np.asarray(c["world_to_camera"], np.float64)
-                    bcam.set_camera(cam_ob, K, w2c, width, height, c["near"], c["far"])
-                    out = render_view(tmp, int(f["seed"]))
-                    uv, z = project(K, w2c, lm3d)
-                    vis = visibility(uv, z, out["depth"], out["rgba"][..., 3])
-                    fj = dict(f)
-                    fj["shard_id"] = shard_id
-                    fj["image"] = {"width": width, "height": height, "file": f"{key}.exr",
-                                   "layers": list(CHANNELS)}
-                    fj["model"] = {**model_info, "identity": beta.tolist(), "expression": psi.tolist(),
-                                   "expression_preset": e.get("preset"), "expression_kind": e.get("kind"),
-                                   "joint_rotations": {n: rot[j].tolist() for n, j in hm.joint_index.items()},
-                                   "pose": e.get("pose"),
-                                   "head_pose": head_pose.tolist()}
-                    fj["landmarks_3d"] = lm3d.tolist()
-                    fj["landmarks_2d"] = uv.tolist()
-                    fj["landmarks_visible"] = vis.tolist()
-                    fj["assets"] = assets_record
-                    fj["skin"] = skin_record
-                    fj["lighting"] = env
-                    fj["render"] = {"preset": render_cfg.get("preset"), "resolution": [width, height],
-                                    "seed": int(f["seed"]), **effective}
-                    fj["software"] = versions
-                    st.write_frame(key, out["rgba"], out["depth"], out["normals"], out["segmentation"], fj)
+                    out, fj = sc.render(f, tmp)
+                    st.write_frame(f["frame_id"], out["rgba"], out["depth"], out["normals"], out["segmentation"], fj)
                     rendered += 1
-                    emit(event="frame", shard=shard_id, key=key, render_seconds=out["render_seconds"])
-            rigs.clear()
+                    emit(event="frame", shard=shard_id, key=f["frame_id"], render_seconds=out["render_seconds"])
+            sc.close()
             emit(event="rss", rss_mb=rss_mb())
         st.commit(manifest_extra={"seeds": seeds, "versions": versions})
     emit(event="commit", shard=shard_id)
