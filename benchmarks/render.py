@@ -1,0 +1,204 @@
+"""Rendering benchmarks (issue 4). Prints Markdown tables for docs/performance.md.
+
+    .venv/bin/python benchmarks/render.py overhead [--identities 1 --expressions 2 --views 15]
+    .venv/bin/python benchmarks/render.py quality  [--views 2 --reference-spp 1024]
+    .venv/bin/python benchmarks/render.py memory   [--scenes 20]
+    .venv/bin/python benchmarks/render.py all
+
+overhead: the whole `synth render` (planning, worker start, model load, scene and asset
+  build, EXR + JSON writing, commit) at the `preview` preset, over the time spent inside
+  Cycles' render call (``render_seconds`` in the worker's events: scene sync, sampling,
+  denoising). Target <= 1.10.
+quality: speed against error. One planned identity (with its assets) at 256x256; spp in
+  {4, 16, 64, 256} x denoiser {off, on}, PSNR against a high-spp, non-denoised reference,
+  over the pixels the reference's alpha covers (> 0.5), on sRGB-encoded RGB clipped to [0, 1].
+memory: RSS of one process building, rendering (1 view, ci preset) and resetting 20
+  identity scenes in turn (what a worker does between recycles).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import resource
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def machine() -> str:
+    return f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+
+
+# --------------------------------------------------------------------------- overhead
+
+def overhead(args) -> None:
+    from synth.cli.render_cmd import prepare_plan, render_plan
+
+    rows = []
+    for views in args.views:
+        with tempfile.TemporaryDirectory(prefix="synth-bench-") as d:
+            out = Path(d) / "ds"
+            t0 = time.perf_counter()
+            pdir = prepare_plan(out, args.identities, None,
+                                [f"dataset.expressions_per_identity={args.expressions}",
+                                 f"dataset.views_per_expression={views}", f'render.preset="{args.preset}"'],
+                                args.seed, None)
+            t_plan = time.perf_counter() - t0
+            res = render_plan(out, pdir, workers=1, shards_per_worker=2, quiet=True)
+            total = time.perf_counter() - t0
+        n = res["frames_rendered"]
+        rows.append((args.identities, args.expressions, views, n, total, t_plan, res["render_seconds"],
+                     total / max(res["render_seconds"], 1e-9), n / total))
+    print(f"\n### Pipeline overhead at `{args.preset}` ({machine()})\n")
+    print("| identities | expressions | views | frames | total s | planning s | Cycles s | total / Cycles | frames/s |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for r in rows:
+        print(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]} | {r[4]:.1f} | {r[5]:.2f} | {r[6]:.1f} | {r[7]:.3f} | {r[8]:.2f} |")
+
+
+# --------------------------------------------------------------------------- scenes
+
+def _plan_one(tmp: Path, n: int, preset: str, views: int, seed: int):
+    from synth.config import load_config
+    from synth.plan.io import load_plan
+    from synth.plan.planner import run_plan
+
+    cfg = load_config(None, [f'render.preset="{preset}"', "dataset.expressions_per_identity=1",
+                             f"dataset.views_per_expression={views}"])
+    run_plan(cfg, n, tmp / "plan", seed=seed)
+    return load_plan(tmp / "plan")
+
+
+def _scene(plan, shard_id: str, hm, render_cfg: dict | None = None):
+    from blender_scripts.worker import IdentityScene, software_versions
+
+    spec = plan.shard(shard_id)
+    ident = spec["identities"][0]
+    sc = IdentityScene(ident, hm, plan, render_cfg or plan.render_settings(), int(spec["run_seed"]),
+                       {"name": hm.data.name, "sha256": plan.model_sha256()}, software_versions(), shard_id)
+    sc.set_expression(ident["expressions"][0])
+    return sc, ident
+
+
+def psnr_masked(img: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> float:
+    from synth.dataset.preview import linear_to_srgb
+
+    a = np.clip(linear_to_srgb(np.clip(img[..., :3].astype(np.float64), 0, None)), 0, 1)[mask]
+    b = np.clip(linear_to_srgb(np.clip(ref[..., :3].astype(np.float64), 0, None)), 0, 1)[mask]
+    mse = float(np.mean((a - b) ** 2))
+    return float("inf") if mse == 0 else 10.0 * np.log10(1.0 / mse)
+
+
+def quality(args) -> None:
+    from blender_scripts import scene as bscene
+    from synth.model.head import HeadModel
+
+    with tempfile.TemporaryDirectory(prefix="synth-bench-") as d:
+        tmp = Path(d)
+        plan = _plan_one(tmp, 1, "preview", args.views, args.seed)
+        hm = HeadModel(plan.model_data())
+        sc, ident = _scene(plan, "shard_000000", hm)
+        frames = ident["expressions"][0]["frames"][: args.views]
+        base = dict(plan.render_settings())
+
+        def render_all(spp: int, denoise: bool):
+            bscene.configure_render({**base, "samples": spp, "denoise": denoise, "adaptive_sampling": False},
+                                    sc.width, sc.height)
+            outs, secs = [], 0.0
+            for f in frames:
+                t0 = time.perf_counter()
+                out, _ = sc.render(f, tmp)
+                secs += time.perf_counter() - t0
+                outs.append(out)
+            return outs, secs / len(frames)
+
+        ref, ref_s = render_all(args.reference_spp, False)
+        masks = [r["rgba"][..., 3] > 0.5 for r in ref]
+        rows = []
+        for spp in args.spp:
+            for dn in (False, True):
+                outs, s = render_all(spp, dn)
+                p = np.mean([psnr_masked(o["rgba"], r["rgba"], m) for o, r, m in zip(outs, ref, masks)])
+                rows.append((spp, dn, s, p))
+                print(f"  spp {spp:4d} denoise {dn!s:5}: {s:6.2f} s/frame, PSNR {p:.2f} dB", file=sys.stderr)
+    assets = sorted(c for c, e in ident["assets"].items() if e)
+    print(f"\n### Speed against error at 256x256 ({machine()})\n")
+    print(f"Identity 0 of seed {args.seed} with assets: {', '.join(assets)}; {args.views} views; reference "
+          f"{args.reference_spp} spp without denoising ({ref_s:.1f} s/frame). PSNR over the reference's "
+          "alpha > 0.5 pixels, sRGB-encoded, clipped to [0, 1].\n")
+    print("| spp | denoiser | s / frame | PSNR (dB) |")
+    print("|---:|:---:|---:|---:|")
+    for spp, dn, s, p in rows:
+        print(f"| {spp} | {'OIDN' if dn else 'off'} | {s:.2f} | {p:.2f} |")
+
+
+# --------------------------------------------------------------------------- memory
+
+def rss_mb() -> float:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def memory(args) -> None:
+    from synth.model.head import HeadModel
+
+    with tempfile.TemporaryDirectory(prefix="synth-bench-") as d:
+        tmp = Path(d)
+        plan = _plan_one(tmp, args.scenes, "ci", 1, args.seed)
+        hm = HeadModel(plan.model_data())
+        rss = []
+        for k, sid in enumerate(plan.shard_ids()):
+            sc, ident = _scene(plan, sid, hm)
+            sc.render(ident["expressions"][0]["frames"][0], tmp)
+            sc.close()
+            rss.append(rss_mb())
+            print(f"  scene {k + 1:2d}: RSS {rss[-1]:.0f} MB", file=sys.stderr)
+    r = np.asarray(rss)
+    half = len(r) // 2
+    slope = np.polyfit(np.arange(half, len(r)), r[half:], 1)[0] if len(r) >= 4 else float("nan")
+    print(f"\n### Worker memory over {len(r)} scenes (`ci`, one view each; {machine()})\n")
+    print("| scene | " + " | ".join(str(i + 1) for i in range(0, len(r), max(1, len(r) // 10))) + " |")
+    print("|---|" + "---:|" * len(range(0, len(r), max(1, len(r) // 10))))
+    print("| RSS (MB) | " + " | ".join(f"{r[i]:.0f}" for i in range(0, len(r), max(1, len(r) // 10))) + " |")
+    print(f"\nFirst {r[0]:.0f} MB, last {r[-1]:.0f} MB, peak {r.max():.0f} MB; growth over the second half "
+          f"{slope:+.2f} MB per scene.")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("what", choices=("overhead", "quality", "memory", "all"))
+    ap.add_argument("--identities", type=int, default=1)
+    ap.add_argument("--expressions", type=int, default=2)
+    ap.add_argument("--views", type=int, nargs="+", default=None)
+    ap.add_argument("--preset", default="preview")
+    ap.add_argument("--spp", type=int, nargs="+", default=[4, 16, 64, 256])
+    ap.add_argument("--reference-spp", type=int, default=1024)
+    ap.add_argument("--scenes", type=int, default=20)
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args()
+    if args.what in ("overhead", "all"):
+        a = argparse.Namespace(**vars(args))
+        a.views = args.views or [5, 15]
+        overhead(a)
+    if args.what in ("quality", "all"):
+        a = argparse.Namespace(**vars(args))
+        a.views = (args.views or [2])[0]
+        quality(a)
+    if args.what in ("memory", "all"):
+        memory(args)
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(ROOT))
+    main()
