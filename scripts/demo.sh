@@ -1,11 +1,14 @@
 #!/usr/bin/env bash
-# The README's main job on the embedded default model. Until `synth render` is wired to the
-# plan, it builds (first run) and describes the default model and samples a few heads.
+# The README's main job on the embedded default model: render a small dataset at the
+# `preview` preset (2 identities x 2 expressions x 6 views, 256x256, denoised), check it,
+# and write a contact sheet. Rerunning resumes (committed shards are skipped).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-demo_out}
 SYNTH=.venv/bin/synth
-$SYNTH model info
-rm -rf "$OUT/heads"
-$SYNTH model sample --n 6 --seed 0 --out "$OUT/heads"
-echo "demo: sampled heads (OBJ + codes.json) in $OUT/heads"
+$SYNTH render --identities 2 --expressions 2 --views 6 --preset preview --out "$OUT/dataset"
+$SYNTH validate "$OUT/dataset"
+for s in shard_000000 shard_000001; do
+  $SYNTH preview "$OUT/dataset" --shard "$s" -o "$OUT/preview_$s.png"
+done
+echo "demo: dataset in $OUT/dataset, contact sheets $OUT/preview_shard_00000{0,1}.png"
