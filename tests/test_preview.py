@@ -82,3 +82,20 @@ def test_tile_helpers():
     assert tuple(s[0, 1]) == PALETTE[1] and tuple(s[1, 1]) == (255, 255, 255)  # unknown: white
     d = depth_tile(np.array([[1.0, 2.0], [0.0, 1.5]], np.float32), np.array([[1, 1], [0, 1]], np.float32))
     assert d[0, 0, 0] == 255 and d[1, 0, 0] == 0 and d[0, 1, 0] < d[1, 1, 0] < d[0, 0, 0]
+
+
+def test_overview_sheet_one_block_per_committed_shard(tmp_path):
+    from synth.dataset.preview import overview_sheet
+
+    root = tmp_path / "ds"
+    ds = open_dataset(root, "c" * 64, ff.plan(3, 2, 4))
+    ff.render_dataset(ds, shards=["shard_000000", "shard_000002"])
+    out = overview_sheet(root, tmp_path / "o.png", views=2, tile=20, columns=2)
+    im = np.asarray(Image.open(out))
+    # 2 blocks side by side, each 2 views x (2 tiles of 20 + gap + pad), one block row
+    assert im.shape[1] == 8 + 2 * (2 * (2 * 20 + 2 + 8) + 8) and im.shape[0] == 8 + (14 + 20 + 8)
+    # second block's first segmentation tile shows the palette's skin colour
+    x = 8 + (2 * (2 * 20 + 2 + 8) + 8) + 22
+    colours = {tuple(c) for c in im[8 + 14:8 + 34, x:x + 20].reshape(-1, 3)}
+    assert PALETTE[1] in colours
+    assert main(["preview", str(root), "--overview", "--shard", "shard_000000"]) == 2

@@ -73,10 +73,23 @@ def preview_cmd(
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="PNG to write (default: DIR/preview_<shard>.png)."),
     max_views: Optional[int] = typer.Option(None, "--max-views", min=1, help="Show at most this many views."),
     tile: int = typer.Option(96, "--tile", min=8, max=1024, help="Tile height in pixels."),
+    overview: bool = typer.Option(False, "--overview", help="Many identities instead of one shard: per "
+                                  "committed shard, its first expression at --max-views views (default 3)."),
+    max_shards: Optional[int] = typer.Option(None, "--max-shards", min=1, help="With --overview: at most this "
+                                             "many shards."),
+    columns: int = typer.Option(2, "--columns", min=1, max=64, help="With --overview: identities per row."),
 ) -> None:
-    """Write a contact-sheet PNG of a shard: rows expressions, columns views; colour | segmentation | depth."""
-    from synth.dataset.preview import contact_sheet
+    """Write a contact-sheet PNG of a shard: rows expressions, columns views; colour | segmentation | depth.
+    With --overview: one block per identity (colour | segmentation), to see a dataset's diversity."""
+    from synth.dataset.preview import contact_sheet, overview_sheet
 
+    if overview:
+        if shard is not None:
+            raise SynthError("--overview covers all shards; --shard was given too", "--shard", "drop one of them")
+        p = overview_sheet(directory, output, views=max_views or 3, max_shards=max_shards, tile=tile,
+                           columns=columns)
+        typer.echo(str(p))
+        return
     p = contact_sheet(directory, shard, output, max_views=max_views, tile=tile)
     typer.echo(str(p))
 

@@ -143,3 +143,56 @@ def contact_sheet(root, shard_id: str | None = None, out=None, *, max_views: int
     except OSError as e:
         raise SynthError(f"cannot write the preview ({e.strerror})", str(out), "pass -o with a writable path") from None
     return out
+
+
+def overview_sheet(root, out=None, *, views: int = 3, max_shards: int | None = None, tile: int = 96,
+                   columns: int = 2) -> Path:
+    """Many identities at a glance: for each committed shard (in order), its first identity's
+    first expression at up to ``views`` views, colour and segmentation side by side; shards
+    laid out in ``columns`` columns. Default output: ``DIR/overview.png``."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    from synth.dataset.fsio import atomic_write_bytes
+    from synth.dataset.shards import load_dataset
+    from synth.frames import parse_frame_key
+
+    ds = load_dataset(root)
+    committed = sorted(ds.committed_shards())
+    if not committed:
+        raise SynthError("the dataset has no committed shard yet", str(ds.root), "render at least one shard first")
+    if views < 1 or tile < 8 or columns < 1:
+        raise SynthError("--views, --tile and --columns must be positive (tile >= 8)", None, "pass sensible sizes")
+    shards = committed[:max_shards] if max_shards else committed
+    rows = []
+    for sid in shards:
+        keys = sorted(ds.read_manifest(sid)["frames"])
+        parsed = [(k, parse_frame_key(k)) for k in keys]
+        i0 = min(p[0] for _, p in parsed)
+        e0 = min(p[1] for _, p in parsed if p[0] == i0)
+        sel = [k for k, p in parsed if p[0] == i0 and p[1] == e0][:views]
+        rows.append((sid, i0, [_frame_tiles(ds.shard_dir(sid) / f"{k}.exr", tile)[:2] for k in sel]))
+    tw = max(t[0].size[0] for _, _, r in rows for t in r)
+    gap, pad, label_h = 2, 8, 14
+    block_w = views * (2 * tw + gap + pad)
+    block_h = label_h + tile + pad
+    ncol = min(columns, len(rows))
+    nrow = -(-len(rows) // ncol)
+    sheet = Image.new("RGB", (pad + ncol * (block_w + pad), pad + nrow * block_h), BG)
+    draw = ImageDraw.Draw(sheet)
+    font = ImageFont.load_default()
+    for n, (sid, ident, cells) in enumerate(rows):
+        x0 = pad + (n % ncol) * (block_w + pad)
+        y0 = pad + (n // ncol) * block_h
+        draw.text((x0, y0), f"identity {ident} ({sid})", fill=LABEL, font=font)
+        for j, tiles in enumerate(cells):
+            x = x0 + j * (2 * tw + gap + pad)
+            for t, im in enumerate(tiles):
+                sheet.paste(im, (x + t * (tw + gap), y0 + label_h))
+    out = Path(out) if out is not None else ds.root / "overview.png"
+    buf = io.BytesIO()
+    sheet.save(buf, format="PNG")
+    try:
+        atomic_write_bytes(out, buf.getvalue())
+    except OSError as e:
+        raise SynthError(f"cannot write the preview ({e.strerror})", str(out), "pass -o with a writable path") from None
+    return out
