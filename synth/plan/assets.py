@@ -11,6 +11,11 @@ Sampling, per identity i and class c (in ASSET_CLASSES order), from the uniforms
 weight among those compatible with the classes already chosen, then its parameters from
 their ranges. Classes use independent counters, so editing one class never changes the
 uniforms of another.
+
+External packs (``generator = "blend:PATH.blend"``, docs/assets.md) are checked here at plan
+time (file inside the file's ``asset_root``, sha256 as declared) and their picks carry a
+``pack`` record for the rig. ``synth assets validate`` (synth/assets_validate.py) reports every
+defect of a folder at once; this loader stops at the first.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ from __future__ import annotations
 import hashlib
 import json
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -54,6 +59,10 @@ class Catalogue:
     rules: list[dict[str, Any]]
     digest: str  # sha256 of the canonical JSON of everything above
     path: str
+    #: "class/id" -> pack record (synth.assets_validate.pack_record) of each external asset;
+    #: not part of the digest (its asset_root is an absolute, machine-dependent path; the
+    #: file's sha256 is in the digest through the entry itself)
+    packs: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
 def _read(path: Path) -> dict:
@@ -72,7 +81,7 @@ def _validate(doc: dict, path: Path, kind: str = "class_file") -> None:
     except jsonschema.ValidationError as e:
         loc = "/".join(str(p) for p in e.absolute_path) or "top level"
         raise SynthError(f"asset manifest invalid at {loc}: {e.message}", str(path),
-                         "see docs/plan-format.md (asset catalogue)") from None
+                         "see docs/assets.md; 'synth assets validate' lists every defect") from None
 
 
 def load_catalogue(manifest_dir: str | Path | None = None) -> Catalogue:
@@ -80,7 +89,10 @@ def load_catalogue(manifest_dir: str | Path | None = None) -> Catalogue:
     d = Path(manifest_dir) if manifest_dir else default_manifest_dir()
     if not d.is_dir():
         raise SynthError("asset manifest folder not found", str(d), "set assets.manifest_dir")
+    from synth import assets_validate as av
+
     classes: dict[str, dict[str, Any]] = {}
+    packs: dict[str, dict[str, Any]] = {}
     for cls in ASSET_CLASSES:
         p = d / f"{cls}.toml"
         if not p.is_file():
@@ -96,6 +108,12 @@ def load_catalogue(manifest_dir: str | Path | None = None) -> Catalogue:
             if a["class"] != cls:
                 raise SynthError(f"asset '{a['id']}' has class '{a['class']}'", str(p), f"use class = '{cls}'")
             _check_params(a, p)
+            if av.is_external(a["generator"]):
+                root = av.asset_root_of(doc, p)
+                where = f"{p} asset {a['id']}"
+                for what, fix in av.pack_defects(cls, a, root, where):
+                    raise SynthError(what, where, fix)
+                packs[f"{cls}/{a['id']}"] = av.pack_record(cls, a, root)
         classes[cls] = {"presence": float(doc.get("presence", 1.0)), "assets": doc["assets"]}
     for p in sorted(d.glob("*.toml")):
         if p.stem not in ASSET_CLASSES and p.stem != "rules":
@@ -107,23 +125,15 @@ def load_catalogue(manifest_dir: str | Path | None = None) -> Catalogue:
         _validate(doc, rp, "rules_file")
         rules = list(doc.get("exclude", []))
     canon = json.dumps({"classes": classes, "rules": rules}, sort_keys=True, separators=(",", ":"))
-    return Catalogue(classes, rules, hashlib.sha256(canon.encode()).hexdigest(), str(d))
+    return Catalogue(classes, rules, hashlib.sha256(canon.encode()).hexdigest(), str(d), packs)
 
 
 def _check_params(asset: dict, path: Path) -> None:
-    if len(asset.get("parameters", {})) > MAX_PARAMETERS:
-        raise SynthError(f"asset '{asset['id']}' has more than {MAX_PARAMETERS} parameters", str(path),
-                         "split it into several assets")
-    for name, spec in asset.get("parameters", {}).items():
-        where = f"{path} asset {asset['id']} parameter {name}"
-        if "range" in spec and spec["range"][0] > spec["range"][1]:
-            raise SynthError("range low > high", where, "write [low, high]")
-        if "range" in spec and spec.get("log") and spec["range"][0] <= 0:
-            raise SynthError("log range must be positive", where, "use a positive low end")
-        if "choices" in spec and "weights" in spec and len(spec["weights"]) != len(spec["choices"]):
-            raise SynthError("weights and choices differ in length", where, "give one weight per choice")
-        if "match" in spec and spec["match"].split(".")[0] not in ASSET_CLASSES:
-            raise SynthError(f"match names unknown class in '{spec['match']}'", where, "write 'class.parameter'")
+    from synth.assets_validate import parameter_defects
+
+    for what, name, fix in parameter_defects(asset, MAX_PARAMETERS):
+        where = f"{path} asset {asset['id']} parameter {name}" if name else str(path)
+        raise SynthError(what, where, fix)
 
 
 MAX_PARAMETERS = 14  # uniform slots per asset: presence, pick, then one per parameter
@@ -198,6 +208,9 @@ def sample_assets_batch(seed: int, identities, cat: Catalogue, disabled: tuple[s
             params = {name: _draw_param(spec, un[2 + j], chosen)
                       for j, (name, spec) in enumerate(sorted(a.get("parameters", {}).items()))}
             pick = {"id": a["id"], "generator": a["generator"], "params": params}
+            pack = cat.packs.get(f"{cls}/{a['id']}")
+            if pack is not None:  # external assets only: the procedural picks stay as they were
+                pick["pack"] = dict(pack)
             chosen[cls] = pick
             chosen_tags |= tags[k]
             forbidden |= excl[k]
