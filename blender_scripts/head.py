@@ -9,11 +9,14 @@ from synth.segmentation import CLASSES
 
 #: Region -> segmentation class, in priority order (first match wins for a polygon).
 REGION_CLASSES = (("teeth", "teeth"), ("eyes", "eyes"), ("mouth_interior", "mouth_interior"))
+#: Regions whose polygons are not rendered (vertices are kept so indices stay the model's).
+HIDDEN_REGIONS = ("lash_helper_l_upper", "lash_helper_l_lower", "lash_helper_r_upper", "lash_helper_r_lower")
 
 
-def polygon_classes(data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(offsets, indices, class id per polygon). A polygon takes a region's class when all
-    its corners are in that region; everything else is skin."""
+def polygon_classes(data) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(offsets, indices, class id per polygon, kept-polygon mask). A polygon takes a region's
+    class when all its corners are in that region; everything else is skin. Polygons entirely in
+    HIDDEN_REGIONS are left out."""
     if data.poly_offsets is not None:
         off, idx = data.poly_offsets.astype(np.int64), data.poly_indices.astype(np.int64)
     else:
@@ -31,13 +34,27 @@ def polygon_classes(data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         sel = all_in & ~assigned
         cls[sel] = CLASSES[name]
         assigned |= sel
-    return off, idx, cls
+    # helper geometry (MakeHuman's eyelash placement strips) is not part of the surface: dropped
+    helper = np.zeros(data.num_vertices, bool)
+    for region in HIDDEN_REGIONS:
+        if region in data.regions:
+            helper[data.regions[region]] = True
+    if helper.any():
+        hidden = np.add.reduceat(helper[idx].astype(np.int64), off[:-1]) == counts
+        if hidden.any():
+            keep = ~hidden
+            starts, counts_k = off[:-1][keep], counts[keep]
+            idx = np.concatenate([idx[a:a + n] for a, n in zip(starts.tolist(), counts_k.tolist())])
+            off = np.concatenate([[0], np.cumsum(counts_k)]).astype(np.int64)
+            cls = cls[keep]
+            return off, idx, cls, keep
+    return off, idx, cls, np.ones(len(cls), bool)
 
 
 def build_head_object(data, vertices: np.ndarray, materials: dict[int, "bpy.types.Material"],
                       name: str = "head") -> "bpy.types.Object":
     """Create the mesh (polygons with quads kept, UVs, one material slot per class)."""
-    off, idx, cls = polygon_classes(data)
+    off, idx, cls, keep = polygon_classes(data)
     me = bpy.data.meshes.new(name)
     V = vertices.shape[0]
     me.vertices.add(V)
@@ -52,8 +69,11 @@ def build_head_object(data, vertices: np.ndarray, materials: dict[int, "bpy.type
         uv_layer = me.uv_layers.new(name="UVMap")
         if data.poly_uv is not None and data.poly_offsets is not None:
             corner_uv = data.uvs[data.poly_uv]
+            orig_counts = np.diff(data.poly_offsets.astype(np.int64))
         else:
             corner_uv = data.uvs[data.tri_uv.reshape(-1)]
+            orig_counts = np.full(len(data.triangles), 3, np.int64)
+        corner_uv = corner_uv[np.repeat(keep, orig_counts)]
         uv_layer.data.foreach_set("uv", np.ascontiguousarray(corner_uv, np.float32).ravel())
     slots = sorted(set(cls.tolist()))
     slot_of = {c: i for i, c in enumerate(slots)}

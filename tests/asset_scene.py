@@ -32,7 +32,7 @@ def _codes(hm, case: str):
             psi[names.index("jawOpen")] = 1.0
         rot[hm.joint_index["jaw"]] = (np.radians(25.0), 0.0, 0.0)
     if case.endswith("brows"):
-        for n in ("browInnerUp", "browOuterUp_L", "browOuterUp_R"):
+        for n in ("browInnerUp", "browOuterUpLeft", "browOuterUpRight"):
             if n in names:
                 psi[names.index(n)] = 1.0
     return beta, psi, rot
