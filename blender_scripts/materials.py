@@ -117,3 +117,116 @@ def head_materials(skin_params: dict, albedo) -> dict[int, "bpy.types.Material"]
         CLASSES["teeth"]: teeth_material(),
         CLASSES["mouth_interior"]: mouth_material(),
     }
+
+
+# --------------------------------------------------------------------------------------
+# layering helpers for shader-layer assets (makeup, iris, skin detail): they insert nodes
+# between what currently feeds a Principled input and the input itself, so layers stack in
+# build order whatever was there before.
+
+
+def principled(mat) -> "bpy.types.Node":
+    for n in mat.node_tree.nodes:
+        if n.type == "BSDF_PRINCIPLED":
+            return n
+    raise KeyError(f"material {mat.name!r} has no Principled BSDF")
+
+
+def input_source(mat, input_name: str):
+    """The socket feeding a Principled input; an RGB/Value node holding its default if unlinked."""
+    nt = mat.node_tree
+    sock = principled(mat).inputs[input_name]
+    if sock.is_linked:
+        return sock.links[0].from_socket
+    if sock.type == "RGBA":
+        n = nt.nodes.new("ShaderNodeRGB")
+        n.outputs[0].default_value = tuple(sock.default_value)
+    else:
+        n = nt.nodes.new("ShaderNodeValue")
+        n.outputs[0].default_value = float(sock.default_value)
+    return n.outputs[0]
+
+
+def attribute(mat, name: str):
+    """Attribute node reading a mesh attribute (per-vertex masks written by the rigs)."""
+    n = mat.node_tree.nodes.new("ShaderNodeAttribute")
+    n.attribute_type = "GEOMETRY"
+    n.attribute_name = name
+    return n
+
+
+def layer_over(mat, input_name: str, value, factor, blend: str = "MIX"):
+    """Mix ``value`` (socket or constant) over what feeds ``input_name`` by ``factor``
+    (socket or constant). Colour inputs use an RGBA mix with ``blend``; others a float mix."""
+    nt = mat.node_tree
+    bsdf = principled(mat)
+    sock = bsdf.inputs[input_name]
+    src = input_source(mat, input_name)
+    mix = nt.nodes.new("ShaderNodeMix")
+    rgba = sock.type == "RGBA"
+    mix.data_type = "RGBA" if rgba else "FLOAT"
+    if rgba:
+        mix.blend_type = blend
+        a, b, out = mix.inputs[6], mix.inputs[7], mix.outputs[2]
+    else:
+        a, b, out = mix.inputs[2], mix.inputs[3], mix.outputs[0]
+    nt.links.new(src, a)
+    if hasattr(value, "node"):
+        nt.links.new(value, b)
+    else:
+        b.default_value = (*value, 1.0) if rgba and len(value) == 3 else value
+    if hasattr(factor, "node"):
+        nt.links.new(factor, mix.inputs[0])
+    else:
+        mix.inputs[0].default_value = float(factor)
+    nt.links.new(out, sock)
+    return mix
+
+
+def chain_bump(mat, height, strength: float, distance: float):
+    """Add a bump layer on top of whatever feeds the Principled normal."""
+    nt = mat.node_tree
+    bsdf = principled(mat)
+    bump = nt.nodes.new("ShaderNodeBump")
+    bump.inputs["Strength"].default_value = float(strength)
+    bump.inputs["Distance"].default_value = float(distance)
+    nt.links.new(height, bump.inputs["Height"])
+    sock = bsdf.inputs["Normal"]
+    if sock.is_linked:
+        nt.links.new(sock.links[0].from_socket, bump.inputs["Normal"])
+    nt.links.new(bump.outputs["Normal"], sock)
+    return bump
+
+
+def math_node(mat, op: str, a, b=None, clamp: bool = False):
+    nt = mat.node_tree
+    n = nt.nodes.new("ShaderNodeMath")
+    n.operation = op
+    n.use_clamp = clamp
+    for i, v in enumerate((a, b)):
+        if v is None:
+            continue
+        if hasattr(v, "node"):
+            nt.links.new(v, n.inputs[i])
+        else:
+            n.inputs[i].default_value = float(v)
+    return n.outputs[0]
+
+
+def write_point_colour(mesh, name: str, rgba) -> None:
+    """(V, 4) float colour attribute on the points of ``mesh`` (replaced if it exists)."""
+    import numpy as np
+
+    if name in mesh.attributes:
+        mesh.attributes.remove(mesh.attributes[name])
+    attr = mesh.attributes.new(name, "FLOAT_COLOR", "POINT")
+    attr.data.foreach_set("color", np.ascontiguousarray(rgba, np.float32).ravel())
+
+
+def write_point_vector(mesh, name: str, vec) -> None:
+    import numpy as np
+
+    if name in mesh.attributes:
+        mesh.attributes.remove(mesh.attributes[name])
+    attr = mesh.attributes.new(name, "FLOAT_VECTOR", "POINT")
+    attr.data.foreach_set("vector", np.ascontiguousarray(vec, np.float32).ravel())

@@ -1,0 +1,167 @@
+"""Eye-glasses rig: parametric frames posed by contact on the nose bridge and the ears.
+
+Geometry and the pose solve live in :mod:`blender_scripts.assets.glasses_fit` (plain numpy,
+tested without Blender); this module builds the Blender side: one mesh object for the frame
+(rims, bridge, end pieces, hinges, pad arms, temples, temple tips, nose pads; one material
+slot per finish) and one for the two lenses (glass: Principled transmission tinted by
+``lens_tint``). Every material has ``pass_index = CLASSES['glasses']`` (10), lenses included.
+
+Meshes are built in world coordinates (object transform = identity). ``update`` re-solves
+on the current expression and swaps in fresh mesh data (expressions barely move the nose
+and ears, so the fit changes little).
+"""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from blender_scripts.assets import Rig
+from blender_scripts.assets import glasses_fit as gf
+from synth.segmentation import CLASSES
+
+PASS = CLASSES["glasses"]
+FRAME_SLOTS = ("frame", "metal", "temple", "tip", "pad")
+TINTS = {"aviator": (0.30, 0.26, 0.16), "default": (0.35, 0.33, 0.30)}  # tint colour at full strength
+
+
+def _principled(name: str):
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    mat.pass_index = PASS
+    return mat, mat.node_tree.nodes["Principled BSDF"]
+
+
+def _finish(name: str, colour: str, kind: str, seed: float = 0.0):
+    """kind: acetate | metal | tip | pad."""
+    mat, b = _principled(name)
+    rgb = gf.COLOURS.get(colour, gf.COLOURS["black"])
+    b.inputs["Base Color"].default_value = (*rgb, 1.0)
+    if kind == "metal" or (kind == "tip" and colour in gf.METALLIC_COLOURS):
+        if kind == "tip":  # metal temples get acetate/silicone tips
+            b.inputs["Base Color"].default_value = (0.03, 0.03, 0.03, 1.0)
+            b.inputs["Roughness"].default_value = 0.35
+        else:
+            b.inputs["Metallic"].default_value = 1.0
+            b.inputs["Roughness"].default_value = 0.18
+    elif kind == "pad":
+        b.inputs["Base Color"].default_value = (0.9, 0.9, 0.88, 1.0)
+        b.inputs["Transmission Weight"].default_value = 0.6
+        b.inputs["Roughness"].default_value = 0.3
+    else:  # acetate: glossy plastic under a clear coat
+        b.inputs["Roughness"].default_value = 0.3
+        b.inputs["Coat Weight"].default_value = 0.6
+        b.inputs["Coat Roughness"].default_value = 0.05
+        if colour == "clear":
+            b.inputs["Transmission Weight"].default_value = 0.85
+            b.inputs["Roughness"].default_value = 0.1
+        if colour == "tortoise":  # mottled amber / dark brown
+            nt = mat.node_tree
+            tex = nt.nodes.new("ShaderNodeTexNoise")
+            tex.noise_dimensions = "4D"
+            tex.inputs["W"].default_value = float(seed)
+            tex.inputs["Scale"].default_value = 350.0
+            tex.inputs["Detail"].default_value = 4.0
+            ramp = nt.nodes.new("ShaderNodeValToRGB")
+            ramp.color_ramp.elements[0].position = 0.45
+            ramp.color_ramp.elements[0].color = (0.035, 0.012, 0.004, 1.0)
+            ramp.color_ramp.elements[1].position = 0.6
+            ramp.color_ramp.elements[1].color = (0.32, 0.12, 0.025, 1.0)
+            nt.links.new(tex.outputs["Fac"], ramp.inputs["Fac"])
+            nt.links.new(ramp.outputs["Color"], b.inputs["Base Color"])
+    return mat
+
+
+def _lens_material(style: str, tint: float):
+    mat, b = _principled("glasses_lens")
+    tc = np.asarray(TINTS.get(style, TINTS["default"]))
+    col = 1.0 - float(np.clip(tint, 0.0, 1.0)) * (1.0 - tc)
+    b.inputs["Base Color"].default_value = (*col, 1.0)
+    b.inputs["Transmission Weight"].default_value = 1.0
+    b.inputs["Roughness"].default_value = 0.02
+    b.inputs["IOR"].default_value = 1.5
+    return mat
+
+
+def mesh_from_arrays(name: str, parts: list[tuple[np.ndarray, np.ndarray, int]]):
+    """Mesh from (V, F, material slot) triples (triangles), smooth shaded."""
+    Vs, Fs, Ms, off = [], [], [], 0
+    for V, F, slot in parts:
+        Vs.append(np.asarray(V, np.float64))
+        Fs.append(np.asarray(F, np.int64) + off)
+        Ms.append(np.full(len(F), slot, np.int32))
+        off += len(V)
+    V, F, M = np.concatenate(Vs), np.concatenate(Fs), np.concatenate(Ms)
+    me = bpy.data.meshes.new(name)
+    me.vertices.add(len(V))
+    me.vertices.foreach_set("co", np.ascontiguousarray(V, np.float32).ravel())
+    me.loops.add(F.size)
+    me.loops.foreach_set("vertex_index", F.astype(np.int32).ravel())
+    me.polygons.add(len(F))
+    me.polygons.foreach_set("loop_start", np.arange(0, F.size, 3, dtype=np.int32))
+    me.polygons.foreach_set("loop_total", np.full(len(F), 3, np.int32))
+    me.polygons.foreach_set("material_index", M)
+    me.polygons.foreach_set("use_smooth", np.ones(len(F), bool))
+    me.update()
+    me.validate(clean_customdata=False)
+    return me
+
+
+class GlassesRig(Rig):
+    def __init__(self, spec: gf.FrameSpec, frame_ob, lens_ob, materials: dict, info: dict):
+        super().__init__("glasses", [frame_ob, lens_ob], info)
+        self.spec = spec
+        self.front = gf.build_front(spec)
+        self.materials = materials
+
+    def _fit(self, ctx) -> gf.GlassesFit:
+        return gf.fit_glasses(ctx.vertices, ctx.data.triangles, ctx.data.regions, ctx.landmarks, self.spec,
+                              front=self.front)
+
+    def _apply(self, fit: gf.GlassesFit) -> None:
+        frame_ob, lens_ob = self.objects
+        slots = [(fit.parts[k][0], fit.parts[k][1], i) for i, k in enumerate(FRAME_SLOTS)
+                 if k in fit.parts and len(fit.parts[k][0])]
+        for ob, me in ((frame_ob, mesh_from_arrays("glasses_frame", slots)),
+                       (lens_ob, mesh_from_arrays("glasses_lenses", [(*fit.parts["lens"], 0)]))):
+            old = ob.data
+            for m in old.materials:
+                me.materials.append(m)
+            ob.data = me
+            bpy.data.meshes.remove(old)
+        self.info.update(fit.info)
+
+    def update(self, ctx) -> None:
+        self._apply(self._fit(ctx))
+
+
+def build(ctx, entry: dict) -> GlassesRig:
+    style = str(entry["id"])
+    rng = ctx.rng("glasses")
+    spec = gf.frame_spec(style, dict(entry.get("params") or {}), rng)
+    seed = float(rng.uniform(0, 100))
+    metal_col = spec.temple_colour if spec.temple_colour in gf.METALLIC_COLOURS else (
+        spec.colour if spec.colour in gf.METALLIC_COLOURS else "silver")
+    frame_kind = "metal" if spec.material == "metal" else "acetate"
+    mats = {
+        "frame": _finish("glasses_frame", spec.colour, frame_kind, seed),
+        "metal": _finish("glasses_metal", metal_col, "metal"),
+        "temple": _finish("glasses_temple", spec.temple_colour,
+                          "metal" if spec.material == "metal" else "acetate", seed + 1),
+        "tip": _finish("glasses_tip", spec.temple_colour, "tip" if spec.material == "metal" else "acetate", seed + 2),
+        "pad": _finish("glasses_pad", "clear", "pad"),
+        "lens": _lens_material(style, spec.tint),
+    }
+    frame_me = bpy.data.meshes.new("glasses_frame")
+    lens_me = bpy.data.meshes.new("glasses_lenses")
+    for k in FRAME_SLOTS:
+        frame_me.materials.append(mats[k])
+    lens_me.materials.append(mats["lens"])
+    frame_ob = bpy.data.objects.new("glasses_frame", frame_me)
+    lens_ob = bpy.data.objects.new("glasses_lenses", lens_me)
+    for ob in (frame_ob, lens_ob):
+        bpy.context.scene.collection.objects.link(ob)
+        ob.pass_index = PASS
+    rig = GlassesRig(spec, frame_ob, lens_ob, mats, {"id": style})
+    rig.update(ctx)
+    return rig

@@ -1,0 +1,160 @@
+"""Makeup rig: shader layers over the skin material (no new objects).
+
+Masks are computed per vertex with numpy from the head regions and ibug68 landmarks and
+written to the head mesh as two point colour attributes (``makeup_mask``: lips, eyeshadow,
+eyeliner, blush; ``makeup_mask2``: foundation, eyeliner wing), read back in the skin
+material by Attribute nodes and mixed over the skin's base colour / roughness / coat.
+Looks: ``light_foundation``, ``lipstick`` (with gloss), ``eyeliner`` (optional wing),
+``eyeshadow`` (with shimmer), ``blush``, ``full_look`` (lips + shadow + liner + blush).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from blender_scripts import materials as bmat
+from blender_scripts.assets import Rig
+from blender_scripts.assets._masks import distance_to, feather, region_mask, segment_distance, skin_only
+from synth.segmentation import CLASSES
+
+LIP_COLOURS = {"red": (0.42, 0.02, 0.03), "nude": (0.42, 0.2, 0.15), "pink": (0.6, 0.16, 0.25),
+               "berry": (0.2, 0.015, 0.06), "coral": (0.7, 0.18, 0.1), "brown": (0.18, 0.06, 0.035)}
+SHADOW_COLOURS = {"brown": (0.12, 0.06, 0.03), "gold": (0.5, 0.33, 0.1), "grey": (0.12, 0.12, 0.13),
+                  "plum": (0.17, 0.05, 0.12), "blue": (0.06, 0.12, 0.32), "green": (0.07, 0.2, 0.08)}
+LINER = (0.01, 0.008, 0.008)
+BLUSH = (0.62, 0.18, 0.2)
+
+
+def compute_masks(data, V: np.ndarray, lm: np.ndarray, extent: float = 0.6, liner: float = 0.6,
+                  wing: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(V, 4) [lips, eyeshadow, eyeliner, blush] and (V, 4) [foundation, wing, 0, 0]."""
+    n = len(V)
+    skin = skin_only(data, n).astype(float)
+    lips_idx = data.regions.get("lips")
+    lips_pts = V[np.asarray(lips_idx)] if lips_idx is not None else V[0:0]
+    if len(lips_pts) == 0:  # fall back to the landmark lip contour
+        lips_pts = lm[48:60]
+    lips = feather(distance_to(V, lips_pts), 0.0005, 0.0025) * skin
+    shadow = np.zeros(n)
+    eyeliner = np.zeros(n)
+    wingm = np.zeros(n)
+    blush = np.zeros(n)
+    for sl, outer_i, sign in ((slice(36, 42), 36, -1.0), (slice(42, 48), 45, 1.0)):
+        eye = lm[sl]
+        c = eye.mean(0)
+        half_w = 0.5 * np.linalg.norm(eye[0] - eye[3])
+        upper = eye[1:3]  # upper lid points
+        z_lid = upper[:, 2].mean()
+        dx = np.abs(V[:, 0] - c[0]) / (half_w * (1.15 + 0.3 * extent))
+        dz = (V[:, 2] - z_lid) / (0.006 + 0.008 * extent)
+        front = V[:, 1] < c[1] + 0.012
+        shadow = np.maximum(shadow, feather(dx, 0.6, 1.0) * np.clip(dz * 4, 0, 1) * feather(dz, 0.5, 1.0) * front)
+        # eyeliner: along the upper lash line (upper lid landmarks + corners)
+        line = np.concatenate([eye[[0, 1, 2, 3]]])
+        dl = np.min([segment_distance(V, line[i], line[i + 1]) for i in range(3)], axis=0)
+        eyeliner = np.maximum(eyeliner, feather(dl, 0.0004 + 0.0008 * liner, 0.0012 + 0.0012 * liner)
+                              * (V[:, 2] > z_lid - 0.0025) * front)
+        if wing:
+            corner = lm[outer_i]
+            tip = corner + np.array([sign * 0.007, 0.002, 0.0035])
+            wingm = np.maximum(wingm, feather(segment_distance(V, corner, tip), 0.0005 * (1 + liner), 0.0015)
+                               * front)
+        # blush: on the cheek apple, below and outside the eye
+        cheek = c + np.array([sign * 0.008, -0.002, -0.03])
+        blush = np.maximum(blush, feather(np.linalg.norm(V - cheek, axis=1), 0.006, 0.022))
+    shadow *= skin * (1 - lips)
+    eyeliner = np.maximum(eyeliner, wingm) * skin
+    blush *= skin * (1 - lips)
+    face = region_mask(data, ("face",), n).astype(float)
+    face = np.maximum(face, feather(distance_to(V, V[face > 0]), 0.0, 0.01)) if face.any() else np.ones(n)
+    m1 = np.stack([lips, shadow, eyeliner, blush], 1)
+    m2 = np.stack([face * skin, wingm, np.zeros(n), np.zeros(n)], 1)
+    return np.clip(m1, 0, 1), np.clip(m2, 0, 1)
+
+
+def _choose(v, table, rng):
+    if v in table:
+        return v
+    keys = sorted(table)
+    return keys[int(rng.integers(len(keys)))]
+
+
+def build(ctx, entry: dict) -> Rig:
+    look = str(entry["id"])
+    p = dict(entry.get("params") or {})
+    rng = ctx.rng("makeup")
+    draws = {"gloss": float(rng.uniform(0, 0.8)), "opacity": float(rng.uniform(0.5, 1.0)),
+             "extent": float(rng.uniform(0.3, 1.0)), "thick": float(rng.uniform(0.3, 1.0)),
+             "shimmer": float(rng.uniform(0, 0.6)), "blush": float(rng.uniform(0.2, 0.6)),
+             "coverage": float(rng.uniform(0.2, 0.6)), "wing": bool(rng.random() < 0.4)}
+    layers = {"foundation": 0.0, "lips": 0.0, "shadow": 0.0, "liner": 0.0, "blush": 0.0}
+    rec: dict = {"id": look}
+    lip_col = _choose(p.get("lip_colour"), LIP_COLOURS, rng)
+    sh_col = _choose(p.get("colour", p.get("eyeshadow_colour")), SHADOW_COLOURS, rng)
+    gloss = float(p.get("gloss", draws["gloss"]))
+    shimmer = float(p.get("shimmer", draws["shimmer"]))
+    extent = float(p.get("extent", draws["extent"]))
+    thick = float(p.get("thickness", draws["thick"]))
+    wing = bool(p.get("wing", draws["wing"]))
+    if look == "light_foundation":
+        layers["foundation"] = float(p.get("coverage", draws["coverage"]))
+    elif look == "lipstick":
+        layers["lips"] = float(p.get("opacity", draws["opacity"]))
+    elif look == "eyeliner":
+        layers["liner"] = 1.0
+    elif look == "eyeshadow":
+        layers["shadow"] = 0.85
+    elif look == "blush":
+        layers["blush"] = float(p.get("intensity", draws["blush"]))
+    elif look == "full_look":
+        layers.update(foundation=0.3, lips=0.9, shadow=0.75, blush=float(p.get("blush", draws["blush"])),
+                      liner=1.0 if bool(p.get("eyeliner", True)) else 0.0)
+        gloss = float(p.get("gloss", 0.4))
+    else:
+        raise ValueError(f"unknown makeup look {look!r}")
+    m1, m2 = compute_masks(ctx.data, np.asarray(ctx.vertices), np.asarray(ctx.landmarks["ibug68"]),
+                           extent=extent, liner=thick, wing=wing)
+    me = ctx.head.data
+    bmat.write_point_colour(me, "makeup_mask", m1)
+    bmat.write_point_colour(me, "makeup_mask2", m2)
+    mat = ctx.materials[CLASSES["skin"]]
+    a1 = bmat.attribute(mat, "makeup_mask")
+    a2 = bmat.attribute(mat, "makeup_mask2")
+    nt = mat.node_tree
+    sep1 = nt.nodes.new("ShaderNodeSeparateColor")
+    nt.links.new(a1.outputs["Color"], sep1.inputs["Color"])
+    sep2 = nt.nodes.new("ShaderNodeSeparateColor")
+    nt.links.new(a2.outputs["Color"], sep2.inputs["Color"])
+    lips_m, shadow_m, liner_m = sep1.outputs[0], sep1.outputs[1], sep1.outputs[2]
+    blush_alpha = a1.outputs["Alpha"]
+    found_m = sep2.outputs[0]
+    if layers["foundation"] > 0:  # evens tone (less saturated, a touch lighter) and mattifies
+        hsv = nt.nodes.new("ShaderNodeHueSaturation")
+        hsv.inputs["Saturation"].default_value = 0.8
+        hsv.inputs["Value"].default_value = 1.06
+        nt.links.new(bmat.input_source(mat, "Base Color"), hsv.inputs["Color"])
+        f = bmat.math_node(mat, "MULTIPLY", found_m, layers["foundation"])
+        bmat.layer_over(mat, "Base Color", hsv.outputs["Color"], f)
+        bmat.layer_over(mat, "Roughness", 0.6, bmat.math_node(mat, "MULTIPLY", f, 0.7))
+    if layers["blush"] > 0:
+        bmat.layer_over(mat, "Base Color", BLUSH, bmat.math_node(mat, "MULTIPLY", blush_alpha, 0.45 * layers["blush"]),
+                        blend="MULTIPLY")
+    if layers["shadow"] > 0:
+        f = bmat.math_node(mat, "MULTIPLY", shadow_m, layers["shadow"])
+        bmat.layer_over(mat, "Base Color", SHADOW_COLOURS[sh_col], f)
+        bmat.layer_over(mat, "Roughness", max(0.15, 0.5 - 0.5 * shimmer), f)
+        bmat.layer_over(mat, "Metallic", 0.35 * shimmer, f)
+        rec.update(eyeshadow_colour=sh_col, extent=round(extent, 4), shimmer=round(shimmer, 4))
+    if layers["liner"] > 0:
+        bmat.layer_over(mat, "Base Color", LINER, bmat.math_node(mat, "MULTIPLY", liner_m, 0.95))
+        rec.update(eyeliner_thickness=round(thick, 4), wing=wing)
+    if layers["lips"] > 0:
+        f = bmat.math_node(mat, "MULTIPLY", lips_m, layers["lips"])
+        bmat.layer_over(mat, "Base Color", LIP_COLOURS[lip_col], f)
+        bmat.layer_over(mat, "Roughness", max(0.08, 0.5 - 0.5 * gloss), f)
+        bmat.layer_over(mat, "Coat Weight", gloss, f)
+        rec.update(lip_colour=lip_col, gloss=round(gloss, 4), opacity=round(layers["lips"], 4))
+    rec["layers"] = {k: round(v, 4) for k, v in layers.items()}
+    rec["mask_vertices"] = {k: int((m1[:, i] > 0.5).sum()) for i, k in enumerate(("lips", "eyeshadow", "eyeliner",
+                                                                                  "blush"))}
+    return Rig("makeup", [], rec)

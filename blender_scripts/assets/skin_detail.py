@@ -1,0 +1,130 @@
+"""Skin detail rig: procedural layers on the skin material from skin.toml parameters.
+
+Layers (all masked per vertex by the ``skin_mask`` point colour attribute: R cheeks+nose,
+G T-zone, B wrinkle zones, A beard area):
+
+* freckles (small Voronoi spots on cheeks and nose, density/strength ~ ``freckles``),
+* age spots / moles (sparse larger Voronoi spots on the face, ``age_spots``),
+* redness (cheeks and nose, from ``haemoglobin``),
+* oiliness -> lower roughness in the T-zone,
+* wrinkles (forehead bands, crow's feet, nasolabial folds) as a bump, ``wrinkle_depth``,
+* pore scale (rescales the base material's pore noise), ``detail_variant`` seeds the noise,
+* stubble shadow over the beard area when the identity has no beard (drawn with
+  probability 0.5 and a light strength) or has the ``stubble`` beard.
+
+The base albedo (melanin/haemoglobin) is set by the worker through ``head_materials``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from blender_scripts import materials as bmat
+from blender_scripts.assets import Rig
+from blender_scripts.assets._masks import feather, region_mask, skin_only
+from synth.segmentation import CLASSES
+
+
+def compute_mask(data, V, lm) -> np.ndarray:
+    n = len(V)
+    skin = skin_only(data, n).astype(float)
+    nose_tip, c_l, c_r = lm[30], lm[42:48].mean(0), lm[36:42].mean(0)
+    cheeks = np.maximum.reduce([feather(np.linalg.norm(V - (c + [0, -0.003, -0.025]), axis=1), 0.008, 0.025)
+                                for c in (c_l, c_r)] + [feather(np.linalg.norm(V - nose_tip, axis=1), 0.006, 0.02)])
+    brow_c = 0.5 * (lm[19] + lm[24])
+    tz = np.maximum(feather(np.abs(V[:, 0] - nose_tip[0]), 0.008, 0.02) * (V[:, 2] > nose_tip[2] - 0.01)
+                    * (V[:, 2] < brow_c[2] + 0.05), feather(np.linalg.norm(V - lm[8], axis=1), 0.01, 0.025))
+    forehead = (V[:, 2] > brow_c[2] + 0.012) * feather(np.abs(V[:, 0] - brow_c[0]), 0.035, 0.055) * (V[:, 1] < brow_c[1] + 0.03)
+    crows = np.maximum(feather(np.linalg.norm(V - (lm[45] + [0.01, 0.004, 0]), axis=1), 0.002, 0.012),
+                       feather(np.linalg.norm(V - (lm[36] + [-0.01, 0.004, 0]), axis=1), 0.002, 0.012))
+    wr = np.maximum(forehead, crows)
+    beard = region_mask(data, ("beard",), n).astype(float)
+    m = np.stack([cheeks, tz, wr, beard], 1) * skin[:, None]
+    return np.clip(m, 0, 1)
+
+
+def _tex_node(mat, kind, scale, seed, vec=None):
+    nt = mat.node_tree
+    t = nt.nodes.new(kind)
+    if hasattr(t, "voronoi_dimensions"):
+        t.voronoi_dimensions = "4D"
+    if hasattr(t, "noise_dimensions"):
+        t.noise_dimensions = "4D"
+    t.inputs["Scale"].default_value = scale
+    if "W" in t.inputs:
+        t.inputs["W"].default_value = seed
+    coord = nt.nodes.new("ShaderNodeTexCoord")
+    nt.links.new(vec if vec is not None else coord.outputs["Object"], t.inputs["Vector"])
+    return t
+
+
+def build(ctx, entry: dict) -> Rig:
+    p = dict(entry.get("params") or {})
+    rng = ctx.rng("skin")
+    seed = float(p.get("detail_variant", rng.integers(64))) * 7.31
+    stub_draw, stub_level = float(rng.random()), float(rng.uniform(0.1, 0.3))
+    mat = ctx.materials[CLASSES["skin"]]
+    nt = mat.node_tree
+    V, lm = np.asarray(ctx.vertices), np.asarray(ctx.landmarks["ibug68"])
+    bmat.write_point_colour(ctx.head.data, "skin_mask", compute_mask(ctx.data, V, lm))
+    attr = bmat.attribute(mat, "skin_mask")
+    sep = nt.nodes.new("ShaderNodeSeparateColor")
+    nt.links.new(attr.outputs["Color"], sep.inputs["Color"])
+    cheeks, tzone, wzone, beard = sep.outputs[0], sep.outputs[1], sep.outputs[2], attr.outputs["Alpha"]
+    rec = {"id": entry.get("id")}
+    pore = float(p.get("pore_scale", 1.0))
+    for n in nt.nodes:  # rescale the base material's pore noise
+        if n.type == "TEX_NOISE" and n.inputs["Scale"].default_value > 300:
+            n.inputs["Scale"].default_value *= pore
+    # redness from blood volume
+    red = float(np.clip(float(p.get("haemoglobin", 0.02)) / 0.07, 0, 1))
+    bmat.layer_over(mat, "Base Color", (0.75, 0.3, 0.3), bmat.math_node(mat, "MULTIPLY", cheeks, 0.35 * red),
+                    blend="MULTIPLY")
+    # freckles: small cells, random per cell, thresholded by the amount
+    fr = float(p.get("freckles", 0.0))
+    if fr > 0.01:
+        v = _tex_node(mat, "ShaderNodeTexVoronoi", 450.0, seed)
+        sepc = nt.nodes.new("ShaderNodeSeparateColor")
+        nt.links.new(v.outputs["Color"], sepc.inputs["Color"])
+        spot = bmat.math_node(mat, "LESS_THAN", sepc.outputs[0], 0.6 * fr)
+        small = bmat.math_node(mat, "LESS_THAN", v.outputs["Distance"], 0.35)
+        f = bmat.math_node(mat, "MULTIPLY", bmat.math_node(mat, "MULTIPLY", spot, small), cheeks)
+        bmat.layer_over(mat, "Base Color", (0.55, 0.35, 0.22), bmat.math_node(mat, "MULTIPLY", f, 0.8),
+                        blend="MULTIPLY")
+    ag = float(p.get("age_spots", 0.0))
+    if ag > 0.01:
+        v = _tex_node(mat, "ShaderNodeTexVoronoi", 60.0, seed + 3)
+        sepc = nt.nodes.new("ShaderNodeSeparateColor")
+        nt.links.new(v.outputs["Color"], sepc.inputs["Color"])
+        spot = bmat.math_node(mat, "LESS_THAN", sepc.outputs[0], 0.25 * ag)
+        small = bmat.math_node(mat, "LESS_THAN", v.outputs["Distance"], 0.25)
+        face = bmat.math_node(mat, "MAXIMUM", cheeks, wzone)
+        f = bmat.math_node(mat, "MULTIPLY", bmat.math_node(mat, "MULTIPLY", spot, small), face)
+        bmat.layer_over(mat, "Base Color", (0.45, 0.3, 0.2), f, blend="MULTIPLY")
+    oil = float(p.get("oiliness", 0.0))
+    if oil > 0.0:
+        base_r = float(p.get("roughness", 0.45))
+        bmat.layer_over(mat, "Roughness", base_r * (1 - 0.6 * oil), bmat.math_node(mat, "MULTIPLY", tzone, 0.9))
+    wd = float(p.get("wrinkle_depth", 0.0))
+    if wd > 0.01:
+        wave = _tex_node(mat, "ShaderNodeTexWave", 90.0, seed)
+        wave.wave_type = "BANDS"
+        wave.bands_direction = "Z"
+        wave.inputs["Distortion"].default_value = 3.0
+        h = bmat.math_node(mat, "MULTIPLY", wave.outputs["Fac"], wzone)
+        bmat.chain_bump(mat, h, 0.35 * wd, 0.0006)
+    beard_entry = (ctx.assets or {}).get("beard")
+    beard_id = (beard_entry or {}).get("id")
+    stubble = 0.0
+    if beard_id == "stubble":
+        stubble = 0.55
+    elif not beard_entry and stub_draw < 0.5:
+        stubble = stub_level
+    if stubble > 0:
+        nz = _tex_node(mat, "ShaderNodeTexNoise", 2500.0, seed + 5)
+        f = bmat.math_node(mat, "MULTIPLY", bmat.math_node(mat, "MULTIPLY", beard, nz.outputs["Fac"]), 1.6 * stubble)
+        bmat.layer_over(mat, "Base Color", (0.35, 0.33, 0.34), bmat.math_node(mat, "MINIMUM", f, 1.0),
+                        blend="MULTIPLY")
+    rec.update(freckles=fr, age_spots=ag, redness=round(red, 4), oiliness=oil, wrinkle_depth=wd,
+               pore_scale=pore, stubble_shadow=round(stubble, 4))
+    return Rig("skin", [], rec)
