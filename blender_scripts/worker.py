@@ -67,7 +67,7 @@ def _dress(ident: dict, ctx, rigs_out: dict) -> dict:
         if not e:
             record[c] = None
             continue
-        record[c] = {**e, "build": rigs[c].record()} if c in rigs else {**e, "build": {"built": False}}
+        record[c] = {**e, "build": rigs[c].record()}
     return record
 
 
@@ -94,7 +94,7 @@ class IdentityScene:
     expression is a vertex update (+ rig updates) and each view a camera move."""
 
     def __init__(self, ident: dict, hm, plan, render_cfg: dict, run_seed: int, model_info: dict,
-                 versions: dict, shard_id: str = ""):
+                 versions: dict, shard_id: str = "", asset_resolution: int | None = None):
         from blender_scripts import camera as bcam
         from blender_scripts import materials as bmat
         from blender_scripts import scene as bscene
@@ -102,6 +102,7 @@ class IdentityScene:
 
         self.ident, self.hm, self.render_cfg = ident, hm, render_cfg
         self.run_seed, self.model_info, self.versions, self.shard_id = run_seed, model_info, versions, shard_id
+        self.asset_resolution = asset_resolution  # benchmarks: strand counts independent of the image size
         bscene.reset()
         f0 = ident["expressions"][0]["frames"][0]["camera"]
         self.width, self.height = int(f0["width"]), int(f0["height"])
@@ -140,7 +141,7 @@ class IdentityScene:
             self.ctx = HeadContext(data=hm.data, head=self.head_ob, materials=self.materials,
                                    rest_vertices=self.rest, vertices=verts, joint_transforms=joints,
                                    joint_index=dict(hm.joint_index), landmarks=lms,
-                                   resolution=max(self.width, self.height),
+                                   resolution=self.asset_resolution or max(self.width, self.height),
                                    identity_index=int(self.ident["identity_index"]), run_seed=self.run_seed)
             self.assets_record = _dress(self.ident, self.ctx, self.rigs)
         else:

@@ -67,6 +67,22 @@ def test_render_validates_with_expected_layers_and_sizes(rendered):
         # segmentation: background exactly where alpha is zero, skin present
         seg = ex["segmentation"]
         assert (seg[a <= 0.0] == 0).all() and (seg == 1).any()
+    # every chosen asset was built (its record is in the JSON) and the large ones are rendered
+    # into their own segmentation IDs
+    from synth.segmentation import CLASSES
+
+    fj = json.loads(next(iter(fr.values())).read_text())
+    seen = set()
+    for jp in fr.values():
+        seen |= set(np.unique(read_frame_exr(jp.with_suffix(".exr"))["segmentation"]).tolist())
+    seg_of = {"hair": "hair", "beard": "beard", "garment": "clothing", "glasses": "glasses", "headwear": "headwear"}
+    for cls, entry in fj["assets"].items():
+        if entry is None:
+            continue
+        assert isinstance(entry.get("build"), dict) and entry["id"], cls
+        if cls in seg_of:
+            assert CLASSES[seg_of[cls]] in seen, f"{cls} ({entry['id']}) not in the segmentation"
+    assert fj["assets"]["hair"] is not None and fj["assets"]["garment"] is not None
     synth("preview", rendered, "-o", rendered / "sheet.png")
     assert (rendered / "sheet.png").stat().st_size > 1000
 

@@ -97,15 +97,7 @@ def dress(ctx: HeadContext, assets: dict[str, Any]) -> dict[str, Rig]:
         entry = assets.get(cls)
         if not entry:
             continue
-        try:
-            mod = rig_module(cls, entry)
-        except ModuleNotFoundError as e:  # TEMPORARY while rigs are being written: recorded as not built
-            if not (e.name or "").startswith(__name__ + "."):
-                raise
-            import sys
-
-            print(f"synth worker: warning: no rig for class {cls!r} yet; not built", file=sys.stderr)
-            continue
+        mod = rig_module(cls, entry)
         rigs[cls] = mod.build(ctx, entry)
     return rigs
 
