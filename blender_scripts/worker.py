@@ -138,6 +138,8 @@ class IdentityScene:
         if self.head_ob is None:
             self.head_ob = bhead.build_head_object(hm.data, verts, self.materials)
             bhead.set_rest_positions(self.head_ob, self.rest)
+            self.effective["subdivision_levels"] = bhead.add_render_subdivision(self.head_ob,
+                                                                                max(self.width, self.height))
             self.ctx = HeadContext(data=hm.data, head=self.head_ob, materials=self.materials,
                                    rest_vertices=self.rest, vertices=verts, joint_transforms=joints,
                                    joint_index=dict(hm.joint_index), landmarks=lms,
