@@ -81,17 +81,19 @@ def table(name: str, cam: CameraConfig) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--write", action="store_true", help="write docs/performance-cameras.md")
+    ap.add_argument("--write", action="store_true", help="write the table into docs/performance.md (after its '<!-- table -->' marker)")
     args = ap.parse_args()
     parts = [table(name, cam) for name, cam in REGIONS.items()]
     text = "\n".join(parts)
     print(text)
     if args.write:
-        doc = Path(__file__).resolve().parents[1] / "docs" / "performance-cameras.md"
-        head = doc.read_text().split("<!-- table -->")[0] if doc.exists() else "# Cameras\n\n"
+        doc = Path(__file__).resolve().parents[1] / "docs" / "performance.md"
+        head = doc.read_text().split("<!-- table -->")[0] if doc.exists() else "# Performance\n\n"
         machine = f"{platform.processor() or platform.machine()}, Python {platform.python_version()}, " \
                   f"numpy {np.__version__}"
-        doc.write_text(f"{head}<!-- table -->\nMeasured with `benchmarks/cameras.py --write` ({machine}).\n\n{text}")
+        tail = doc.read_text().split("<!-- /table -->", 1)[1] if "<!-- /table -->" in doc.read_text() else "\n"
+        doc.write_text(f"{head}<!-- table -->\nMeasured with `benchmarks/cameras.py --write` ({machine}).\n\n{text}"
+                       f"\n<!-- /table -->{tail}")
 
 
 if __name__ == "__main__":

@@ -273,9 +273,8 @@ def test_bad_catalogues_are_refused(tmp_path, text, what):
 
 
 @pytest.mark.slow
-def test_default_model_plan_and_speed(tmp_path):
+def test_default_model_plan(tmp_path):
     """The issue's figures on the embedded default model (built and cached on first use)."""
-    import time
 
     pytest.importorskip("scipy")
     try:
@@ -284,9 +283,6 @@ def test_default_model_plan_and_speed(tmp_path):
         default_model_path()
     except SynthError as e:  # pragma: no cover - the data package is missing
         pytest.skip(str(e))
-    t = time.perf_counter()
     header, summ = planner.run_plan(load_config(), 300, tmp_path / "p", seed=7)
-    dt = time.perf_counter() - t
     assert summ["presets_unavailable_in_model"] == [] and summ["cameras"]["restarts"] == 0
     assert summ["cameras"]["smallest_pairwise_angle_deg"] >= 25.0
-    assert dt < 20.0  # ~1 s here; 1,500 identities take ~5 s (docs/performance-cameras.md)
