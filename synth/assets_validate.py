@@ -12,7 +12,6 @@ root once symlinks are resolved, and have the declared sha256. See docs/assets.m
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import tomllib
@@ -21,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from synth.config import ASSET_CLASSES
+from synth.dataset.fsio import sha256_file  # noqa: F401 - re-exported for the pack rig
 from synth.errors import SynthError
 
 #: Procedural generator name -> the asset class whose rig (blender_scripts.assets.MODULES)
@@ -102,17 +102,6 @@ def asset_root_of(doc: dict, manifest_file: Path) -> Path:
     base = Path(manifest_file).resolve().parent
     root = doc.get("asset_root")
     return (base / root) if root else base
-
-
-def sha256_file(path: str | Path, chunk: int = 1 << 20) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while True:
-            b = f.read(chunk)
-            if not b:
-                break
-            h.update(b)
-    return h.hexdigest()
 
 
 def pack_path_problem(rel: str, root: str | Path) -> tuple[Path | None, tuple[str, str] | None]:

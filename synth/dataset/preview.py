@@ -85,7 +85,6 @@ def contact_sheet(root, shard_id: str | None = None, out=None, *, max_views: int
         from PIL import Image, ImageDraw, ImageFont
     except ImportError as e:  # pragma: no cover
         raise SynthError("pillow is not installed", None, "install it: .venv/bin/pip install pillow") from e
-    from synth.dataset.fsio import atomic_write_bytes
     from synth.dataset.shards import load_dataset
     from synth.frames import parse_frame_key
 
@@ -136,13 +135,7 @@ def contact_sheet(root, shard_id: str | None = None, out=None, *, max_views: int
             for t, im in enumerate(cells.get((e, v), [])):
                 sheet.paste(im, (x + t * (tw + gap), y))
     out = Path(out) if out is not None else ds.root / f"preview_{shard_id}.png"
-    buf = io.BytesIO()
-    sheet.save(buf, format="PNG")
-    try:
-        atomic_write_bytes(out, buf.getvalue())
-    except OSError as e:
-        raise SynthError(f"cannot write the preview ({e.strerror})", str(out), "pass -o with a writable path") from None
-    return out
+    return _save_png(sheet, out)
 
 
 def overview_sheet(root, out=None, *, views: int = 3, max_shards: int | None = None, tile: int = 96,
@@ -152,7 +145,6 @@ def overview_sheet(root, out=None, *, views: int = 3, max_shards: int | None = N
     laid out in ``columns`` columns. Default output: ``DIR/overview.png``."""
     from PIL import Image, ImageDraw, ImageFont
 
-    from synth.dataset.fsio import atomic_write_bytes
     from synth.dataset.shards import load_dataset
     from synth.frames import parse_frame_key
 
@@ -189,6 +181,12 @@ def overview_sheet(root, out=None, *, views: int = 3, max_shards: int | None = N
             for t, im in enumerate(tiles):
                 sheet.paste(im, (x + t * (tw + gap), y0 + label_h))
     out = Path(out) if out is not None else ds.root / "overview.png"
+    return _save_png(sheet, out)
+
+
+def _save_png(sheet, out: Path) -> Path:
+    from synth.dataset.fsio import atomic_write_bytes
+
     buf = io.BytesIO()
     sheet.save(buf, format="PNG")
     try:
