@@ -5,6 +5,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
+from blender_scripts.mesh import link_object, new_mesh, set_positions
 from synth.segmentation import CLASSES
 
 #: Region -> segmentation class, in priority order (first match wins for a polygon).
@@ -55,18 +56,8 @@ def build_head_object(data, vertices: np.ndarray, materials: dict[int, "bpy.type
                       name: str = "head") -> "bpy.types.Object":
     """Create the mesh (polygons with quads kept, UVs, one material slot per class)."""
     off, idx, cls, keep = polygon_classes(data)
-    me = bpy.data.meshes.new(name)
-    V = vertices.shape[0]
-    me.vertices.add(V)
-    me.vertices.foreach_set("co", np.ascontiguousarray(vertices, np.float32).ravel())
-    me.loops.add(len(idx))
-    me.loops.foreach_set("vertex_index", idx.astype(np.int32))
-    P = len(off) - 1
-    me.polygons.add(P)
-    me.polygons.foreach_set("loop_start", off[:-1].astype(np.int32))
-    me.polygons.foreach_set("loop_total", np.diff(off).astype(np.int32))
+    corner_uv = None
     if data.uvs is not None:
-        uv_layer = me.uv_layers.new(name="UVMap")
         if data.poly_uv is not None and data.poly_offsets is not None:
             corner_uv = data.uvs[data.poly_uv]
             orig_counts = np.diff(data.poly_offsets.astype(np.int64))
@@ -74,25 +65,15 @@ def build_head_object(data, vertices: np.ndarray, materials: dict[int, "bpy.type
             corner_uv = data.uvs[data.tri_uv.reshape(-1)]
             orig_counts = np.full(len(data.triangles), 3, np.int64)
         corner_uv = corner_uv[np.repeat(keep, orig_counts)]
-        uv_layer.data.foreach_set("uv", np.ascontiguousarray(corner_uv, np.float32).ravel())
     slots = sorted(set(cls.tolist()))
     slot_of = {c: i for i, c in enumerate(slots)}
-    for c in slots:
-        me.materials.append(materials[c])
-    me.polygons.foreach_set("material_index", np.array([slot_of[c] for c in cls.tolist()], np.int32))
-    me.polygons.foreach_set("use_smooth", np.ones(P, bool))
-    me.update()
-    me.validate(clean_customdata=False)
-    ob = bpy.data.objects.new(name, me)
-    bpy.context.scene.collection.objects.link(ob)
-    return ob
+    me = new_mesh(name, vertices, off, idx, np.array([slot_of[c] for c in cls.tolist()], np.int32), corner_uv)
+    return link_object(name, me, [materials[c] for c in slots])
 
 
 def set_vertices(ob, vertices: np.ndarray) -> None:
     """Expression change: overwrite coordinates in place (no rebuild)."""
-    me = ob.data
-    me.vertices.foreach_set("co", np.ascontiguousarray(vertices, np.float32).ravel())
-    me.update()
+    set_positions(ob, vertices)
 
 
 def set_rest_positions(ob, rest: np.ndarray) -> None:

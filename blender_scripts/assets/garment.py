@@ -177,31 +177,9 @@ def cloth_material(name: str, cls: str, colour, fabric: str, knit_scale: float =
 # ----------------------------------------------------------------------------- mesh object helpers
 
 def mesh_object(name: str, P: np.ndarray, faces: np.ndarray, mat_index: np.ndarray, materials: list):
-    import bpy
+    from blender_scripts.mesh import link_object, new_triangle_mesh
 
-    me = bpy.data.meshes.new(name)
-    me.vertices.add(len(P))
-    me.vertices.foreach_set("co", np.ascontiguousarray(P, np.float32).ravel())
-    me.loops.add(faces.size)
-    me.loops.foreach_set("vertex_index", np.ascontiguousarray(faces, np.int32).ravel())
-    me.polygons.add(len(faces))
-    me.polygons.foreach_set("loop_start", np.arange(0, faces.size, 3, dtype=np.int32))
-    me.polygons.foreach_set("loop_total", np.full(len(faces), 3, np.int32))
-    for m in materials:
-        me.materials.append(m)
-    me.polygons.foreach_set("material_index", np.ascontiguousarray(mat_index, np.int32))
-    me.polygons.foreach_set("use_smooth", np.ones(len(faces), bool))
-    me.update()
-    me.validate(clean_customdata=False)
-    ob = bpy.data.objects.new(name, me)
-    bpy.context.scene.collection.objects.link(ob)
-    return ob
-
-
-def set_positions(ob, P: np.ndarray) -> None:
-    me = ob.data
-    me.vertices.foreach_set("co", np.ascontiguousarray(P, np.float32).ravel())
-    me.update()
+    return link_object(name, new_triangle_mesh(name, P, faces, mat_index), materials)
 
 
 class Parts:
@@ -238,6 +216,8 @@ class FittedRig(Rig):
         P = self.binding.apply(ctx.vertices)
         q = fit.SurfaceQuery(ctx.vertices, ctx.data.triangles, self.body_tris)
         P = fit.push_out(P, q, self.clearance, iterations=6)
+        from blender_scripts.mesh import set_positions
+
         set_positions(self.objects[0], P)
 
 

@@ -91,20 +91,9 @@ def mesh_from_arrays(name: str, parts: list[tuple[np.ndarray, np.ndarray, int]])
         Fs.append(np.asarray(F, np.int64) + off)
         Ms.append(np.full(len(F), slot, np.int32))
         off += len(V)
-    V, F, M = np.concatenate(Vs), np.concatenate(Fs), np.concatenate(Ms)
-    me = bpy.data.meshes.new(name)
-    me.vertices.add(len(V))
-    me.vertices.foreach_set("co", np.ascontiguousarray(V, np.float32).ravel())
-    me.loops.add(F.size)
-    me.loops.foreach_set("vertex_index", F.astype(np.int32).ravel())
-    me.polygons.add(len(F))
-    me.polygons.foreach_set("loop_start", np.arange(0, F.size, 3, dtype=np.int32))
-    me.polygons.foreach_set("loop_total", np.full(len(F), 3, np.int32))
-    me.polygons.foreach_set("material_index", M)
-    me.polygons.foreach_set("use_smooth", np.ones(len(F), bool))
-    me.update()
-    me.validate(clean_customdata=False)
-    return me
+    from blender_scripts.mesh import new_triangle_mesh
+
+    return new_triangle_mesh(name, np.concatenate(Vs), np.concatenate(Fs), np.concatenate(Ms))
 
 
 class GlassesRig(Rig):
