@@ -11,7 +11,6 @@ from __future__ import annotations
 import numpy as np
 
 from blender_scripts.assets import strands as S
-from synth import pigment as pig
 
 
 def counts(resolution: int, density: float = 1.0) -> int:
@@ -27,14 +26,9 @@ def _polyline_distance(p, line):
 
 
 def build(ctx, entry):
-    rng = ctx.rng("beard")
-    sid = str(entry.get("id", "short_full"))
-    prm = dict(entry.get("params") or {})
-    surface = S.Surface(ctx)
-    hf = S.head_frame(ctx)
+    st = S.setup(ctx, entry, "beard", "short_full")
+    rng, sid, prm, surface, hf, colour, pg = st.rng, st.sid, st.prm, st.surface, st.hf, st.colour, st.pg
     lm = hf["lm"]
-    colour = S.colour_of(entry, ctx, "dark_brown")
-    pg = pig.sample(colour, rng)
     tris = surface.region_triangles("beard", "all", exclude=("lips", "mouth_interior", "teeth", "nose"))
     corner_r, corner_l = lm[48], lm[54]
     x_c = 0.5 * (corner_l[0] + corner_r[0])

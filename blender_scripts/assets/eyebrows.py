@@ -8,7 +8,6 @@ from __future__ import annotations
 import numpy as np
 
 from blender_scripts.assets import strands as S
-from synth import pigment as pig
 
 
 def counts(resolution: int, density: float = 1.0) -> int:
@@ -32,14 +31,9 @@ def _brow_coords(p, line):
 
 
 def build(ctx, entry):
-    rng = ctx.rng("eyebrows")
-    sid = str(entry.get("id", "natural"))
-    prm = dict(entry.get("params") or {})
-    surface = S.Surface(ctx)
-    hf = S.head_frame(ctx)
+    st = S.setup(ctx, entry, "eyebrows", "natural")
+    rng, sid, prm, surface, hf, colour, pg = st.rng, st.sid, st.prm, st.surface, st.hf, st.colour, st.pg
     lm = hf["lm"]
-    colour = S.colour_of(entry, ctx, "dark_brown")
-    pg = pig.sample(colour, rng)
     thick = float(prm.get("thickness", {"thin_arched": 0.45, "bushy": 1.5, "sparse": 0.6}.get(sid, 0.9)))
     dens = float(prm.get("density", {"sparse": 0.35, "bushy": 1.2}.get(sid, 1.0)))
     arch = float(prm.get("arch", {"thin_arched": 0.7, "straight": 0.05}.get(sid, 0.3)))

@@ -11,7 +11,6 @@ from __future__ import annotations
 import numpy as np
 
 from blender_scripts.assets import strands as S
-from synth import pigment as pig
 
 POINTS = {"buzz_cut": 4, "short_straight": 10, "short_curly": 14, "undercut": 14, "medium_wavy": 22, "bob": 20,
           "long_straight": 28, "long_curly": 40, "afro": 32, "bun": 28, "ponytail": 30, "braids": 40}
@@ -52,14 +51,9 @@ def _sphere_path(c, roots, target, n_points, lift=0.004):
 
 
 def build(ctx, entry):
-    rng = ctx.rng("hair")
-    sid = str(entry.get("id", "short_straight"))
-    prm = dict(entry.get("params") or {})
-    surface = S.Surface(ctx)
-    hf = S.head_frame(ctx)
+    st = S.setup(ctx, entry, "hair", "short_straight")
+    rng, sid, prm, surface, hf, colour, pg = st.rng, st.sid, st.prm, st.surface, st.hf, st.colour, st.pg
     c = hf["centre"]
-    colour = S.colour_of(entry, ctx, "dark_brown")
-    pg = pig.sample(colour, rng)
     density = float(prm.get("density", 1.0))
     n, g = counts(ctx.resolution, density)
     P = POINTS.get(sid, 20)

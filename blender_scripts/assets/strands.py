@@ -619,6 +619,26 @@ def colour_of(entry: dict, ctx, default: str = "dark_brown") -> str:
     return default
 
 
+@dataclass
+class StrandSetup:
+    """What every strand rig starts from (the rng has already drawn the pigment)."""
+
+    rng: np.random.Generator
+    sid: str
+    prm: dict
+    surface: Surface
+    hf: dict
+    colour: str
+    pg: object
+
+
+def setup(ctx, entry: dict, cls: str, default_id: str, default_colour: str = "dark_brown") -> StrandSetup:
+    rng = ctx.rng(cls)
+    colour = colour_of(entry, ctx, default_colour)
+    return StrandSetup(rng, str(entry.get("id", default_id)), dict(entry.get("params") or {}), Surface(ctx),
+                       head_frame(ctx), colour, pig.sample(colour, rng))
+
+
 def param(entry: dict, name: str, default):
     v = (entry.get("params") or {}).get(name, default)
     return default if v is None else v
