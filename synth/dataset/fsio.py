@@ -42,24 +42,16 @@ def fsync_file(path: Path) -> None:
         os.close(fd)
 
 
-def atomic_write_bytes(path: Path, data: bytes, *, durable: bool = True, mode: int | None = None) -> None:
-    """Write ``data`` to ``path`` atomically: temp file, fsync, rename over, fsync directory.
-
-    On any error the temporary file is removed and ``path`` is left as it was.
-    """
+def atomic_place(path: Path, fill, *, durable: bool = True, sync_file: bool = True) -> None:
+    """Create ``path`` atomically: ``fill(tmp)`` writes a temp file next to it, which is fsynced
+    (``sync_file``; skip it when ``fill`` already did), renamed over ``path``, and the directory
+    fsynced. On any error the temporary file is removed and ``path`` is left as it was."""
     path = Path(path)
     tmp = temp_name(path)
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644 if mode is None else mode)
     try:
-        try:
-            view = memoryview(data)
-            while view:
-                n = os.write(fd, view)
-                view = view[n:]
-            if durable:
-                os.fsync(fd)
-        finally:
-            os.close(fd)
+        fill(tmp)
+        if durable and sync_file:
+            fsync_file(tmp)
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -69,6 +61,27 @@ def atomic_write_bytes(path: Path, data: bytes, *, durable: bool = True, mode: i
         raise
     if durable:
         fsync_dir(path.parent)
+
+
+def atomic_write_bytes(path: Path, data: bytes, *, durable: bool = True, mode: int | None = None) -> None:
+    """Write ``data`` to ``path`` atomically: temp file, fsync, rename over, fsync directory.
+
+    On any error the temporary file is removed and ``path`` is left as it was.
+    """
+
+    def fill(tmp: Path) -> None:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644 if mode is None else mode)
+        try:
+            view = memoryview(data)
+            while view:
+                n = os.write(fd, view)
+                view = view[n:]
+            if durable:
+                os.fsync(fd)
+        finally:
+            os.close(fd)
+
+    atomic_place(path, fill, durable=durable, sync_file=False)
 
 
 def dumps_json(obj, *, indent: int | None = 1) -> bytes:

@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 import synth
-from synth.dataset.fsio import (atomic_write_bytes, atomic_write_json, dumps_json, fsync_dir, fsync_file,
-                                is_temp_name, loads_json, sha256_bytes, temp_name)
+from synth.dataset.fsio import (atomic_place, atomic_write_bytes, atomic_write_json, dumps_json, fsync_dir,
+                                is_temp_name, loads_json, sha256_bytes)
 from synth.dataset.index import update_index
 from synth.dataset.layout import MANIFEST_FILE, SHARD_FORMAT, frame_files, utc_now
 from synth.errors import SynthError
@@ -215,9 +215,10 @@ class StagingShard:
             os.unlink(self.dir / js)
         except FileNotFoundError:
             pass
-        tmp = temp_name(self.dir / exr)
         moved = False
-        try:
+
+        def fill(tmp: Path) -> None:
+            nonlocal moved
             if move:
                 try:
                     os.replace(src, tmp)
@@ -227,17 +228,8 @@ class StagingShard:
                         raise
             if not moved:
                 shutil.copyfile(src, tmp)
-            if durable:
-                fsync_file(tmp)
-            os.replace(tmp, self.dir / exr)
-        except BaseException:
-            try:
-                os.unlink(tmp)
-            except FileNotFoundError:
-                pass
-            raise
-        if durable:
-            fsync_dir(self.dir)
+
+        atomic_place(self.dir / exr, fill, durable=durable)
         atomic_write_json(self.dir / js, fj, durable=durable, indent=None)
         if move and not moved:
             os.unlink(src)
