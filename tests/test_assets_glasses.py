@@ -82,7 +82,7 @@ def test_closest_point_matches_trimesh():
     rng = np.random.default_rng(0)
     tri = rng.normal(size=(200, 3, 3))
     p = rng.normal(size=(200, 3)) * 2
-    q, bary = gf.closest_point_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2])
+    q, bary = gf.closest_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2])
     ref = trimesh.triangles.closest_point(tri, p)
     np.testing.assert_allclose(q, ref, atol=1e-9)
     np.testing.assert_allclose(bary.sum(1), 1.0, atol=1e-9)

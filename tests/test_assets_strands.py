@@ -26,31 +26,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _closest_on_triangles(P, A, B, C):
-    """Closest points on triangles (A, B, C) to points P (all (..., 3)); Ericson's method."""
-    ab, ac = B - A, C - A
-    ap, bp, cp = P - A, P - B, P - C
-    d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
-    d3, d4 = (ab * bp).sum(-1), (ac * bp).sum(-1)
-    d5, d6 = (ab * cp).sum(-1), (ac * cp).sum(-1)
-    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-    den = va + vb + vc
-    den = np.where(np.abs(den) < 1e-30, 1e-30, den)
-    Q = A + ab * (vb / den)[..., None] + ac * (vc / den)[..., None]
+    """Closest points on triangles (A, B, C) to points P (all broadcastable (..., 3)), by trimesh:
+    an implementation independent of the rigs' own."""
+    import trimesh
 
-    def safe(x):
-        return np.where(np.abs(x) < 1e-30, 1e-30, x)
-
-    cases = [
-        ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), B + (C - B) * ((d4 - d3) / safe((d4 - d3) + (d5 - d6)))[..., None]),
-        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), A + ac * (d2 / safe(d2 - d6))[..., None]),
-        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), A + ab * (d1 / safe(d1 - d3))[..., None]),
-        ((d6 >= 0) & (d5 <= d6), C),
-        ((d3 >= 0) & (d4 <= d3), B),
-        ((d1 <= 0) & (d2 <= 0), A),
-    ]
-    for m, val in cases:  # last assignment wins: vertex regions take priority over edges
-        Q = np.where(m[..., None], val, Q)
-    return Q
+    shape = np.broadcast_shapes(P.shape, A.shape, B.shape, C.shape)
+    P, A, B, C = (np.broadcast_to(x, shape).reshape(-1, 3) for x in (P, A, B, C))
+    return trimesh.triangles.closest_point(np.stack([A, B, C], 1), P).reshape(shape)
 
 
 def surface_distance(points, V, T, k: int = 24, exact: bool = False):

@@ -32,6 +32,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from blender_scripts.assets import Rig
+from blender_scripts.assets.fitting import closest_on_triangles
 from synth import pigment as pig
 from synth.segmentation import CLASSES
 
@@ -157,7 +158,7 @@ class Surface:
         _, idx = self._tri_tree.query(flat, k=k, workers=-1)
         tri = self.V[self.T[self.ext_tris[idx]]]
         Pk = np.broadcast_to(flat[:, None], tri.shape[:2] + (3,))
-        Q = closest_on_triangles(Pk, tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
+        Q = closest_on_triangles(Pk, tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])[0]
         d = np.linalg.norm(Pk - Q, axis=-1)
         j = d.argmin(1)
         r = np.arange(len(flat))
@@ -199,33 +200,6 @@ class Surface:
                 break
             P += deficit[..., None] * n
         return P
-
-
-def closest_on_triangles(P, A, B, C):
-    """Closest points on triangles (A, B, C) to points P (all (..., 3)); Ericson's method."""
-    ab, ac = B - A, C - A
-    ap, bp, cp = P - A, P - B, P - C
-    d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
-    d3, d4 = (ab * bp).sum(-1), (ac * bp).sum(-1)
-    d5, d6 = (ab * cp).sum(-1), (ac * cp).sum(-1)
-    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
-
-    def safe(x):
-        return np.where(np.abs(x) < 1e-30, 1e-30, x)
-
-    den = safe(va + vb + vc)
-    Q = A + ab * (vb / den)[..., None] + ac * (vc / den)[..., None]
-    cases = [
-        ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0), B + (C - B) * ((d4 - d3) / safe((d4 - d3) + (d5 - d6)))[..., None]),
-        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), A + ac * (d2 / safe(d2 - d6))[..., None]),
-        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), A + ab * (d1 / safe(d1 - d3))[..., None]),
-        ((d6 >= 0) & (d5 <= d6), C),
-        ((d3 >= 0) & (d4 <= d3), B),
-        ((d1 <= 0) & (d2 <= 0), A),
-    ]
-    for m, val in cases:  # later cases win: vertex regions take priority over edges
-        Q = np.where(m[..., None], val, Q)
-    return Q
 
 
 # --------------------------------------------------------------------------- strand shapes
