@@ -2,8 +2,8 @@
 
 from prior.data.bounds import bounding_sphere, foreground_points, intersect_sphere
 from prior.data.codes import CodeLayout
-from prior.data.sampler import Batch, RaySampler, rays_for
+from prior.data.sampler import Batch, RaySampler, pixel_radius, rays_for
 from prior.data.store import FrameStore, IdentityInfo, load_store
 
 __all__ = ["Batch", "CodeLayout", "FrameStore", "IdentityInfo", "RaySampler", "bounding_sphere", "foreground_points",
-           "intersect_sphere", "load_store", "rays_for"]
+           "intersect_sphere", "load_store", "pixel_radius", "rays_for"]

@@ -37,6 +37,7 @@ class Batch:
     directions: np.ndarray  # (N, 3) float32, unit
     near: np.ndarray  # (N,) float32
     far: np.ndarray  # (N,) float32
+    radii: np.ndarray  # (N,) float32: cone radius at unit distance, 2 / sqrt(12) / fx (mip-NeRF)
     codes: np.ndarray  # (N, C) float32
     latent_ids: np.ndarray  # (N,) int64
     rgba: np.ndarray  # (N, 4) float32: premultiplied colour and alpha
@@ -45,6 +46,12 @@ class Batch:
 
     def __len__(self) -> int:
         return int(self.near.shape[0])
+
+
+def pixel_radius(K: np.ndarray) -> np.ndarray:
+    """mip-NeRF's cone radius at unit distance for cameras ``K`` (..., 3, 3): a pixel's width
+    (1 / fx) times 2 / sqrt(12)."""
+    return (2.0 / np.sqrt(12.0)) / np.asarray(K)[..., 0, 0]
 
 
 def rays_for(store: FrameStore, frames: np.ndarray, pixels: np.ndarray):
@@ -115,5 +122,6 @@ class RaySampler:
         H, W = st.size
         rgba = st.rgba.reshape(len(st.rgba), H * W, 4)[frames[:, None], pixels].reshape(-1, 4).astype(np.float32)
         fr = np.repeat(frames, self.P)
-        return Batch(origins=o, directions=d, near=near, far=far, codes=st.codes[fr], latent_ids=st.latent[fr],
+        radii = np.repeat(pixel_radius(st.K[frames]), self.P).astype(np.float32)
+        return Batch(origins=o, directions=d, near=near, far=far, radii=radii, codes=st.codes[fr], latent_ids=st.latent[fr],
                      rgba=rgba, frames=fr, pixels=pixels.reshape(-1))

@@ -83,3 +83,12 @@ def make_dataset(root, identities: int = 2, expressions: int = 2, views: int = 4
                 st.write_frame(k, *px, meta)
             st.commit(manifest_extra={"seeds": {"run": 0}, "versions": {"blender": "none"}})
     return root
+
+
+#: a model and batch small enough for tests that train a few steps on CPU
+TINY = ["model.nerf_width=16", "model.nerf_depth=2", "model.skip_layer=1", "model.proposal_width=8",
+        "model.proposal_depth=1", "model.bottleneck_width=8", "model.view_width=8", "model.pos_levels=4",
+        "model.dir_levels=2", "model.latent_dim=4", "sampling.proposal_samples=[8, 8]", "sampling.nerf_samples=8",
+        "train.identities_per_batch=2", "train.views_per_identity=2", "train.pixels_per_view=16",
+        "train.warmup_steps=2", "train.background_steps=2", "train.log_every=1", "train.checkpoint_every=2",
+        "train.preview_every=0", "train.keep_checkpoints=10"]
