@@ -95,7 +95,9 @@ class Trainer:
         if dist.enabled:
             from torch.nn.parallel import DistributedDataParallel as DDP
 
-            self.fwd = DDP(self.model, device_ids=[device.index] if device.type == "cuda" else None)
+            # the predicted-normals head gets no gradient from L1 + proposal (fine-tuning trains it)
+            self.fwd = DDP(self.model, device_ids=[device.index] if device.type == "cuda" else None,
+                           find_unused_parameters=True)
         if t.compile:
             self.fwd = torch.compile(self.fwd)
         self.bg = torch.tensor(t.background, dtype=torch.float32, device=device)
