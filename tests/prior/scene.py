@@ -40,7 +40,7 @@ def camera(az_deg: float, el_deg: float, size: int, dist: float = 0.8) -> dict:
             "radius_m": dist}
 
 
-def frame(ident: int, expr: int, view: int, views: int, size: int):
+def frame(ident: int, expr: int, view: int, views: int, size: int, id_size: int = ID_SIZE):
     key = frame_key(ident, expr, view)
     cam = camera((360.0 * view / views + 23.0 * expr) % 360.0 - 180.0, 15.0 - 10.0 * (view % 3), size)
     o, d, cos_z = camera_rays(cam["K"], cam["camera_to_world"], size, size, dtype=np.float64)
@@ -64,14 +64,15 @@ def frame(ident: int, expr: int, view: int, views: int, size: int):
     pc = lm3 @ cam["world_to_camera"][:3, :3].T + cam["world_to_camera"][:3, 3]
     q = pc @ cam["K"].T
     meta["landmarks_3d"], meta["landmarks_2d"] = lm3, q[:, :2] / q[:, 2:3]
-    meta["model"]["identity"] = [0.1 * ident + 0.05 * k for k in range(ID_SIZE)]
+    meta["model"]["identity"] = [0.1 * ident + 0.05 * k for k in range(id_size)]
     meta["model"]["expression"] = [0.2 * expr - 0.1 * k for k in range(EXPR_SIZE)]
     meta["model"]["joint_rotations"] = {"neck": [0.0, 0.0, 0.0], "jaw": [0.05 * expr, 0.0, 0.0],
                                         "eye_l": [0.0, 0.01 * expr, 0.0], "eye_r": [0.0, -0.01 * expr, 0.0]}
     return key, (rgba, depth, n.astype(np.float32), hit.astype(np.uint32)), meta
 
 
-def make_dataset(root, identities: int = 2, expressions: int = 2, views: int = 4, size: int = 16) -> Path:
+def make_dataset(root, identities: int = 2, expressions: int = 2, views: int = 4, size: int = 16,
+                 id_size: int = ID_SIZE) -> Path:
     root = Path(root)
     expected = {f"shard_{i:06d}": [frame_key(i, e, v) for e in range(expressions) for v in range(views)]
                 for i in range(identities)}
@@ -79,7 +80,7 @@ def make_dataset(root, identities: int = 2, expressions: int = 2, views: int = 4
     for sid, keys in expected.items():
         with ds.staging(sid) as st:
             for key in keys:
-                k, px, meta = frame(*parse_frame_key(key), views, size)
+                k, px, meta = frame(*parse_frame_key(key), views, size, id_size)
                 st.write_frame(k, *px, meta)
             st.commit(manifest_extra={"seeds": {"run": 0}, "versions": {"blender": "none"}})
     return root
