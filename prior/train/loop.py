@@ -145,9 +145,10 @@ class Trainer:
         return stats
 
     # ------------------------------------------------------------------ loop
-    def run(self, *, stop_at: int | None = None) -> int:
-        """Train from the start step to ``train.steps`` (or ``stop_at``, as if interrupted there);
-        returns 0, or 130 when interrupted by SIGINT."""
+    def run(self, *, stop_at: int | None = None, deadline: float | None = None) -> int:
+        """Train from the start step to ``train.steps``; stop early with a checkpoint at step
+        ``stop_at`` or at the first step that ends after ``deadline`` (``time.perf_counter()``
+        seconds; benchmarks). Returns 0, or 130 when interrupted by SIGINT."""
         t = self.cfg.train
         if self.start == 0 and self.dist.main and self.last_saved is None:
             self._save(0)  # a good checkpoint to fall back to from the first step on
@@ -177,7 +178,12 @@ class Trainer:
                         window = self._log(done, stats, norms, window, rays_step)
                     if self.dist.main and t.preview_every and done % t.preview_every == 0:
                         self._preview(done)
-                    stopping = bool(interrupted) or done == stop_at
+                    late = deadline is not None and time.perf_counter() > deadline
+                    if self.dist.enabled and deadline is not None:  # every rank stops at the same step
+                        late_t = torch.tensor(float(late), device=self.dev)
+                        torch.distributed.all_reduce(late_t, op=torch.distributed.ReduceOp.MAX)
+                        late = bool(late_t.item())
+                    stopping = bool(interrupted) or done == stop_at or late
                     if done % t.checkpoint_every == 0 or done == t.steps or stopping:
                         if self.dist.main:
                             self._save(done)
