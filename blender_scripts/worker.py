@@ -4,15 +4,15 @@
 
 Per identity one scene is built (head mesh, materials, lights, camera); each expression is a
 vertex update and each view a camera move, so nothing is rebuilt per view. Frames already
-written by an interrupted run are skipped. Progress goes to stdout as JSON lines:
-``{"event": "frame", ...}``, ``{"event": "commit", ...}``, ``{"event": "rss", ...}``.
+written by an interrupted run are skipped. Progress goes to stdout as JSON-line events
+(``renderer_jobs.events``: start, frame, rss, skip, commit, error).
 The worker draws no random numbers: every choice comes from the plan.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import os
 import platform
 import resource
 import signal
@@ -23,16 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
+from renderer_jobs.events import Commit, Error, Frame, Rss, Skip, Start, emit
 from synth.errors import SynthError
 
 
 #: Classes listed under "assets" in every frame JSON (null where absent).
 ASSET_CLASSES = ("hair", "beard", "eyebrows", "eyelashes", "garment", "glasses", "headwear", "makeup", "iris", "skin")
-
-
-def emit(**ev) -> None:
-    sys.stdout.write(json.dumps(ev) + "\n")
-    sys.stdout.flush()
 
 
 def rss_mb() -> float:
@@ -156,7 +152,7 @@ class IdentityScene:
     def render(self, f: dict, tmp: Path, seed: int | None = None) -> tuple[dict, dict]:
         """Render one planned frame of the current expression: (passes, frame JSON)."""
         from blender_scripts import camera as bcam
-        from blender_scripts.render_frame import render_view
+        from blender_scripts.passes import render_view
         from synth.conventions import project
         from synth.exr import CHANNELS
         from synth.labels import visibility
@@ -203,7 +199,7 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> in
              for f in e["frames"]}
     st = ds.try_staging(shard_id)
     if st is None:  # committed meanwhile, or another process holds it
-        emit(event="skip", shard=shard_id)
+        emit(Skip(shard=shard_id))
         return 0
     with st:
         done = st.frames_done()
@@ -222,11 +218,11 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> in
                     out, fj = sc.render(f, tmp)
                     st.write_frame(f["frame_id"], out["rgba"], out["depth"], out["normals"], out["segmentation"], fj)
                     rendered += 1
-                    emit(event="frame", shard=shard_id, key=f["frame_id"], render_seconds=out["render_seconds"])
+                    emit(Frame(shard=shard_id, key=f["frame_id"], render_seconds=out["render_seconds"]))
             sc.close()
-            emit(event="rss", rss_mb=rss_mb())
+            emit(Rss(rss_mb=rss_mb()))
         st.commit(manifest_extra={"seeds": seeds, "versions": versions})
-    emit(event="commit", shard=shard_id)
+    emit(Commit(shard=shard_id))
     return rendered
 
 
@@ -236,6 +232,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--plan", required=True)
     ap.add_argument("--shards", required=True)
     args = ap.parse_args(argv)
+    emit(Start(shards=tuple(args.shards.split(",")), pid=os.getpid(), host=platform.node()))
 
     # SIGTERM (Ctrl-C in the parent) -> stop between frames; staged frames are kept.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
@@ -256,7 +253,7 @@ def main(argv: list[str] | None = None) -> int:
                 n = render_shard(ds, plan, shard_id, hm, model_info, Path(tmp))
                 print(f"worker: {shard_id}: {n} frames in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     except SynthError as e:
-        emit(event="error", shard=args.shards, message=str(e))
+        emit(Error(shard=args.shards, message=str(e)))
         print(f"synth worker: error: {e}", file=sys.stderr)
         return 2
     return 0

@@ -13,7 +13,7 @@ pytestmark = [pytest.mark.blender, pytest.mark.slow]
 
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
-    from blender_scripts import camera, head, materials, render_frame, scene
+    from blender_scripts import camera, head, materials, passes, scene
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world, project
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
@@ -40,7 +40,7 @@ def rendered(tmp_path_factory):
         w2c = invert_rigid(orbit_camera_to_world(az, el, rad, target))
         K = intrinsics(W, H, 35.0, off)
         camera.set_camera(cam, K, w2c, W, H, 0.05, 10.0)
-        r = render_frame.render_view(tmp, 7)
+        r = passes.render_view(tmp, 7)
         uv, z = project(K, w2c, lm)
         out.append((K, w2c, uv, z, r))
     return m, out
