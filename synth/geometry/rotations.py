@@ -51,8 +51,10 @@ def matrix_to_axis_angle(R: np.ndarray) -> np.ndarray:
     out[small & ~near_pi] = v[small & ~near_pi] * 0.5
     if np.any(near_pi):
         Rp = R[near_pi]
-        # axis from the largest diagonal of (R + I)/2 = n n^T (for angle ~ pi)
-        B = (Rp + np.eye(3)) / 2.0
+        # axis from the largest diagonal of n n^T = (sym(R) - cos I) / (1 - cos), exact for every
+        # angle (sym(R) = cos I + (1 - cos) n n^T); the antisymmetric part, O(pi - angle), stays out
+        c = cos[near_pi][..., None, None]
+        B = ((Rp + np.swapaxes(Rp, -1, -2)) / 2.0 - c * np.eye(3)) / (1.0 - c)
         i = np.argmax(np.diagonal(B, axis1=-2, axis2=-1), axis=-1)
         col = B[np.arange(len(i)), :, i]
         n = col / np.linalg.norm(col, axis=-1, keepdims=True)
