@@ -13,6 +13,7 @@ import pytest
 from synth.cli.main import main
 from synth.config import ASSET_CLASSES, ExpressionConfig, IdentityConfig, load_config
 from synth.conventions import project
+from synth.dataset.layout import frame_key
 from synth.errors import SynthError
 from synth.plan import assets, expressions, identities, io, planner
 from synth.plan.cameras import min_pairwise_angle_deg
@@ -63,7 +64,7 @@ def test_frames_carry_opencv_cameras_that_look_at_the_face(plan20):
     ident = spec["identities"][0]
     for e in ident["expressions"][:3]:
         for f in e["frames"]:
-            assert f["frame_id"] == f"id000003_ex{e['expression_index']:02d}_v{f['view_index']:02d}"
+            assert f["frame_id"] == frame_key(3, e["expression_index"], f["view_index"])
             c = f["camera"]
             jsonschema.validate(c, cam_schema)
             K, w2c, c2w = (np.array(c[k]) for k in ("K", "world_to_camera", "camera_to_world"))

@@ -71,7 +71,7 @@ def render_plan(out: Path, plan_dir: Path, workers: int, shards_per_worker: int,
     """Open (or resume) the dataset for ``plan_dir`` in ``out`` and render what is missing."""
     from synth.plan.io import load_plan
     from synth.render.runner import raise_on_failures, run_workers
-    from synth.shards import open_dataset
+    from synth.dataset.shards import open_dataset
 
     plan = load_plan(plan_dir)
     ds = open_dataset(out, plan.plan_hash, plan.expected(),
