@@ -30,7 +30,7 @@ def toy(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def plan20(tmp_path_factory, toy):
-    """The issue's check: 20 identities, seed 7, paper defaults (on the toy model)."""
+    """20 identities, seed 7, paper defaults (on the toy model)."""
     out = tmp_path_factory.mktemp("plans") / "p20"
     assert main(["plan", "--identities", "20", "--seed", "7", "--out", str(out), "--model", str(toy), "-q"]) == 0
     return out
@@ -268,7 +268,7 @@ def test_bad_catalogues_are_refused(tmp_path, text, what):
 
 @pytest.mark.slow
 def test_default_model_plan(tmp_path):
-    """The issue's figures on the embedded default model (built and cached on first use)."""
+    """Plan figures on the embedded default model (built and cached on first use)."""
 
     pytest.importorskip("scipy")
     try:
