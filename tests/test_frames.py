@@ -22,8 +22,13 @@ def test_keys():
     for bad in [(-1, 0, 0), (10**6, 0, 0), (0, 100, 0)]:
         with pytest.raises(SynthError):
             frame_key(*bad)
-    with pytest.raises(SynthError):
-        parse_frame_key("id42_ex7_v13")
+    for bad in ("id42_ex7_v13", "id000042_ex07_v13.json", None):
+        with pytest.raises(SynthError):
+            parse_frame_key(bad)
+    assert shard_name(42) == "shard_000042" and shard_name(0) < shard_name(9) < shard_name(10)
+    for bad in (-1, 10**6):
+        with pytest.raises(SynthError):
+            shard_name(bad)
 
 
 def test_schema_is_valid_draft_2020_12():

@@ -1,6 +1,6 @@
 """The dataset format: everything a render writes and a training job reads.
 
-Modules, bottom to top (each imports only from the lines above it):
+Modules, bottom to top (each imports only from its own line and the lines above):
 
 - ``layout``, ``fsio``: names and paths (frame keys, shard names), crash-safe file writes
 - ``segmentation``, ``labels``, ``exr``, ``exr_check``, ``frame_json``: the two files of a

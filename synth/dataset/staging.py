@@ -196,7 +196,7 @@ class StagingShard:
         if not isinstance(fj, dict) or fj.get("frame_id") != key:
             raise SynthError(f"frame JSON's frame_id {fj.get('frame_id') if isinstance(fj, dict) else None!r} "
                              f"is not {key!r}", str(self.dir), "set frame_id to the frame key")
-        check_frame_json(fj, str(self.dir / f"{key}.json"))
+        check_frame_json(fj, str(self.dir / frame_files(key)[1]))
         return fj
 
     # -- commit ------------------------------------------------------------------------------
