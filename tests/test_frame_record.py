@@ -79,6 +79,7 @@ def test_a_new_frame_validates_and_is_plain_json():
                                "layers": ff.frame_json(key)["image"]["layers"]}
     assert record["render"] == {"preset": "ci", "resolution": [size, size], "seed": 99, "engine": "CYCLES",
                                 "samples": 4, "denoiser": None, "device": "cpu"}
-    assert record["model"]["expression_kind"] == "preset" and list(record["model"]["joint_rotations"]) == ["jaw", "head"]
+    assert record["model"]["expression_kind"] == "preset"
+    assert list(record["model"]["joint_rotations"]) == ["jaw", "head"]
     assert record["landmarks_3d"][0] == [float(x) for x in lm3[0]]
     json.dumps(record, allow_nan=False)  # plain JSON types only: no numpy left
