@@ -154,11 +154,10 @@ class IdentityScene:
         from blender_scripts import camera as bcam
         from blender_scripts.passes import render_view
         from synth.conventions import project
-        from synth.exr import CHANNELS
-        from synth.labels import visibility
+        from synth.dataset.frame_json import build_frame_record
+        from synth.dataset.labels import visibility
 
-        hm, x = self.hm, self.expr
-        key = f["frame_id"]
+        x = self.expr
         c = f["camera"]
         K = np.asarray(c["K"], np.float64)
         w2c = np.asarray(c["world_to_camera"], np.float64)
@@ -166,22 +165,13 @@ class IdentityScene:
         out = render_view(tmp, int(f["seed"] if seed is None else seed))
         uv, z = project(K, w2c, x["lm3d"])
         vis = visibility(uv, z, out["depth"], out["rgba"][..., 3])
-        fj = dict(f)
-        fj["shard_id"] = self.shard_id
-        fj["image"] = {"width": self.width, "height": self.height, "file": f"{key}.exr", "layers": list(CHANNELS)}
-        fj["model"] = {**self.model_info, "identity": self.beta.tolist(), "expression": x["psi"].tolist(),
-                       "expression_preset": x["e"].get("preset"), "expression_kind": x["e"].get("kind"),
-                       "joint_rotations": {n: x["rot"][j].tolist() for n, j in hm.joint_index.items()},
-                       "pose": x["e"].get("pose"), "head_pose": x["head_pose"].tolist()}
-        fj["landmarks_3d"] = x["lm3d"].tolist()
-        fj["landmarks_2d"] = uv.tolist()
-        fj["landmarks_visible"] = vis.tolist()
-        fj["assets"] = self.assets_record
-        fj["skin"] = self.skin_record
-        fj["lighting"] = self.env
-        fj["render"] = {"preset": self.render_cfg.get("preset"), "resolution": [self.width, self.height],
-                        "seed": int(f["seed"]), **self.effective}
-        fj["software"] = self.versions
+        fj = build_frame_record(
+            f, shard_id=self.shard_id, width=self.width, height=self.height, model_info=self.model_info,
+            identity_code=self.beta, planned_expression=x["e"], expression_code=x["psi"],
+            joint_rotations={n: x["rot"][j] for n, j in self.hm.joint_index.items()}, head_pose=x["head_pose"],
+            landmarks_3d=x["lm3d"], landmarks_2d=uv, landmarks_visible=vis, assets=self.assets_record,
+            skin=self.skin_record, lighting=self.env, render_preset=self.render_cfg.get("preset"),
+            render_settings=self.effective, software=self.versions)
         return out, fj
 
     def close(self) -> None:
@@ -239,7 +229,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from synth.model.head import HeadModel
     from synth.plan.io import load_plan
-    from synth.shards import open_dataset
+    from synth.dataset.shards import open_dataset
 
     try:
         plan = load_plan(Path(args.plan))

@@ -97,7 +97,7 @@ def built(pack_manifest, tmp_path_factory):
 
 
 def test_pack_is_linked_and_segmented(built):
-    from synth.segmentation import CLASSES
+    from synth.dataset.segmentation import CLASSES
 
     ctx, _, rig, pack, _ = built
     assert len(rig.objects) == 1
@@ -137,7 +137,7 @@ def test_pack_is_placed_on_the_head(built):
 def test_render_shows_the_segmentation_id(built, tmp_path):
     from blender_scripts import camera, passes, scene
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
-    from synth.segmentation import CLASSES
+    from synth.dataset.segmentation import CLASSES
 
     ctx, _, _, _, _ = built
     W = H = 64

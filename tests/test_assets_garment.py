@@ -246,7 +246,7 @@ def test_render_shows_clothing_and_headwear(tmp_path):
     from blender_scripts import camera, passes, scene
     from blender_scripts.assets import garment, headwear
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
-    from synth.segmentation import CLASSES
+    from synth.dataset.segmentation import CLASSES
 
     ctx, _ = asset_scene.head_context("neutral")
     g = garment.build(ctx, {"id": "sweater", "params": {"colour_hsv": "navy"}})

@@ -133,7 +133,7 @@ def test_strands_stay_attached(cls, sid, params, case, other):
     ob = rig.objects[0]
     assert ob.type == "CURVES"
     assert rig.info["strands"] > 0 and rig.info["guides"] > 0
-    from synth.segmentation import CLASSES
+    from synth.dataset.segmentation import CLASSES
 
     assert all(m.pass_index == CLASSES[cls] for m in ob.data.materials)
     pts, _ = asset_scene.evaluated_mesh(ob)
@@ -226,7 +226,7 @@ def test_render_shows_strand_classes(tmp_path):
     from blender_scripts import camera, passes, scene
     from blender_scripts.assets import dress
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
-    from synth.segmentation import CLASSES
+    from synth.dataset.segmentation import CLASSES
 
     ctx, _ = asset_scene.head_context("neutral", resolution=64)
     W = H = 64
