@@ -27,7 +27,7 @@ import numpy as np
 from synth import seeds
 from synth.config import ASSET_CLASSES
 
-#: asset class -> segmentation class name (synth.segmentation.CLASSES)
+#: asset class -> segmentation class name (synth.dataset.segmentation.CLASSES)
 SEGMENTATION_CLASS = {"hair": "hair", "beard": "beard", "eyebrows": "eyebrows", "eyelashes": "eyelashes",
                       "garment": "clothing", "glasses": "glasses", "headwear": "headwear",
                       "makeup": "skin", "iris": "eyes", "skin": "skin"}

@@ -42,7 +42,7 @@ from mathutils import Matrix
 from blender_scripts.assets import SEGMENTATION_CLASS, HeadContext, Rig
 from synth.assets_validate import PACK_ANCHORS, REFERENCE_SKULL_WIDTH_M, verify_pack
 from synth.errors import SynthError
-from synth.segmentation import CLASSES
+from synth.dataset.segmentation import CLASSES
 
 #: object types that render and carry material slots (lights, cameras, empties... are skipped)
 RENDERABLE = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME"}

@@ -37,7 +37,7 @@ import numpy as np
 
 from blender_scripts.assets import HeadContext, Rig, SEGMENTATION_CLASS
 from blender_scripts.assets import fitting as fit
-from synth.segmentation import CLASSES
+from synth.dataset.segmentation import CLASSES
 
 #: minimum distance (m) kept between every garment vertex and the skin
 CLEARANCE = 0.0015

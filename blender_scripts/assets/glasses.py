@@ -18,7 +18,7 @@ import numpy as np
 
 from blender_scripts.assets import Rig
 from blender_scripts.assets import glasses_fit as gf
-from synth.segmentation import CLASSES
+from synth.dataset.segmentation import CLASSES
 
 PASS = CLASSES["glasses"]
 FRAME_SLOTS = ("frame", "metal", "temple", "tip", "pad")
