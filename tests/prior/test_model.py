@@ -240,8 +240,17 @@ def orbit_view(az_deg, size=32, fx=60.0, dist=1.0, radius=0.2, bound=0.25):
     return o, d, near, torch.where(inside, far, near), image, mask, t_hit
 
 
+@pytest.fixture
+def one_thread():
+    """Small matmuls on a shared 2-core machine run faster (and steadier) on one thread."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
 @pytest.mark.slow
-def test_tiny_model_overfits_three_views_of_a_textured_sphere():
+def test_tiny_model_overfits_three_views_of_a_textured_sphere(one_thread):
     views = [orbit_view(az) for az in (-45, 0, 45)]
     o, d, near, far, image, mask, t_hit = (torch.cat(x) for x in zip(*views))
     n = o.shape[0]
@@ -252,7 +261,7 @@ def test_tiny_model_overfits_three_views_of_a_textured_sphere():
     codes, ids, bg = torch.zeros(n, 4), torch.zeros(n, dtype=torch.long), torch.ones(n, 3)
     opt = torch.optim.Adam(model.parameters(), lr=0.01)
     gen = torch.Generator().manual_seed(0)
-    steps = 220
+    steps = 300  # reaches ~32.6 dB (seeded); 220 steps gave 28.6
     for i in range(steps):
         for group in opt.param_groups:
             group["lr"] = 0.01 * 0.05 ** (i / steps)
