@@ -175,7 +175,7 @@ class PriorField(nn.Module):
     def forward(self, origins: torch.Tensor, directions: torch.Tensor, near: torch.Tensor,
                 far: torch.Tensor, codes: torch.Tensor, latent_ids: torch.Tensor | None = None,
                 latents: torch.Tensor | None = None, *, radii: torch.Tensor | None = None,
-                train_frac: float = 1.0, randomized: bool = False,
+                train_frac: float | torch.Tensor = 1.0, randomized: bool = False,
                 background: torch.Tensor | None = None, compute_normals: bool = False,
                 generator: torch.Generator | None = None) -> dict:
         """Render N rays; see ``docs/prior.md`` for the keys of the returned dict.
@@ -183,9 +183,12 @@ class PriorField(nn.Module):
         ``radii`` (N,): cone radius at unit distance (pixel footprint, e.g.
         ``2 / sqrt(12) / fx`` for unit directions); None = thin rays (plain encoding).
         ``latents`` (N, latent_dim), if given, replaces the codebook lookup of
-        ``latent_ids``. ``train_frac`` in [0, 1] drives the proposal annealing.
+        ``latent_ids``. ``train_frac`` in [0, 1] drives the proposal annealing; pass it as a
+        0-d tensor under torch.compile (a Python float is a constant: one recompile per value).
         """
         n = origins.shape[0]
+        if randomized and generator is None:
+            raise ValueError("randomized sampling needs a torch.Generator (no global RNG)")
         if latents is None:
             if latent_ids is None:
                 raise ValueError("PriorField needs latent_ids or latents")
@@ -198,19 +201,20 @@ class PriorField(nn.Module):
         near, far = render.ray_bounds(near, far)
         radii = torch.zeros_like(near) if radii is None else radii.float()
         dir_enc = encoding.pos_enc(directions, self.model_cfg.dir_levels)[:, None, :]
-        s, w = render.initial_intervals(n, origins.device)
         levels = self.sampling_cfg.samples_per_level
+        jitter = (render.draw_jitter(n, self.sampling_cfg, generator, origins.device) if randomized
+                  else [None] * len(levels))
+        s, w = render.initial_intervals(n, origins.device)
         history = []
         for level in range(len(levels) - 1):
-            s = render.resample(level, s, w, self.sampling_cfg, train_frac=train_frac,
-                                randomized=randomized, generator=generator)
+            s = render.resample(level, s, w, self.sampling_cfg, train_frac=train_frac, jitter=jitter[level])
             t = render.s_to_t(s, near, far)
             enc = self._encode(*encoding.frustum_gaussians(origins, directions, t, radii))
             raw = self.proposal[min(level, len(self.proposal) - 1)](enc, cond)
             w = render.alpha_weights(self._density(raw), t)
             history.append((s, w))
         s = render.resample(len(levels) - 1, s, w, self.sampling_cfg, train_frac=train_frac,
-                            randomized=randomized, generator=generator)
+                            jitter=jitter[-1])
         t = render.s_to_t(s, near, far)
         out = self._nerf_level(origins, directions, t, radii, dir_enc, cond, compute_normals)
         w = render.alpha_weights(self._density(out.pop("raw_density")), t)

@@ -86,11 +86,27 @@ def dilation_for_level(level: int, cfg: SamplingConfig) -> float:
     return cfg.dilation_bias + cfg.dilation_multiplier / prod
 
 
+def jitter_widths(cfg: SamplingConfig) -> tuple[int, ...]:
+    """Uniforms per ray that each level's stratified sampling consumes."""
+    return tuple(1 if cfg.single_jitter else n for n in cfg.samples_per_level)
+
+
+@torch.compiler.disable
+def draw_jitter(num_rays: int, cfg: SamplingConfig, generator: torch.Generator | None,
+                device) -> list[torch.Tensor]:
+    """All the stratification noise of a batch in one draw from ``generator``: one
+    (num_rays, width) tensor per level. Kept out of torch.compile graphs (generators
+    break them), so a compiled forward has a single break here."""
+    widths = jitter_widths(cfg)
+    noise = torch.rand((num_rays, sum(widths)), generator=generator, dtype=torch.float32, device=device)
+    return list(torch.split(noise, widths, dim=-1))
+
+
 def resample(level: int, s: torch.Tensor, w: torch.Tensor, cfg: SamplingConfig, *,
-             train_frac: float, randomized: bool,
-             generator: torch.Generator | None = None) -> torch.Tensor:
+             train_frac: float | torch.Tensor, jitter: torch.Tensor | None = None) -> torch.Tensor:
     """Edges in s (N, n+1) of level ``level`` from the previous level's histogram
-    ``(s, w)``: dilate (levels > 0), anneal, pad, then sample. No gradient flows."""
+    ``(s, w)``: dilate (levels > 0), anneal, pad, then sample (stratified with
+    ``jitter``, deterministic without). No gradient flows."""
     s, w = s.detach().float(), w.detach().float()
     if level > 0:
         dilation = dilation_for_level(level, cfg)
@@ -99,9 +115,7 @@ def resample(level: int, s: torch.Tensor, w: torch.Tensor, cfg: SamplingConfig, 
         exponent = stepfun.anneal_exponent(train_frac, cfg.anneal_slope)
         w = torch.pow(w + cfg.resample_padding, exponent)
         w = torch.where(s[:, 1:] > s[:, :-1], w, torch.zeros_like(w))
-    n = cfg.samples_per_level[level]
-    return stepfun.sample_intervals(s, w, n, randomized, (0.0, 1.0),
-                                    single_jitter=cfg.single_jitter, generator=generator)
+    return stepfun.sample_intervals(s, w, cfg.samples_per_level[level], jitter, (0.0, 1.0))
 
 
 def ray_bounds(near: torch.Tensor, far: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

@@ -50,29 +50,25 @@ def invert_cdf(u: torch.Tensor, t: torch.Tensor, w: torch.Tensor) -> torch.Tenso
     return t0 + frac * (t1 - t0)
 
 
-def quantiles(num_rays: int, num: int, randomized: bool, *, single_jitter: bool = False,
-              generator: torch.Generator | None = None, device=None) -> torch.Tensor:
-    """(num_rays, num) quantiles in [0, 1): bin centres, or one uniform draw per bin
-    (stratified; one shared draw per ray with ``single_jitter``)."""
+def quantiles(num_rays: int, num: int, jitter: torch.Tensor | None = None, device=None) -> torch.Tensor:
+    """(num_rays, num) quantiles in [0, 1): bin centres, or ``(i + jitter) / num`` with
+    ``jitter`` uniform in [0, 1) of shape (num_rays, num) (stratified) or (num_rays, 1)
+    (one shared offset per ray)."""
     base = torch.arange(num, dtype=torch.float32, device=device)
-    if randomized:
-        shape = (num_rays, 1) if single_jitter else (num_rays, num)
-        jitter = torch.rand(shape, generator=generator, dtype=torch.float32, device=device)
-    else:
+    if jitter is None:
         jitter = torch.full((num_rays, 1), 0.5, dtype=torch.float32, device=device)
-    u = (base + jitter) / num
+    u = (base + jitter.float()) / num
     return u.clamp(0.0, 1.0 - torch.finfo(torch.float32).eps)
 
 
-def sample_intervals(t: torch.Tensor, w: torch.Tensor, num: int, randomized: bool,
-                     domain: tuple[float, float] = (0.0, 1.0), *, single_jitter: bool = False,
-                     generator: torch.Generator | None = None) -> torch.Tensor:
+def sample_intervals(t: torch.Tensor, w: torch.Tensor, num: int, jitter: torch.Tensor | None = None,
+                     domain: tuple[float, float] = (0.0, 1.0)) -> torch.Tensor:
     """``num`` new intervals (edges (N, num+1), sorted, inside ``domain``) drawn from the
     histogram ``w`` (non-negative, normalised here) on edges ``t``: ``num`` points from
-    the inverse CDF become the interval centres; the edges are their midpoints, the two
-    outer edges mirrored about the first/last point and clipped to the domain."""
-    u = quantiles(t.shape[0], num, randomized, single_jitter=single_jitter,
-                  generator=generator, device=t.device)
+    the inverse CDF (at :func:`quantiles` with ``jitter``; None = deterministic) become
+    the interval centres; the edges are their midpoints, the two outer edges mirrored
+    about the first/last point and clipped to the domain."""
+    u = quantiles(t.shape[0], num, jitter, device=t.device)
     c = invert_cdf(u, t, normalize_weights(w))
     mid = (c[:, 1:] + c[:, :-1]) / 2
     first = (2 * c[:, :1] - mid[:, :1]).clamp_min(domain[0])
@@ -131,13 +127,17 @@ def max_dilate_weights(t: torch.Tensor, w: torch.Tensor, dilation: float,
     return t_new, pdf_new * (t_new[:, 1:] - t_new[:, :-1])
 
 
-def anneal_exponent(train_frac: float, slope: float) -> float:
+def anneal_exponent(train_frac: float | torch.Tensor, slope: float) -> float | torch.Tensor:
     """mip-NeRF 360's schedule of the exponent on the proposal weights: Schlick's bias
     ``s x / ((s - 1) x + 1)`` of the training fraction x in [0, 1] with slope s: 0 at the
-    start (uniform resampling), 1 at the end. ``slope = 0`` turns annealing off (1)."""
+    start (uniform resampling), 1 at the end. ``slope = 0`` turns annealing off (1).
+    A 0-d tensor ``train_frac`` gives a tensor (no recompiles under torch.compile)."""
     if slope <= 0:
         return 1.0
-    x = min(max(float(train_frac), 0.0), 1.0)
+    if isinstance(train_frac, torch.Tensor):
+        x = train_frac.float().clamp(0.0, 1.0)
+    else:
+        x = min(max(float(train_frac), 0.0), 1.0)
     return slope * x / ((slope - 1) * x + 1)
 
 

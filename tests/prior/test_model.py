@@ -65,6 +65,8 @@ def test_randomness_comes_only_from_the_generator():
     run = lambda seed: model(*rays, randomized=True, generator=torch.Generator().manual_seed(seed))["t"]
     assert torch.equal(run(3), run(3)) and not torch.equal(run(3), run(4))
     assert torch.equal(model(*rays)["t"], model(*rays)["t"])  # deterministic mode
+    with pytest.raises(ValueError, match="Generator"):
+        model(*rays, randomized=True)
 
 
 def test_initialisation_is_seeded_he_uniform():
@@ -109,6 +111,19 @@ def test_conditioning_and_explicit_latents():
         model(o, d, near, far, codes)
     with pytest.raises(ValueError, match="do not match"):
         model(o, d, near, far, codes[:, :3], ids)
+
+
+@pytest.mark.slow
+def test_compiled_forward_matches_eager():
+    model = tiny_model()
+    rays = random_rays(16)
+    compiled = torch.compile(model, backend="aot_eager")  # no C++ toolchain needed
+    for frac in (0.2, 0.7):
+        kwargs = dict(train_frac=torch.tensor(frac), randomized=True, background=torch.ones(16, 3))
+        want = model(*rays, generator=torch.Generator().manual_seed(5), **kwargs)
+        got = compiled(*rays, generator=torch.Generator().manual_seed(5), **kwargs)
+        for key in ("rgb", "acc", "depth", "t"):
+            torch.testing.assert_close(got[key], want[key])
 
 
 def test_param_groups_partition_the_parameters_and_view_branch_is_the_direction_block():

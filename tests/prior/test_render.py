@@ -111,8 +111,8 @@ def test_resample_concentrates_samples_where_the_weights_are(train_frac):
     s = torch.linspace(0, 1, 65)[None]
     w = torch.zeros(1, 64)
     w[0, 40] = 1.0  # all mass in [0.625, 0.640625)
-    edges = render.resample(1, s, w, cfg, train_frac=train_frac, randomized=True,
-                            generator=torch.Generator().manual_seed(0))
+    jitter = render.draw_jitter(1, cfg, torch.Generator().manual_seed(0), None)[1]
+    edges = render.resample(1, s, w, cfg, train_frac=train_frac, jitter=jitter)
     assert (edges[:, 1:] >= edges[:, :-1]).all() and edges.min() >= 0 and edges.max() <= 1
     mid = (edges[0, 1:] + edges[0, :-1]) / 2
     dil = render.dilation_for_level(1, cfg)

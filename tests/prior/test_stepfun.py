@@ -55,14 +55,14 @@ def test_invert_cdf_matches_loop_reference():
 
 def test_deterministic_sampling_of_a_uniform_histogram_gives_even_edges():
     t = torch.tensor([[0.0, 0.25, 0.5, 0.75, 1.0]])
-    edges = stepfun.sample_intervals(t, torch.ones(1, 4), 8, randomized=False)
+    edges = stepfun.sample_intervals(t, torch.ones(1, 4), 8)
     np.testing.assert_allclose(edges[0].numpy(), np.linspace(0, 1, 9), atol=1e-6)
 
 
 def test_deterministic_samples_follow_the_histogram_mass():
     t = torch.tensor([[0.0, 0.1, 0.5, 0.6, 1.0]])
     w = torch.tensor([[0.5, 0.0, 0.25, 0.25]])
-    pts = stepfun.invert_cdf(stepfun.quantiles(1, 1000, False), t, w)[0].numpy()
+    pts = stepfun.invert_cdf(stepfun.quantiles(1, 1000), t, w)[0].numpy()
     counts = np.histogram(pts, bins=t[0].numpy())[0]
     np.testing.assert_array_equal(counts, [500, 0, 250, 250])
 
@@ -77,7 +77,8 @@ def test_sample_intervals_are_sorted_and_inside_the_domain(seed, n, num, randomi
     t, w = random_steps(rng, 4, n, zero_frac=0.5, ties=n > 4, lo=lo, hi=hi)
     w[0] = 0.0
     gen = torch.Generator().manual_seed(seed)
-    edges = stepfun.sample_intervals(t, w, num, randomized, (lo, hi), single_jitter=single, generator=gen)
+    jitter = torch.rand((4, 1 if single else num), generator=gen) if randomized else None
+    edges = stepfun.sample_intervals(t, w, num, jitter, (lo, hi))
     assert edges.shape == (4, num + 1)
     assert torch.isfinite(edges).all()
     assert (edges[:, 1:] >= edges[:, :-1]).all()
@@ -85,13 +86,13 @@ def test_sample_intervals_are_sorted_and_inside_the_domain(seed, n, num, randomi
     assert (edges >= lo - tol).all() and (edges <= hi + tol).all()
 
 
-def test_stratified_sampling_is_a_function_of_the_generator_seed():
-    rng = np.random.default_rng(3)
-    t, w = random_steps(rng, 8, 6)
-    a = stepfun.sample_intervals(t, w, 16, True, generator=torch.Generator().manual_seed(7))
-    b = stepfun.sample_intervals(t, w, 16, True, generator=torch.Generator().manual_seed(7))
-    c = stepfun.sample_intervals(t, w, 16, True, generator=torch.Generator().manual_seed(8))
-    assert torch.equal(a, b) and not torch.equal(a, c)
+def test_stratified_quantiles_stay_in_their_bins():
+    jitter = torch.tensor([[0.0, 0.5, 0.999999], [0.25, 0.25, 0.25]])
+    u = stepfun.quantiles(2, 3, jitter)
+    np.testing.assert_allclose(u.numpy(), [[0.0, 0.5, 0.99999967], [1 / 12, 5 / 12, 9 / 12]], atol=1e-7)
+    shared = stepfun.quantiles(2, 4, torch.tensor([[0.2], [0.9]]))
+    np.testing.assert_allclose(shared.numpy(), [[0.05, 0.3, 0.55, 0.8], [0.225, 0.475, 0.725, 0.975]], atol=1e-7)
+    assert (stepfun.quantiles(1, 5, torch.ones(1, 5)) < 1).all()
 
 
 # ---------------------------------------------------------------- dilation
@@ -156,6 +157,8 @@ def test_anneal_exponent_schedule():
     xs = np.linspace(0, 1, 50)
     vals = [stepfun.anneal_exponent(x, 10.0) for x in xs]
     assert np.all(np.diff(vals) > 0)
+    as_tensor = stepfun.anneal_exponent(torch.tensor(xs, dtype=torch.float32), 10.0)
+    np.testing.assert_allclose(as_tensor.numpy(), vals, rtol=1e-5)
 
 
 # ---------------------------------------------------------------- envelope and proposal penalty
