@@ -178,7 +178,7 @@ class PriorField(nn.Module):
                 train_frac: float | torch.Tensor = 1.0, randomized: bool = False,
                 background: torch.Tensor | None = None, compute_normals: bool = False,
                 generator: torch.Generator | None = None) -> dict:
-        """Render N rays; see ``docs/prior.md`` for the keys of the returned dict.
+        """Render N rays; ``docs/prior-model.md`` lists the keys of the returned dict.
 
         ``radii`` (N,): cone radius at unit distance (pixel footprint, e.g.
         ``2 / sqrt(12) / fx`` for unit directions); None = thin rays (plain encoding).
