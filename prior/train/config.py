@@ -43,27 +43,33 @@ class DataConfig:
 class TrainConfig:
     """The optimisation (``prior/train``)."""
 
+    #: total optimisation steps (the learning-rate schedule spans them)
     steps: int = 1_000_000
     #: run seed: every random draw (batches, stratified jitter) derives from (seed, step, rank)
     seed: int = 0
     #: a batch is identities x views x pixels rays (per step, summed over ranks and micro-batches)
     identities_per_batch: int = 256
+    #: frames drawn per identity (any expression)
     views_per_identity: int = 8
+    #: pixels drawn per frame
     pixels_per_view: int = 64
     #: share of each view's pixels drawn from its foreground (alpha > 0); 0 = uniform over the image
     foreground_fraction: float = 0.0
     #: micro-batches per step (gradients summed before the update); the batch is split among them
     grad_accum: int = 1
+    #: learning rate at step 0 (after the warm-up factor) and at the last step; log-linear in between
     lr_init: float = 2e-3
     lr_final: float = 2e-5
     #: linear warm-up from lr_init * warmup_start over these steps, then exponential decay
     warmup_steps: int = 2500
     warmup_start: float = 0.01
+    #: Adam's moment decays and epsilon
     adam_beta1: float = 0.9
     adam_beta2: float = 0.999
     adam_eps: float = 1e-8
     #: gradient-norm clipping, separately per parameter group (proposal MLP, NeRF MLP, codebook); 0 = off
     grad_clip: float = 1e-3
+    #: weight of the proposal loss (Cafca: L1 + lambda_prop * L_prop)
     proposal_weight: float = 1.0
     #: stage 1 ("with background"): targets are composited over this constant colour (linear RGB) and the
     #: model renders without a background term, so empty space inside the bounds must get density
@@ -74,15 +80,18 @@ class TrainConfig:
     #: for collapse_patience consecutive logged steps
     collapse_acc: float = 1e-3
     collapse_patience: int = 5
+    #: steps between log lines / metrics.jsonl entries, and between checkpoints
     log_every: int = 100
     checkpoint_every: int = 5000
     #: TensorBoard preview images (one training view per identity shown) every this many steps; 0 = off
     preview_every: int = 10_000
+    #: side of the preview images in pixels
     preview_size: int = 64
     #: checkpoints kept in RUN/checkpoints (the newest ones)
     keep_checkpoints: int = 3
     #: bf16 autocast for the MLPs (CUDA; on CPU only for tests); compositing and losses stay float32
     bf16: bool = False
+    #: torch.compile the model (off by default; first steps are slow while it compiles)
     compile: bool = False
     #: rays per chunk when rendering whole images (previews, ``synth prior render``)
     render_chunk: int = 4096
@@ -291,13 +300,32 @@ def to_toml(cfg: RunConfig) -> str:
     return tomli_w.dumps(cfg.to_dict())
 
 
+def _field_docs(cls) -> dict[str, str]:
+    """The ``#:`` comment lines above each field of a dataclass, joined."""
+    import inspect
+    import re
+
+    docs, pending = {}, []
+    for line in inspect.getsource(cls).splitlines():
+        s = line.strip()
+        if s.startswith("#:"):
+            pending.append(s[2:].strip())
+        elif m := re.match(r"^(\w+)\s*:", s):
+            if pending:
+                docs[m.group(1)] = " ".join(pending)
+            pending = []
+        else:
+            pending = []
+    return docs
+
+
 def reference() -> str:
-    """A markdown table of every config key: section, key, type, small / paper defaults."""
+    """A markdown table of every config key: type, small / paper defaults, meaning."""
     small, paper = preset("small").to_dict(), preset("paper").to_dict()
-    rows = ["| key | type | small | paper |", "|---|---|---|---|"]
+    rows = ["| key | type | small | paper | meaning |", "|---|---|---|---|---|"]
     for sec, cls in SECTIONS.items():
-        hints = typing.get_type_hints(cls)
+        hints, docs = typing.get_type_hints(cls), _field_docs(cls)
         for k in small[sec]:
             tp = str(hints[k]).replace("typing.", "").replace("<class '", "").replace("'>", "")
-            rows.append(f"| `{sec}.{k}` | {tp} | `{small[sec][k]}` | `{paper[sec][k]}` |")
+            rows.append(f"| `{sec}.{k}` | {tp} | `{small[sec][k]}` | `{paper[sec][k]}` | {docs.get(k, '')} |")
     return "\n".join(rows)

@@ -14,7 +14,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: fake_fra
 import fake_frames as ff  # noqa: E402
 from synth.dataset.reader import camera_rays  # noqa: E402
 from synth.dataset.shards import open_dataset  # noqa: E402
-from synth.frames import frame_key, parse_frame_key  # noqa: E402
 
 ID_SIZE, EXPR_SIZE = 4, 3
 
@@ -41,7 +40,7 @@ def camera(az_deg: float, el_deg: float, size: int, dist: float = 0.8) -> dict:
 
 
 def frame(ident: int, expr: int, view: int, views: int, size: int, id_size: int = ID_SIZE):
-    key = frame_key(ident, expr, view)
+    key = ff.frame_key(ident, expr, view)
     cam = camera((360.0 * view / views + 23.0 * expr) % 360.0 - 180.0, 15.0 - 10.0 * (view % 3), size)
     o, d, cos_z = camera_rays(cam["K"], cam["camera_to_world"], size, size, dtype=np.float64)
     c, r = head(ident)
@@ -74,13 +73,13 @@ def frame(ident: int, expr: int, view: int, views: int, size: int, id_size: int 
 def make_dataset(root, identities: int = 2, expressions: int = 2, views: int = 4, size: int = 16,
                  id_size: int = ID_SIZE) -> Path:
     root = Path(root)
-    expected = {f"shard_{i:06d}": [frame_key(i, e, v) for e in range(expressions) for v in range(views)]
+    expected = {f"shard_{i:06d}": [ff.frame_key(i, e, v) for e in range(expressions) for v in range(views)]
                 for i in range(identities)}
     ds = open_dataset(root, "a" * 64, expected)
     for sid, keys in expected.items():
         with ds.staging(sid) as st:
             for key in keys:
-                k, px, meta = frame(*parse_frame_key(key), views, size, id_size)
+                k, px, meta = frame(*ff.parse_frame_key(key), views, size, id_size)
                 st.write_frame(k, *px, meta)
             st.commit(manifest_extra={"seeds": {"run": 0}, "versions": {"blender": "none"}})
     return root
