@@ -91,13 +91,13 @@ class Trainer:
             self.start = int(state["step"])
             self.collapse_count = int(state["trainer"].get("collapse_count", 0))
             torch.set_rng_state(state["torch_rng"])
-        self.fwd = self.model
+        self.fwd = self.ddp = self.model
         if dist.enabled:
             from torch.nn.parallel import DistributedDataParallel as DDP
 
             # the predicted-normals head gets no gradient from L1 + proposal (fine-tuning trains it)
-            self.fwd = DDP(self.model, device_ids=[device.index] if device.type == "cuda" else None,
-                           find_unused_parameters=True)
+            self.fwd = self.ddp = DDP(self.model, device_ids=[device.index] if device.type == "cuda" else None,
+                                      find_unused_parameters=True)
         if t.compile:
             self.fwd = torch.compile(self.fwd)
         self.bg = torch.tensor(t.background, dtype=torch.float32, device=device)
@@ -125,7 +125,7 @@ class Trainer:
         for micro in range(acc_n):
             o, d, near, far, radii, codes, ids, rgba = self._tensors(self.sampler.batch(step, micro))
             gen = torch.Generator(device=self.dev).manual_seed(jitter_seed(t.seed, step, micro, self.dist.rank))
-            sync = self.fwd.no_sync() if (self.dist.enabled and micro < acc_n - 1) else contextlib.nullcontext()
+            sync = self.ddp.no_sync() if (self.dist.enabled and micro < acc_n - 1) else contextlib.nullcontext()
             with sync:
                 with torch.autocast(self.dev.type, dtype=torch.bfloat16, enabled=t.bf16):
                     out = self.fwd(o, d, near, far, codes, ids, radii=radii, train_frac=step / t.steps,
