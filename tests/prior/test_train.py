@@ -125,3 +125,10 @@ def test_ddp_gloo_world_1_equals_plain_and_world_2_runs(ds, tmp_path):
     assert json.loads((tmp_path / "ddp2" / "run.json").read_text())["ranks"] == 2
     assert not all(torch.equal(c.model_state[k], b.model_state[k]) for k in b.model_state)
     assert np.isfinite(c.losses["loss"])
+
+
+def test_bf16_autocast_on_cpu_trains(ds, tmp_path):
+    assert _train(ds, tmp_path / "r", ["train.bf16=true"], steps=2) == 0
+    st = _state(tmp_path / "r")
+    assert all(torch.isfinite(v).all() and v.dtype == torch.float32 for v in st.model_state.values())
+    assert np.isfinite(st.losses["loss"])
