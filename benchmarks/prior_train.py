@@ -34,6 +34,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from prior.data import RaySampler  # noqa: E402
 from prior.render_views import png_bytes, render_image, to_srgb8  # noqa: E402
 from prior.train import checkpoint as ckpt  # noqa: E402
 from prior.train.loop import Trainer  # noqa: E402
@@ -56,6 +57,12 @@ def speed(args) -> None:
             tr.sampler.batch(n_load)
             n_load += 1
         load_rate = n_load * rays / (time.perf_counter() - t0)
+        # the loader at the paper's batch shape (256 x 8 x 64; identities repeat on a small dataset)
+        paper = RaySampler(s.store, seed=0, identities=256, views=8, pixels=64)
+        t0 = time.perf_counter()
+        for k in range(3):
+            paper.batch(k)
+        paper_s = (time.perf_counter() - t0) / 3
         t = s.cfg.train
         for warm in range(2):
             tr.step(warm)
@@ -72,6 +79,8 @@ def speed(args) -> None:
     print("|---|---|---|---|---|---|---|---|")
     print(f"| small | {args.threads} | {rays} | {dt:.3f} | {rays / dt:,.0f} | {rays * samples / dt:,.0f} | "
           f"{load_rate:,.0f} | {load_rate / (rays / dt):,.0f}x |")
+    print(f"\nloader at the paper batch (256 x 8 x 64 = 131,072 rays): {paper_s:.3f} s/batch, "
+          f"{131072 / paper_s:,.0f} rays/s")
 
 
 def _psnr(mse: float) -> float:

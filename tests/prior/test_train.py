@@ -132,3 +132,22 @@ def test_bf16_autocast_on_cpu_trains(ds, tmp_path):
     st = _state(tmp_path / "r")
     assert all(torch.isfinite(v).all() and v.dtype == torch.float32 for v in st.model_state.values())
     assert np.isfinite(st.losses["loss"])
+
+
+def test_tensorboard_scalars_and_previews(ds, tmp_path):
+    s = prepare(ds, tmp_path / "r", sets=[*scene.TINY, "train.preview_every=2", "train.preview_size=8"], steps=2)
+    assert Trainer(s, torch.device("cpu"), tty=False, tensorboard=True).run() == 0
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    ev = EventAccumulator(str(tmp_path / "r" / "tb"), size_guidance={"images": 0})
+    ev.Reload()
+    tags = ev.Tags()
+    assert {"train/loss", "train/psnr", "train/acc_fg", "train/rays_per_s"} <= set(tags["scalars"])
+    assert [e.step for e in ev.Scalars("train/loss")] == [1, 2]
+    assert sorted(tags["images"]) == ["preview/identity_0", "preview/identity_1"]
+    img = ev.Images("preview/identity_0")[0]
+    assert (img.width, img.height) == (16, 8)  # prediction | ground truth
+    import json
+
+    lines = (tmp_path / "r" / "metrics.jsonl").read_text().splitlines()
+    assert [json.loads(x)["step"] for x in lines] == [1, 2]
