@@ -69,8 +69,9 @@ class _StopFlag:
 
 
 class Trainer:
-    def __init__(self, setup: RunSetup, device: torch.device, dist: Dist = Dist(), *, tty=None,
+    def __init__(self, setup: RunSetup, device: torch.device, dist: Dist | None = None, *, tty=None,
                  tensorboard: bool = True):
+        dist = dist or Dist()
         self.s, self.cfg, self.dev, self.dist = setup, setup.cfg, device, dist
         t, st = self.cfg.train, setup.store
         per = dist.world * t.grad_accum
