@@ -123,13 +123,15 @@ class Trainer:
         stage_bg = step < t.background_steps
         acc_n = t.grad_accum
         stats = torch.zeros(7, device=self.dev)  # loss, l1, prop, sq err sum, fg acc sum, fg rays, valid rays
+        # a 0-d tensor under torch.compile (a float would be a constant: one recompile per step)
+        frac = torch.tensor(step / t.steps, device=self.dev) if t.compile else step / t.steps
         for micro in range(acc_n):
             o, d, near, far, radii, codes, ids, rgba = self._tensors(self.sampler.batch(step, micro))
             gen = torch.Generator(device=self.dev).manual_seed(jitter_seed(t.seed, step, micro, self.dist.rank))
             sync = self.ddp.no_sync() if (self.dist.enabled and micro < acc_n - 1) else contextlib.nullcontext()
             with sync:
                 with torch.autocast(self.dev.type, dtype=torch.bfloat16, enabled=t.bf16):
-                    out = self.fwd(o, d, near, far, codes, ids, radii=radii, train_frac=step / t.steps,
+                    out = self.fwd(o, d, near, far, codes, ids, radii=radii, train_frac=frac,
                                    randomized=True, generator=gen)
                 alpha = rgba[:, 3]
                 target = rgba[:, :3] + (1 - alpha)[:, None] * self.bg if stage_bg else rgba[:, :3]

@@ -151,3 +151,12 @@ def test_tensorboard_scalars_and_previews(ds, tmp_path):
 
     lines = (tmp_path / "r" / "metrics.jsonl").read_text().splitlines()
     assert [json.loads(x)["step"] for x in lines] == [1, 2]
+
+
+@pytest.mark.slow
+def test_compiled_training_matches_eager_closely(ds, tmp_path):
+    assert _train(ds, tmp_path / "c", ["train.compile=true"], steps=3) == 0
+    assert _train(ds, tmp_path / "e", [], steps=3) == 0
+    c, e = _state(tmp_path / "c"), _state(tmp_path / "e")
+    for k in e.model_state:
+        torch.testing.assert_close(c.model_state[k], e.model_state[k], rtol=1e-3, atol=1e-4)
