@@ -7,6 +7,8 @@
     # report PSNR on those views and write a contact sheet (held-out ground truth | prediction)
     .venv/bin/python benchmarks/prior_train.py quality DATASET --run RUN [--minutes 20] [--threads 2]
         [--steps N] [--set key=value ...] [--sheet docs/prior_heldout.png]
+    (without --steps the schedule is sized to what a 4-step timing probe says fits in --minutes;
+    training stops at --minutes in any case)
 
     # evaluate an existing run on its held-out views
     .venv/bin/python benchmarks/prior_train.py eval DATASET --run RUN [--sheet F]
@@ -135,12 +137,28 @@ def _sheet(pairs, out: Path, cols: int, scale: int = 2) -> None:
     out.write_bytes(png_bytes(canvas))
 
 
+def _probe_steps(args, sets) -> int:
+    """How many steps fit in ``--minutes``: 4 timed steps (after one warm-up) of a throwaway run."""
+    with tempfile.TemporaryDirectory() as tmp:
+        s = prepare(args.dataset, Path(tmp) / "run", preset="small", sets=[*sets, "train.preview_every=0"])
+        tr = Trainer(s, torch.device("cpu"), tty=False, tensorboard=False)
+        tr.step(0)
+        t0 = time.perf_counter()
+        for k in range(1, 5):
+            tr.step(k)
+            tr.opt.step()
+            tr.opt.zero_grad(set_to_none=True)
+        per_step = (time.perf_counter() - t0) / 4
+    return max(10, int(args.minutes * 60 / per_step))
+
+
 def quality(args) -> None:
     torch.set_num_threads(args.threads)
     if args.run.exists():
         shutil.rmtree(args.run)
-    s = prepare(args.dataset, args.run, preset="small", steps=args.steps,
-                sets=[f"data.holdout_views={HOLDOUT}", *args.set])
+    sets = [f"data.holdout_views={HOLDOUT}", *args.set]
+    steps = args.steps if args.steps is not None else _probe_steps(args, sets)
+    s = prepare(args.dataset, args.run, preset="small", steps=steps, sets=sets)
     tr = Trainer(s, torch.device("cpu"), tty=False, tensorboard=True)
     t0 = time.perf_counter()
     tr.run(deadline=t0 + args.minutes * 60)
@@ -174,7 +192,8 @@ def main() -> None:
             p.add_argument("--sheet", type=Path, default=None)
         if name == "quality":
             p.add_argument("--minutes", type=float, default=20.0)
-            p.add_argument("--steps", type=int, default=None, help="train.steps (the schedule's length)")
+            p.add_argument("--steps", type=int, default=None,
+                           help="train.steps, the schedule's length (default: as many as a timing probe says fit)")
     args = ap.parse_args()
     if args.cmd == "speed":
         speed(args)
