@@ -23,11 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from synth.assets.classes import RECORD_ORDER
 from synth.errors import SynthError
-
-
-#: Classes listed under "assets" in every frame JSON (null where absent).
-ASSET_CLASSES = ("hair", "beard", "eyebrows", "eyelashes", "garment", "glasses", "headwear", "makeup", "iris", "skin")
 
 
 def emit(**ev) -> None:
@@ -55,14 +52,15 @@ def software_versions() -> dict:
 
 
 def _dress(ident: dict, ctx, rigs_out: dict) -> dict:
-    """Build the identity's chosen assets (only those). Returns class -> frame-JSON record."""
+    """Build the identity's chosen assets (only those). Returns class -> frame-JSON record, every
+    registered class in RECORD_ORDER (null where absent)."""
     from blender_scripts import assets as basset
 
-    chosen = {c: ident.get("assets", {}).get(c) for c in ASSET_CLASSES}
+    chosen = {c: ident.get("assets", {}).get(c) for c in RECORD_ORDER}
     rigs = basset.dress(ctx, {c: e for c, e in chosen.items() if e})
     rigs_out.update(rigs)
     record = {}
-    for c in ASSET_CLASSES:
+    for c in RECORD_ORDER:
         e = chosen[c]
         if not e:
             record[c] = None

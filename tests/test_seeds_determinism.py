@@ -154,7 +154,7 @@ def test_replanning_alone_and_shard_size_change_nothing(tmp_path, toy):
 
 
 def test_a_single_frame_can_be_replanned_alone(tmp_path, toy):
-    from synth.plan.assets import load_catalogue
+    from synth.assets.catalogue import load_catalogue
     from synth.plan.planner import model_record
 
     cfg = load_config(overrides=["dataset.expressions_per_identity=3", "dataset.views_per_expression=4"])
