@@ -96,7 +96,7 @@ class IdentityScene:
         from blender_scripts import camera as bcam
         from blender_scripts import materials as bmat
         from blender_scripts import scene as bscene
-        from synth.skin import skin_albedo
+        from synth.appearance.skin import skin_albedo
 
         self.ident, self.hm, self.render_cfg = ident, hm, render_cfg
         self.run_seed, self.model_info, self.versions, self.shard_id = run_seed, model_info, versions, shard_id

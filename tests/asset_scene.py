@@ -53,7 +53,7 @@ def head_context(case: str = "neutral", resolution: int = 64, identity_index: in
     from blender_scripts.assets import HeadContext
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
-    from synth.skin import skin_albedo
+    from synth.appearance.skin import skin_albedo
 
     hm = HeadModel(load_default_model())
     bscene.reset()

@@ -23,7 +23,7 @@ def _ids(cls):
 
 
 def test_iris_colour_model():
-    from synth.iris import iris_colour, iris_palette, pupil_ratio
+    from synth.appearance.iris import iris_colour, iris_palette, pupil_ratio
 
     blue = np.array(iris_colour(0.05, 0.8))
     grey = np.array(iris_colour(0.12, 0.45))

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from blender_scripts.assets import strands as S
-from synth import pigment as pig
+from synth.appearance import pigment as pig
 
 
 def counts(resolution: int, density: float = 1.0) -> int:

@@ -33,7 +33,7 @@ from scipy.spatial import cKDTree
 
 from blender_scripts.assets import Rig
 from blender_scripts.assets.fitting import closest_on_triangles
-from synth import pigment as pig
+from synth.appearance import pigment as pig
 from synth.segmentation import CLASSES
 
 UP = np.array([0.0, 0.0, 1.0])
