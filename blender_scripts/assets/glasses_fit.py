@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from blender_scripts.assets.fitting import closest_on_triangles
+from synth.assets.fit.closest import closest_on_triangles
 
 MARGIN = 0.0002  # clearance left between any frame part and the skin (m)
 

@@ -32,7 +32,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from blender_scripts.assets import Rig
-from blender_scripts.assets.fitting import closest_on_triangles
+from synth.assets.fit.closest import closest_on_triangles
 from synth.appearance import pigment as pig
 from synth.segmentation import CLASSES
 

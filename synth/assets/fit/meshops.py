@@ -1,18 +1,12 @@
-"""Pure-numpy fitting helpers shared by the garment and headwear rigs (no bpy; unit-tested).
+"""Mesh operations for the fitted shells (garments, headwear), pure numpy.
 
-The garment and headwear meshes are built *from the body surface*:
-
+* normals (face, area-weighted vertex) and small helpers (``normalize``, ``smoothstep``);
 * :func:`clip_by_field` cuts a triangle set at the zero level of a per-vertex scalar field
   (neckline, cap plane...) exactly, returning new vertices as sparse linear combinations of
   body vertices (``W``, a scipy CSR matrix), so a shell is ``W @ V + offset * normal``;
-* :class:`SurfaceQuery` gives the closest point on a triangle subset (KD tree over triangle
-  centroids, exact point-triangle distance on the ``k`` nearest candidates) and a signed
-  distance whose sign comes from the barycentrically interpolated vertex normal at the
-  closest point (robust on open, non-watertight meshes such as the bust);
-* :func:`push_out` moves every point closer than ``clearance`` (or inside) to the closest
-  surface point plus ``clearance`` along that normal (iterated: fixes concave corners);
-* :class:`Binding` stores point -> (triangle, barycentric, local-frame offset) so a fitted
-  mesh follows the body exactly when its vertices change (expressions).
+  :func:`subdivide` refines such a combination mesh;
+* boundary loops, Laplacian smoothing, face removal, grid faces, swept tubes, an icosphere,
+  loop resampling and level-set points.
 
 Conventions: float64 world metres, Z up, the face looks toward -Y.
 """
@@ -21,10 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 from scipy import sparse
-from scipy.spatial import cKDTree
 
-
-# ----------------------------------------------------------------------------- basics
 
 def face_normals(V: np.ndarray, F: np.ndarray, unit: bool = True) -> np.ndarray:
     n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
@@ -52,124 +43,6 @@ def smoothstep(e0: float, e1: float, x):
     t = np.clip((np.asarray(x, np.float64) - e0) / (e1 - e0), 0.0, 1.0)
     return t * t * (3.0 - 2.0 * t)
 
-
-# ----------------------------------------------------------------------------- closest points
-
-def _dot(a, b):
-    return np.einsum("...i,...i->...", a, b)
-
-
-def closest_on_triangles(p, a, b, c):
-    """Closest points of p to triangles (a, b, c) (all broadcastable (..., 3)), after Ericson,
-    Real-Time Collision Detection 5.1.5, vectorised. Returns (point, barycentric (..., 3));
-    vertex/edge regions give exact 0/1 coordinates; a degenerate triangle gives its centroid
-    weights. The one implementation used by every rig (strands, garments, glasses)."""
-    p, a, b, c = np.broadcast_arrays(p, a, b, c)
-    ab, ac, ap = b - a, c - a, p - a
-    d1, d2 = _dot(ab, ap), _dot(ac, ap)
-    bp = p - b
-    d3, d4 = _dot(ab, bp), _dot(ac, bp)
-    cp = p - c
-    d5, d6 = _dot(ab, cp), _dot(ac, cp)
-    vc = d1 * d4 - d3 * d2
-    vb = d5 * d2 - d1 * d6
-    va = d3 * d6 - d5 * d4
-    with np.errstate(divide="ignore", invalid="ignore"):
-        den = va + vb + vc
-        v_in = np.where(den != 0, vb / den, 1.0 / 3.0)
-        w_in = np.where(den != 0, vc / den, 1.0 / 3.0)
-        t_ab = np.where(d1 - d3 != 0, d1 / (d1 - d3), 0.0)
-        t_ac = np.where(d2 - d6 != 0, d2 / (d2 - d6), 0.0)
-        e1, e2 = d4 - d3, d5 - d6
-        t_bc = np.where(e1 + e2 != 0, e1 / (e1 + e2), 0.0)
-    z = np.zeros_like(d1)
-    o = np.ones_like(d1)
-    bary = np.stack([1.0 - v_in - w_in, v_in, w_in], -1)
-    conds = [
-        (va <= 0) & (e1 >= 0) & (e2 >= 0),  # edge BC
-        (vb <= 0) & (d2 >= 0) & (d6 <= 0),  # edge AC
-        (d6 >= 0) & (d5 <= d6),  # vertex C
-        (vc <= 0) & (d1 >= 0) & (d3 <= 0),  # edge AB
-        (d3 >= 0) & (d4 <= d3),  # vertex B
-        (d1 <= 0) & (d2 <= 0),  # vertex A
-    ]
-    vals = [
-        np.stack([z, 1.0 - t_bc, t_bc], -1),
-        np.stack([1.0 - t_ac, z, t_ac], -1),
-        np.stack([z, z, o], -1),
-        np.stack([1.0 - t_ab, t_ab, z], -1),
-        np.stack([z, o, z], -1),
-        np.stack([o, z, z], -1),
-    ]
-    # Ericson's tests run A, B, AB, C, AC, BC, inside and the first match wins: apply them in
-    # reverse so that earlier tests overwrite later ones.
-    for cond, val in zip(conds, vals):
-        bary = np.where(cond[..., None], val, bary)
-    q = bary[..., 0:1] * a + bary[..., 1:2] * b + bary[..., 2:3] * c
-    return q, bary
-
-
-class SurfaceQuery:
-    """Closest point / signed distance on a triangle subset of a mesh.
-
-    ``tri_ids`` selects the triangles of ``F`` used (default all). Candidates are the ``k``
-    triangles with the nearest centroids; with the bust's triangle sizes (<= 4 cm) and
-    points within a few cm of the surface this finds the exact closest triangle."""
-
-    def __init__(self, V: np.ndarray, F: np.ndarray, tri_ids: np.ndarray | None = None, k: int = 16):
-        self.V = np.asarray(V, np.float64)
-        self.F_all = np.asarray(F, np.int64)
-        self.tri_ids = np.arange(len(F)) if tri_ids is None else np.asarray(tri_ids, np.int64)
-        self.F = self.F_all[self.tri_ids]
-        self.k = int(min(k, len(self.F)))
-        self.vn = vertex_normals(self.V, self.F_all)
-        self.tree = cKDTree(self.V[self.F].mean(1))
-
-    def closest(self, P: np.ndarray):
-        """(closest points, local triangle index into tri_ids, bary, signed distance, unit normal)."""
-        P = np.asarray(P, np.float64)
-        if len(P) == 0:
-            z = np.zeros((0, 3))
-            return z, np.zeros(0, np.int64), z, np.zeros(0), z
-        _, cand = self.tree.query(P, k=self.k)
-        cand = cand.reshape(len(P), -1)
-        kk = cand.shape[1]
-        Pr = np.repeat(P, kk, 0)
-        Fc = self.F[cand.ravel()]
-        pts, bary = closest_on_triangles(Pr, self.V[Fc[:, 0]], self.V[Fc[:, 1]], self.V[Fc[:, 2]])
-        d2 = ((Pr - pts) ** 2).sum(1).reshape(len(P), kk)
-        j = np.argmin(d2, 1)
-        sel = np.arange(len(P)) * kk + j
-        tri = cand[np.arange(len(P)), j]
-        c, b = pts[sel], bary[sel]
-        f = self.F[tri]
-        n = normalize((b[:, :, None] * self.vn[f]).sum(1))
-        d = np.sqrt(d2[np.arange(len(P)), j])
-        sgn = np.where(np.einsum("ij,ij->i", P - c, n) < 0.0, -1.0, 1.0)
-        return c, tri, b, sgn * d, n
-
-    def signed_distance(self, P: np.ndarray) -> np.ndarray:
-        return self.closest(P)[3]
-
-
-def push_out(P: np.ndarray, query: SurfaceQuery, clearance, iterations: int = 3,
-             max_depth: float = np.inf) -> np.ndarray:
-    """Move points with signed distance < clearance to closest + clearance * normal.
-
-    ``clearance`` is a scalar or per-point array. Points deeper than ``max_depth`` are left
-    alone (they belong to a different body part; callers trim them instead)."""
-    P = np.array(P, np.float64, copy=True)
-    clr = np.broadcast_to(np.asarray(clearance, np.float64), (len(P),))
-    for _ in range(iterations):
-        c, _, _, sd, n = query.closest(P)
-        bad = (sd < clr - 1e-7) & (sd > -max_depth)
-        if not bad.any():
-            break
-        P[bad] = c[bad] + n[bad] * clr[bad, None]
-    return P
-
-
-# ----------------------------------------------------------------------------- clipping
 
 def clip_by_field(F: np.ndarray, f: np.ndarray, n_vertices: int):
     """Keep the part of triangles ``F`` where the per-vertex field ``f >= 0``, cut exactly at
@@ -251,8 +124,6 @@ def subdivide(W, faces: np.ndarray, is_cut: np.ndarray | None = None):
         cut2 = np.concatenate([is_cut, is_cut[uniq[:, 0]] & is_cut[uniq[:, 1]]])
     return W2, nf, cut2
 
-
-# ----------------------------------------------------------------------------- mesh utilities
 
 def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
     """Ordered boundary vertex loops of a triangle mesh (manifold boundaries)."""
@@ -393,117 +264,3 @@ def level_points(V: np.ndarray, F: np.ndarray, f: np.ndarray) -> np.ndarray:
     s = (fa < 0) != (fb < 0)
     t = (fa[s] / (fa[s] - fb[s]))[:, None]
     return V[e[s, 0]] * (1 - t) + V[e[s, 1]] * t
-
-
-# ----------------------------------------------------------------------------- noise
-
-class WaveNoise:
-    """Smooth deterministic 3D noise in [-1, 1]: a sum of random plane waves (from ``rng``).
-
-    ``stretch`` scales the axes of the wave vectors (e.g. (1, 1, 0.3): folds that run
-    vertically). Used for geometric wrinkles and slack."""
-
-    def __init__(self, rng: np.random.Generator, wavelength: float, n_waves: int = 12, stretch=(1.0, 1.0, 1.0)):
-        d = normalize(rng.normal(size=(n_waves, 3)) * np.asarray(stretch, np.float64))
-        k = 2 * np.pi / (wavelength * rng.uniform(0.7, 1.4, n_waves))
-        self.k = d * k[:, None]
-        self.phase = rng.uniform(0, 2 * np.pi, n_waves)
-        self.amp = rng.uniform(0.5, 1.0, n_waves)
-        self.amp /= self.amp.sum()
-
-    def __call__(self, P: np.ndarray) -> np.ndarray:
-        return np.sin(np.asarray(P) @ self.k.T + self.phase) @ self.amp
-
-
-# ----------------------------------------------------------------------------- binding
-
-class Binding:
-    """Attach points to the closest triangles of a body (subset) in a local triangle frame.
-
-    ``apply(V)`` reproduces the points exactly for the bind-time vertices and follows any
-    later deformation of the bound triangles (rigidly per triangle)."""
-
-    def __init__(self, V: np.ndarray, F: np.ndarray, tri_ids: np.ndarray, P: np.ndarray, k: int = 16):
-        q = SurfaceQuery(V, F, tri_ids, k=k)
-        c, tri, bary, _, _ = q.closest(P)
-        self.F = q.F[tri]
-        self.bary = bary
-        E = self._frames(np.asarray(V, np.float64))
-        self.coords = np.einsum("nij,nj->ni", E, np.asarray(P, np.float64) - c)
-
-    def _frames(self, V):
-        A, B, C = V[self.F[:, 0]], V[self.F[:, 1]], V[self.F[:, 2]]
-        e1 = normalize(B - A)
-        n = normalize(np.cross(B - A, C - A))
-        e2 = np.cross(n, e1)
-        return np.stack([e1, e2, n], 1)  # rows
-
-    def apply(self, V: np.ndarray) -> np.ndarray:
-        V = np.asarray(V, np.float64)
-        c = (self.bary[:, :, None] * V[self.F]).sum(1)
-        E = self._frames(V)
-        return c + np.einsum("nij,ni->nj", E, self.coords)
-
-
-# ----------------------------------------------------------------------------- body frame
-
-def region_mask(n: int, regions: dict, names) -> np.ndarray:
-    m = np.zeros(n, bool)
-    for r in names:
-        if r in regions:
-            m[np.asarray(regions[r], np.int64)] = True
-    return m
-
-
-class NeckFrame:
-    """Where the neck meets the shoulders, for any identity (pure numpy).
-
-    ``ring``: shoulder vertices adjacent to neck vertices (the neck base); ``center``: its
-    centroid; angles ``theta = atan2(x - cx, -(y - cy))`` (0 in front, +-pi behind, +pi/2
-    at the subject's left). ``z_ring(theta)``: height of the neck base around the neck;
-    ``z_cap(theta)``: highest a collar may rise (1.2 cm under the jaw line, ibug68 0-16,
-    in front of the ears; unlimited behind)."""
-
-    def __init__(self, V: np.ndarray, F: np.ndarray, regions: dict, ibug68: np.ndarray):
-        n = len(V)
-        neck = region_mask(n, regions, ["neck"])
-        sh = region_mask(n, regions, ["shoulders"])
-        E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-        E = np.concatenate([E, E[:, ::-1]])
-        ring = np.unique(E[neck[E[:, 0]] & sh[E[:, 1]], 1])
-        self.ring = ring
-        self.center = V[ring].mean(0)
-        th = self.theta(V[ring])
-        o = np.argsort(th)
-        self._th = np.concatenate([th[o] - 2 * np.pi, th[o], th[o] + 2 * np.pi])
-        self._z = np.tile(V[ring][o, 2], 3)
-        jaw = np.asarray(ibug68[:17], np.float64)
-        jt = self.theta(jaw)
-        o = np.argsort(jt)
-        self._jt, self._jz = jt[o], jaw[o, 2] - 0.012
-        self.chin = np.asarray(ibug68[8], np.float64)
-        self.radius = float(np.median(np.linalg.norm((V[ring] - self.center)[:, :2], axis=1)))
-
-    def theta(self, P: np.ndarray) -> np.ndarray:
-        d = np.asarray(P, np.float64) - self.center
-        return np.arctan2(d[..., 0], -d[..., 1])
-
-    def rxy(self, P: np.ndarray) -> np.ndarray:
-        d = np.asarray(P, np.float64) - self.center
-        return np.hypot(d[..., 0], d[..., 1])
-
-    def z_ring(self, th) -> np.ndarray:
-        # smooth the base height a little (the ring is a vertex zig-zag)
-        th = np.asarray(th, np.float64)
-        acc = sum(np.interp(th + d, self._th, self._z) for d in (-0.15, 0.0, 0.15))
-        return acc / 3.0
-
-    def z_cap(self, th) -> np.ndarray:
-        th = np.asarray(th, np.float64)
-        inside = (th >= self._jt[0]) & (th <= self._jt[-1])
-        return np.where(inside, np.interp(th, self._jt, self._jz), np.inf)
-
-    def outward(self, P: np.ndarray) -> np.ndarray:
-        d = np.asarray(P, np.float64) - self.center
-        d[..., 2] = 0.0
-        return normalize(d)
