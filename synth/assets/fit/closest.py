@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 
-def _dot(a, b):
+def dot(a, b):
     return np.einsum("...i,...i->...", a, b)
 
 
@@ -21,11 +21,11 @@ def closest_on_triangles(p, a, b, c):
     weights. The one implementation used by every rig (strands, garments, glasses)."""
     p, a, b, c = np.broadcast_arrays(p, a, b, c)
     ab, ac, ap = b - a, c - a, p - a
-    d1, d2 = _dot(ab, ap), _dot(ac, ap)
+    d1, d2 = dot(ab, ap), dot(ac, ap)
     bp = p - b
-    d3, d4 = _dot(ab, bp), _dot(ac, bp)
+    d3, d4 = dot(ab, bp), dot(ac, bp)
     cp = p - c
-    d5, d6 = _dot(ab, cp), _dot(ac, cp)
+    d5, d6 = dot(ab, cp), dot(ac, cp)
     vc = d1 * d4 - d3 * d2
     vb = d5 * d2 - d1 * d6
     va = d3 * d6 - d5 * d4
