@@ -80,6 +80,16 @@ def _schema_message(e) -> str:
     return msg if len(msg) <= 240 else msg[:237] + "..."
 
 
+def _read_toml(p: Path, rep: Report) -> dict | None:
+    """A TOML file's content, or None after reporting why it cannot be read."""
+    try:
+        with p.open("rb") as f:
+            return tomllib.load(f)
+    except tomllib.TOMLDecodeError as e:
+        rep.add(f"not valid TOML: {e}", p, "fix the syntax")
+        return None
+
+
 def validate_manifest(manifest_dir: str | Path | None = None, rigs_dir: str | Path | None = None) -> Report:
     """Check every file of a manifest folder; all defects, in file order."""
     d = Path(manifest_dir) if manifest_dir else catalogue.default_manifest_dir()
@@ -103,11 +113,8 @@ def validate_manifest(manifest_dir: str | Path | None = None, rigs_dir: str | Pa
             rep.add(f"class '{cls}' has no manifest file", p, f"add {cls}.toml (presence = 0 switches the class off)")
             continue
         rep.files += 1
-        try:
-            with p.open("rb") as f:
-                doc = tomllib.load(f)
-        except tomllib.TOMLDecodeError as e:
-            rep.add(f"not valid TOML: {e}", p, "fix the syntax")
+        doc = _read_toml(p, rep)
+        if doc is None:
             continue
         errs = catalogue.schema_validator("class_file").iter_errors(doc)
         for e in sorted(errs, key=lambda e: list(map(str, e.absolute_path))):
@@ -167,11 +174,8 @@ def validate_manifest(manifest_dir: str | Path | None = None, rigs_dir: str | Pa
     rp = Path(_show(d / "rules.toml"))
     if rp.is_file():
         rep.files += 1
-        try:
-            with rp.open("rb") as f:
-                doc = tomllib.load(f)
-        except tomllib.TOMLDecodeError as e:
-            rep.add(f"not valid TOML: {e}", rp, "fix the syntax")
+        doc = _read_toml(rp, rep)
+        if doc is None:
             return rep
         errs = list(catalogue.schema_validator("rules_file").iter_errors(doc))
         for e in errs:

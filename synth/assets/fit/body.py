@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from synth.assets.fit.attach import Binding, SurfaceQuery, push_out
+from synth.assets.fit.masks import region_mask
 from synth.assets.fit.meshops import (clip_by_field, level_points, normalize, remove_faces, resample_loop, subdivide,
                                       vertex_normals)
 
@@ -43,14 +44,6 @@ class WaveNoise:
         return np.sin(np.asarray(P) @ self.k.T + self.phase) @ self.amp
 
 
-def region_mask(n: int, regions: dict, names) -> np.ndarray:
-    m = np.zeros(n, bool)
-    for r in names:
-        if r in regions:
-            m[np.asarray(regions[r], np.int64)] = True
-    return m
-
-
 class NeckFrame:
     """Where the neck meets the shoulders, for any identity (pure numpy).
 
@@ -62,8 +55,8 @@ class NeckFrame:
 
     def __init__(self, V: np.ndarray, F: np.ndarray, regions: dict, ibug68: np.ndarray):
         n = len(V)
-        neck = region_mask(n, regions, ["neck"])
-        sh = region_mask(n, regions, ["shoulders"])
+        neck = region_mask(regions, ["neck"], n)
+        sh = region_mask(regions, ["shoulders"], n)
         E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
         E = np.concatenate([E, E[:, ::-1]])
         ring = np.unique(E[neck[E[:, 0]] & sh[E[:, 1]], 1])
@@ -113,13 +106,13 @@ class Body:
         self.F = np.asarray(triangles, np.int64)
         self.regions = regions
         n = len(self.V)
-        skin = region_mask(n, regions, ["skin"])
+        skin = region_mask(regions, ["skin"], n)
         self.skin_tris = np.nonzero(skin[self.F].all(1))[0]
         self.query = SurfaceQuery(self.V, self.F, self.skin_tris)
         self.N = vertex_normals(self.V, self.F[self.skin_tris])
-        ns = region_mask(n, regions, ["neck", "shoulders"]) & skin
+        ns = region_mask(regions, ["neck", "shoulders"], n) & skin
         self.torso_tris = np.nonzero(ns[self.F].all(1))[0]
-        hd = region_mask(n, regions, ["neck", "scalp", "ears", "face"]) & skin
+        hd = region_mask(regions, ["neck", "scalp", "ears", "face"], n) & skin
         self.head_tris = np.nonzero(hd[self.F].all(1))[0]
         self.frame = NeckFrame(self.V, self.F, regions, ibug68)
         self.lm = np.asarray(ibug68, np.float64)

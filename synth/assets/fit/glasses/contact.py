@@ -17,20 +17,27 @@ def region_indices(data_regions, name):
     return None if r is None else np.asarray(r, np.int64)
 
 
+def ear_junction(V: np.ndarray, T: np.ndarray, regions, side: float) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices of one ear (``side`` +1: left, -1: right; the ``ear_l``/``ear_r`` region,
+    else the ``ears`` region on that side) and those of them on its junction with the head
+    (ear vertices sharing a triangle with non-ear vertices)."""
+    idx = region_indices(regions, "ear_l" if side > 0 else "ear_r")
+    if idx is None:
+        allr = region_indices(regions, "ears")
+        idx = allr[np.sign(V[allr, 0]) == side]
+    ear = np.zeros(len(V), bool)
+    ear[idx] = True
+    mixed = ear[T].any(1) & ~ear[T].all(1)
+    return idx, np.unique(T[mixed][ear[T[mixed]]])
+
+
 def ear_rests(vertices, triangles, regions) -> np.ndarray:
     """(2, 3) top of the ear/head junction, left (+X) then right."""
     V = np.asarray(vertices, np.float64)
     T = np.asarray(triangles, np.int64)
     out = []
-    for side, name in ((1.0, "ear_l"), (-1.0, "ear_r")):
-        idx = region_indices(regions, name)
-        if idx is None:
-            allr = region_indices(regions, "ears")
-            idx = allr[np.sign(V[allr, 0]) == side]
-        ear = np.zeros(len(V), bool)
-        ear[idx] = True
-        mixed = ear[T].any(1) & ~ear[T].all(1)
-        jv = np.unique(T[mixed][ear[T[mixed]]])
+    for side in (1.0, -1.0):
+        idx, jv = ear_junction(V, T, regions, side)
         if len(jv) < 3:
             jv = idx
         p = V[jv]
@@ -43,15 +50,7 @@ def ear_hook_path(vertices, triangles, regions, side: float, rest: np.ndarray, l
     """Points behind the ear (the retro-auricular junction) going down from the ear rest."""
     V = np.asarray(vertices, np.float64)
     T = np.asarray(triangles, np.int64)
-    name = "ear_l" if side > 0 else "ear_r"
-    idx = region_indices(regions, name)
-    if idx is None:
-        allr = region_indices(regions, "ears")
-        idx = allr[np.sign(V[allr, 0]) == side]
-    ear = np.zeros(len(V), bool)
-    ear[idx] = True
-    mixed = ear[T].any(1) & ~ear[T].all(1)
-    jv = np.unique(T[mixed][ear[T[mixed]]])
+    idx, jv = ear_junction(V, T, regions, side)
     p = V[jv]
     centre = V[idx].mean(0)
     ang = np.arctan2(p[:, 2] - centre[2], p[:, 1] - centre[1])  # 0: behind (+y), pi/2: top
