@@ -40,7 +40,8 @@ def machine() -> str:
 # --------------------------------------------------------------------------- overhead
 
 def overhead(args) -> None:
-    from synth.cli.render_cmd import prepare_plan, render_plan
+    from renderer_jobs.local import LocalBackend
+    from renderer_jobs.submit import prepare_plan, render_plan
 
     rows = []
     for views in args.views:
@@ -52,7 +53,7 @@ def overhead(args) -> None:
                                  f"dataset.views_per_expression={views}", f'render.preset="{args.preset}"'],
                                 args.seed, None)
             t_plan = time.perf_counter() - t0
-            res = render_plan(out, pdir, workers=1, shards_per_worker=2, quiet=True)
+            res = render_plan(out, pdir, LocalBackend(workers=1), shards_per_worker=2, quiet=True)
             total = time.perf_counter() - t0
         n = res["frames_rendered"]
         rows.append((args.identities, args.expressions, views, n, total, t_plan, res["render_seconds"],

@@ -4,15 +4,15 @@
 
 Per identity one scene is built (head mesh, materials, lights, camera); each expression is a
 vertex update and each view a camera move, so nothing is rebuilt per view. Frames already
-written by an interrupted run are skipped. Progress goes to stdout as JSON lines:
-``{"event": "frame", ...}``, ``{"event": "commit", ...}``, ``{"event": "rss", ...}``.
+written by an interrupted run are skipped. Progress goes to stdout as JSON-line events
+(``renderer_jobs.events``: start, frame, rss, skip, commit, error).
 The worker draws no random numbers: every choice comes from the plan.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import os
 import platform
 import resource
 import signal
@@ -23,13 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from renderer_jobs.events import Commit, Error, Frame, Rss, Skip, Start, emit
 from synth.assets.classes import RECORD_ORDER
 from synth.errors import SynthError
-
-
-def emit(**ev) -> None:
-    sys.stdout.write(json.dumps(ev) + "\n")
-    sys.stdout.flush()
 
 
 def rss_mb() -> float:
@@ -154,13 +150,12 @@ class IdentityScene:
     def render(self, f: dict, tmp: Path, seed: int | None = None) -> tuple[dict, dict]:
         """Render one planned frame of the current expression: (passes, frame JSON)."""
         from blender_scripts import camera as bcam
-        from blender_scripts.render_frame import render_view
+        from blender_scripts.passes import render_view
         from synth.conventions import project
-        from synth.exr import CHANNELS
-        from synth.labels import visibility
+        from synth.dataset.frame_json import build_frame_record
+        from synth.dataset.labels import visibility
 
-        hm, x = self.hm, self.expr
-        key = f["frame_id"]
+        x = self.expr
         c = f["camera"]
         K = np.asarray(c["K"], np.float64)
         w2c = np.asarray(c["world_to_camera"], np.float64)
@@ -168,22 +163,13 @@ class IdentityScene:
         out = render_view(tmp, int(f["seed"] if seed is None else seed))
         uv, z = project(K, w2c, x["lm3d"])
         vis = visibility(uv, z, out["depth"], out["rgba"][..., 3])
-        fj = dict(f)
-        fj["shard_id"] = self.shard_id
-        fj["image"] = {"width": self.width, "height": self.height, "file": f"{key}.exr", "layers": list(CHANNELS)}
-        fj["model"] = {**self.model_info, "identity": self.beta.tolist(), "expression": x["psi"].tolist(),
-                       "expression_preset": x["e"].get("preset"), "expression_kind": x["e"].get("kind"),
-                       "joint_rotations": {n: x["rot"][j].tolist() for n, j in hm.joint_index.items()},
-                       "pose": x["e"].get("pose"), "head_pose": x["head_pose"].tolist()}
-        fj["landmarks_3d"] = x["lm3d"].tolist()
-        fj["landmarks_2d"] = uv.tolist()
-        fj["landmarks_visible"] = vis.tolist()
-        fj["assets"] = self.assets_record
-        fj["skin"] = self.skin_record
-        fj["lighting"] = self.env
-        fj["render"] = {"preset": self.render_cfg.get("preset"), "resolution": [self.width, self.height],
-                        "seed": int(f["seed"]), **self.effective}
-        fj["software"] = self.versions
+        fj = build_frame_record(
+            f, shard_id=self.shard_id, width=self.width, height=self.height, model_info=self.model_info,
+            identity_code=self.beta, planned_expression=x["e"], expression_code=x["psi"],
+            joint_rotations={n: x["rot"][j] for n, j in self.hm.joint_index.items()}, head_pose=x["head_pose"],
+            landmarks_3d=x["lm3d"], landmarks_2d=uv, landmarks_visible=vis, assets=self.assets_record,
+            skin=self.skin_record, lighting=self.env, render_preset=self.render_cfg.get("preset"),
+            render_settings=self.effective, software=self.versions)
         return out, fj
 
     def close(self) -> None:
@@ -201,7 +187,7 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> in
              for f in e["frames"]}
     st = ds.try_staging(shard_id)
     if st is None:  # committed meanwhile, or another process holds it
-        emit(event="skip", shard=shard_id)
+        emit(Skip(shard=shard_id))
         return 0
     with st:
         done = st.frames_done()
@@ -220,11 +206,11 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> in
                     out, fj = sc.render(f, tmp)
                     st.write_frame(f["frame_id"], out["rgba"], out["depth"], out["normals"], out["segmentation"], fj)
                     rendered += 1
-                    emit(event="frame", shard=shard_id, key=f["frame_id"], render_seconds=out["render_seconds"])
+                    emit(Frame(shard=shard_id, key=f["frame_id"], render_seconds=out["render_seconds"]))
             sc.close()
-            emit(event="rss", rss_mb=rss_mb())
+            emit(Rss(rss_mb=rss_mb()))
         st.commit(manifest_extra={"seeds": seeds, "versions": versions})
-    emit(event="commit", shard=shard_id)
+    emit(Commit(shard=shard_id))
     return rendered
 
 
@@ -234,13 +220,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--plan", required=True)
     ap.add_argument("--shards", required=True)
     args = ap.parse_args(argv)
+    emit(Start(shards=tuple(args.shards.split(",")), pid=os.getpid(), host=platform.node()))
 
     # SIGTERM (Ctrl-C in the parent) -> stop between frames; staged frames are kept.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
 
     from synth.model.head import HeadModel
     from synth.plan.io import load_plan
-    from synth.shards import open_dataset
+    from synth.dataset.shards import open_dataset
 
     try:
         plan = load_plan(Path(args.plan))
@@ -254,7 +241,7 @@ def main(argv: list[str] | None = None) -> int:
                 n = render_shard(ds, plan, shard_id, hm, model_info, Path(tmp))
                 print(f"worker: {shard_id}: {n} frames in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     except SynthError as e:
-        emit(event="error", shard=args.shards, message=str(e))
+        emit(Error(shard=args.shards, message=str(e)))
         print(f"synth worker: error: {e}", file=sys.stderr)
         return 2
     return 0

@@ -43,7 +43,7 @@ def entries():
 
 
 def _render(ctx, tmp, target, radius, near=0.01):
-    from blender_scripts import camera, render_frame, scene
+    from blender_scripts import camera, passes, scene
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
 
     scene.configure_render({"samples": SAMPLES, "denoise": False, "device": "cpu"}, SIZE, SIZE)
@@ -51,7 +51,7 @@ def _render(ctx, tmp, target, radius, near=0.01):
     cam = bpy.data.objects.get("contract_cam") or camera.make_camera("contract_cam")
     w2c = invert_rigid(orbit_camera_to_world(0.0, 10.0, radius, np.asarray(target, np.float64)))
     camera.set_camera(cam, intrinsics(SIZE, SIZE, FOV, (0.0, 0.0)), w2c, SIZE, SIZE, near, 10.0)
-    r = render_frame.render_view(tmp, 3)
+    r = passes.render_view(tmp, 3)
     assert np.isfinite(r["rgba"]).all()
     return r
 

@@ -98,7 +98,7 @@ def built(pack_manifest, tmp_path_factory):
 
 
 def test_pack_is_linked_and_segmented(built):
-    from synth.segmentation import CLASSES
+    from synth.dataset.segmentation import CLASSES
 
     ctx, _, rig, pack, _ = built
     assert len(rig.objects) == 1
@@ -136,9 +136,9 @@ def test_pack_is_placed_on_the_head(built):
 
 
 def test_render_shows_the_segmentation_id(built, tmp_path):
-    from blender_scripts import camera, render_frame, scene
+    from blender_scripts import camera, passes, scene
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
-    from synth.segmentation import CLASSES
+    from synth.dataset.segmentation import CLASSES
 
     ctx, _, _, _, _ = built
     W = H = 64
@@ -148,7 +148,7 @@ def test_render_shows_the_segmentation_id(built, tmp_path):
     target = ctx.joint_transforms[ctx.joint_index["head"]][:3, 3]
     w2c = invert_rigid(orbit_camera_to_world(0.0, 15.0, 0.7, target))
     camera.set_camera(cam, intrinsics(W, H, 35.0, (0.0, 0.0)), w2c, W, H, 0.05, 10.0)
-    r = render_frame.render_view(tmp_path, 3)
+    r = passes.render_view(tmp_path, 3)
     seg = r["segmentation"]
     assert (seg == CLASSES["hair"]).sum() > 50
     assert (seg == CLASSES["skin"]).sum() > 50

@@ -33,8 +33,8 @@ from synth.assets.fit.garment import CLEARANCE as GARMENT_CLEARANCE
 from synth.assets.fit.garment import garment_shell
 from synth.assets.fit.headwear import CLEARANCE as HEADWEAR_CLEARANCE
 from synth.assets.fit.headwear import headwear_shell
-from synth.assets.fit.meshops import (boundary_loops, clip_by_field, grid_faces, icosphere, normalize, subdivide,
-                                      sweep_tube, vertex_normals)
+from synth.assets.fit.meshops import boundary_loops, clip_by_field, grid_faces, icosphere, subdivide, sweep_tube
+from synth.geometry.normals import normalize, vertex_normals
 from synth.model.default import load_default_model
 from synth.model.head import HeadModel
 from tests import asset_scene
@@ -89,7 +89,7 @@ def _penetration(ctx, pts: np.ndarray, k: int = 12) -> tuple[float, float, float
     c, d, t = cp[r, j], dd[r, j], cand[r, j]
     s_face = np.einsum("ij,ij->i", pts - c, tm.face_normals[t])
     bary = trimesh.triangles.points_to_barycentric(tris[t], c)
-    vn = vertex_normals(np.asarray(ctx.vertices, np.float64), F)
+    vn = vertex_normals(np.asarray(ctx.vertices, np.float64), F, fallback=(0.0, 0.0, 1.0))
     n_s = (bary[:, :, None] * vn[F[t]]).sum(1)
     s_smooth = np.einsum("ij,ij->i", pts - c, n_s)
     inside = (s_face < 0) & (s_smooth < 0)

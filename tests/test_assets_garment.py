@@ -36,10 +36,10 @@ def test_rig_mesh_is_the_fitted_shell():
 
 def test_render_shows_clothing_and_headwear(tmp_path):
     import asset_scene
-    from blender_scripts import camera, render_frame, scene
+    from blender_scripts import camera, passes, scene
     from blender_scripts.assets import garment, headwear
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
-    from synth.segmentation import CLASSES
+    from synth.dataset.segmentation import CLASSES
 
     ctx, _ = asset_scene.head_context("neutral")
     g = garment.build(ctx, {"id": "sweater", "params": {"colour_hsv": "navy"}})
@@ -53,7 +53,7 @@ def test_render_shows_clothing_and_headwear(tmp_path):
     target = 0.5 * (lm[39] + lm[42]) - np.array([0.0, 0.0, 0.06])
     w2c = invert_rigid(orbit_camera_to_world(20.0, 5.0, 0.9, target))
     camera.set_camera(cam, intrinsics(48, 64, 30.0, (0.0, 0.0)), w2c, 48, 64, 0.05, 10.0)
-    r = render_frame.render_view(tmp_path, 3)
+    r = passes.render_view(tmp_path, 3)
     seg = r["segmentation"]
     assert (seg == CLASSES["clothing"]).sum() > 20
     assert (seg == CLASSES["headwear"]).sum() > 20

@@ -14,7 +14,7 @@ import pytest
 from synth import seeds
 from synth.assets import classes
 from synth.assets.classes import BUILD_ORDER, CLASSES, NAMES, RECORD_ORDER, rig_rng
-from synth.segmentation import CLASSES as SEGMENTATION_IDS
+from synth.dataset.segmentation import CLASSES as SEGMENTATION_IDS
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMAS = ROOT / "synth" / "schemas"

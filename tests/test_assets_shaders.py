@@ -45,7 +45,7 @@ W = H = 64
 
 
 def _render(ctx, tmp):
-    from blender_scripts import camera, render_frame, scene
+    from blender_scripts import camera, passes, scene
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
 
     scene.configure_render({"samples": 4, "denoise": False, "device": "cpu", "max_bounces": 4}, W, H)
@@ -56,7 +56,7 @@ def _render(ctx, tmp):
     w2c = invert_rigid(orbit_camera_to_world(0.0, 0.0, 0.3, target))
     K = intrinsics(W, H, 30.0, (0.0, 0.0))
     camera.set_camera(cam, K, w2c, W, H, 0.05, 10.0)
-    r = render_frame.render_view(tmp, 3)
+    r = passes.render_view(tmp, 3)
     return r, K, w2c
 
 

@@ -134,7 +134,7 @@ def test_strands_stay_attached(cls, sid, params, case, other):
     ob = rig.objects[0]
     assert ob.type == "CURVES"
     assert rig.info["strands"] > 0 and rig.info["guides"] > 0
-    from synth.segmentation import CLASSES
+    from synth.dataset.segmentation import CLASSES
 
     assert all(m.pass_index == CLASSES[cls] for m in ob.data.materials)
     pts, _ = asset_scene.evaluated_mesh(ob)
@@ -207,10 +207,10 @@ def test_deterministic(cls, sid, params):
 
 
 def test_render_shows_strand_classes(tmp_path):
-    from blender_scripts import camera, render_frame, scene
+    from blender_scripts import camera, passes, scene
     from blender_scripts.assets import dress
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
-    from synth.segmentation import CLASSES
+    from synth.dataset.segmentation import CLASSES
 
     ctx, _ = asset_scene.head_context("neutral", resolution=64)
     W = H = 64
@@ -228,7 +228,7 @@ def test_render_shows_strand_classes(tmp_path):
     for target, radius, el in ((0.5 * (lm[39] + lm[42]) + [0, 0, -0.02], 0.55, 10.0), (lm[42:48].mean(0), 0.09, 5.0)):
         w2c = invert_rigid(orbit_camera_to_world(0.0, el, radius, target))
         camera.set_camera(cam, intrinsics(W, H, 35.0, (0.0, 0.0)), w2c, W, H, 0.02, 10.0)
-        r = render_frame.render_view(tmp_path, 3)
+        r = passes.render_view(tmp_path, 3)
         assert np.all(np.isfinite(r["rgba"]))
         seen |= set(np.unique(r["segmentation"]).tolist())
     for cls in ("hair", "beard", "eyebrows", "eyelashes"):

@@ -15,6 +15,7 @@ from synth.assets.catalogue import load_catalogue
 from synth.assets.classes import NAMES
 from synth.config import ExpressionConfig, IdentityConfig, load_config
 from synth.conventions import project
+from synth.dataset.layout import frame_key
 from synth.errors import SynthError
 from synth.plan import assets, expressions, identities, io, planner
 from synth.plan.cameras import min_pairwise_angle_deg
@@ -31,7 +32,7 @@ def toy(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def plan20(tmp_path_factory, toy):
-    """The issue's check: 20 identities, seed 7, paper defaults (on the toy model)."""
+    """20 identities, seed 7, paper defaults (on the toy model)."""
     out = tmp_path_factory.mktemp("plans") / "p20"
     assert main(["plan", "--identities", "20", "--seed", "7", "--out", str(out), "--model", str(toy), "-q"]) == 0
     return out
@@ -65,7 +66,7 @@ def test_frames_carry_opencv_cameras_that_look_at_the_face(plan20):
     ident = spec["identities"][0]
     for e in ident["expressions"][:3]:
         for f in e["frames"]:
-            assert f["frame_id"] == f"id000003_ex{e['expression_index']:02d}_v{f['view_index']:02d}"
+            assert f["frame_id"] == frame_key(3, e["expression_index"], f["view_index"])
             c = f["camera"]
             jsonschema.validate(c, cam_schema)
             K, w2c, c2w = (np.array(c[k]) for k in ("K", "world_to_camera", "camera_to_world"))
@@ -269,7 +270,7 @@ def test_bad_catalogues_are_refused(tmp_path, text, what):
 
 @pytest.mark.slow
 def test_default_model_plan(tmp_path):
-    """The issue's figures on the embedded default model (built and cached on first use)."""
+    """Plan figures on the embedded default model (built and cached on first use)."""
 
     pytest.importorskip("scipy")
     try:

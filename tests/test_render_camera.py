@@ -13,7 +13,7 @@ pytestmark = [pytest.mark.blender, pytest.mark.slow]
 
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
-    from blender_scripts import camera, head, materials, render_frame, scene
+    from blender_scripts import camera, head, materials, passes, scene
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world, project
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
@@ -40,14 +40,14 @@ def rendered(tmp_path_factory):
         w2c = invert_rigid(orbit_camera_to_world(az, el, rad, target))
         K = intrinsics(W, H, 35.0, off)
         camera.set_camera(cam, K, w2c, W, H, 0.05, 10.0)
-        r = render_frame.render_view(tmp, 7)
+        r = passes.render_view(tmp, 7)
         uv, z = project(K, w2c, lm)
         out.append((K, w2c, uv, z, r))
     return m, out
 
 
 def test_visible_landmarks_match_depth_and_alpha(rendered):
-    from synth.labels import visibility
+    from synth.dataset.labels import visibility
 
     _, views = rendered
     n_checked = 0
@@ -86,7 +86,7 @@ def test_silhouette_centred_where_the_camera_says(rendered):
 
 
 def test_segmentation_and_background(rendered):
-    from synth.segmentation import CLASSES
+    from synth.dataset.segmentation import CLASSES
 
     _, views = rendered
     r = views[0][4]

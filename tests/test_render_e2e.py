@@ -45,12 +45,13 @@ def rendered(tmp_path_factory) -> Path:
 
 def test_render_validates_with_expected_layers_and_sizes(rendered):
     from synth.assets.classes import CLASSES, RECORD_ORDER
-    from synth.exr import CHANNELS, read_frame_exr
-    from synth.frames import validate_frame_json
+    from synth.dataset.exr import CHANNELS, read_frame_exr
+    from synth.dataset.frame_json import validate_frame_json
+    from synth.dataset.layout import frame_key
 
     synth("validate", rendered)
     fr = frames(rendered)
-    assert sorted(fr) == [f"id000000_ex{e:02d}_v{v:02d}" for e in range(2) for v in range(3)]
+    assert sorted(fr) == [frame_key(0, e, v) for e in range(2) for v in range(3)]
     for key, jp in fr.items():
         fj = json.loads(jp.read_text())
         assert validate_frame_json(fj) == [], jp
@@ -88,7 +89,7 @@ def test_render_validates_with_expected_layers_and_sizes(rendered):
 def test_camera_truth_from_files(rendered):
     """Landmarks projected with the JSON's K and world_to_camera land within 0.5 px of its 2D
     landmarks; at visible ones the EXR depth matches the landmark's camera z, and alpha > 0.5."""
-    from synth.exr import read_frame_exr
+    from synth.dataset.exr import read_frame_exr
 
     n_visible = 0
     for key, jp in frames(rendered).items():

@@ -20,7 +20,7 @@ import numpy as np
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
 from synth.appearance.iris import iris_palette, pupil_ratio
-from synth.segmentation import CLASSES
+from synth.dataset.segmentation import CLASSES
 
 
 def _sphere_centre(P):

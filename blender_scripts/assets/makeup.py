@@ -15,7 +15,7 @@ import numpy as np
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
 from synth.assets.fit.masks import distance_to, feather, region_mask, segment_distance, skin_only
-from synth.segmentation import CLASSES
+from synth.dataset.segmentation import CLASSES
 
 LIP_COLOURS = {"red": (0.42, 0.02, 0.03), "nude": (0.42, 0.2, 0.15), "pink": (0.6, 0.16, 0.25),
                "berry": (0.2, 0.015, 0.06), "coral": (0.7, 0.18, 0.1), "brown": (0.18, 0.06, 0.035)}

@@ -22,7 +22,7 @@ import numpy as np
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
 from synth.assets.fit.masks import feather, region_mask, skin_only
-from synth.segmentation import CLASSES
+from synth.dataset.segmentation import CLASSES
 
 
 def compute_mask(data, V, lm) -> np.ndarray:

@@ -26,7 +26,7 @@ Three orders, each fixed by an integer per class (never by the table's layout):
     The key order of the frame JSON's ``assets`` object (hair ... skin); changing it
     changes the bytes of every frame JSON.
 
-Segmentation ids are data and fixed forever (``synth/segmentation.py`` owns the table;
+Segmentation ids are data and fixed forever (``synth/dataset/segmentation.py`` owns the table;
 a test checks the ids here against it). Shader-layer classes (skin, iris, makeup) create no
 objects: they edit the head's own materials, so their pixels carry the host's id
 (skin 1, eyes 2) and they cannot come from an external pack (``pack_anchor`` is None).
@@ -50,7 +50,7 @@ class AssetClass:
     slot: int  # seed counter and sampling position (see the module docstring); fixed forever
     build: int  # position in the worker's build order
     record: int  # position in the frame JSON's "assets" object
-    segmentation: str  # segmentation class its pixels carry (synth.segmentation.CLASSES)
+    segmentation: str  # segmentation class its pixels carry (synth.dataset.segmentation.CLASSES)
     segmentation_id: int  # that class's id (fixed forever)
     rig: str  # rig module: blender_scripts.assets.<rig>
     generators: tuple[str, ...]  # procedural generator names its rig builds ("procedural:<name>")

@@ -16,7 +16,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from synth.assets.fit.closest import closest_on_triangles
-from synth.assets.fit.meshops import normalize, vertex_normals
+from synth.geometry.normals import normalize, vertex_normals
 
 
 class SurfaceQuery:
@@ -32,7 +32,7 @@ class SurfaceQuery:
         self.tri_ids = np.arange(len(F)) if tri_ids is None else np.asarray(tri_ids, np.int64)
         self.F = self.F_all[self.tri_ids]
         self.k = int(min(k, len(self.F)))
-        self.vn = vertex_normals(self.V, self.F_all)
+        self.vn = vertex_normals(self.V, self.F_all, fallback=(0.0, 0.0, 1.0))
         self.tree = cKDTree(self.V[self.F].mean(1))
 
     def closest(self, P: np.ndarray):

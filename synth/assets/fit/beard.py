@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from synth.assets.fit.groom import Groom, Styling, setup
-from synth.assets.fit.strands import DOWN, LEFT, UP, add_curl, arc_length, grow, push_out_strands, scale_count, unit
+from synth.assets.fit.strands import DOWN, LEFT, UP, add_curl, arc_length, grow, push_out_strands, scale_count
+from synth.geometry.normals import normalize
 
 
 def counts(resolution: int, density: float = 1.0) -> int:
@@ -92,7 +93,7 @@ def groom(ctx, entry) -> Groom:
 
     def field(p, s, k):
         tdown = DOWN[None] - np.einsum("nd,d->n", nrm, DOWN)[:, None] * nrm
-        d = unit(tdown + 1e-9) + 0.35 * nrm
+        d = normalize(tdown + 1e-9) + 0.35 * nrm
         # moustache hair sweeps outward from the philtrum (handlebar ends turn up)
         mo = upper[:, None] * (0.7 * side[:, None] * LEFT[None])
         if mstyle == "handlebar" and sid == "moustache":

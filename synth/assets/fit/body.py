@@ -19,11 +19,11 @@ import numpy as np
 
 from synth.assets.fit.attach import Binding, SurfaceQuery, push_out
 from synth.assets.fit.masks import region_mask
-from synth.assets.fit.meshops import (clip_by_field, level_points, normalize, remove_faces, resample_loop, subdivide,
-                                      vertex_normals)
+from synth.assets.fit.meshops import clip_by_field, level_points, remove_faces, resample_loop, subdivide
 
 #: vertices of trimmable parts deeper than this inside the skin after shaping are trimmed, not pushed
 TRIM_DEPTH = 0.006
+from synth.geometry.normals import normalize, vertex_normals
 
 
 class WaveNoise:
@@ -109,7 +109,7 @@ class Body:
         skin = region_mask(regions, ["skin"], n)
         self.skin_tris = np.nonzero(skin[self.F].all(1))[0]
         self.query = SurfaceQuery(self.V, self.F, self.skin_tris)
-        self.N = vertex_normals(self.V, self.F[self.skin_tris])
+        self.N = vertex_normals(self.V, self.F[self.skin_tris], fallback=(0.0, 0.0, 1.0))
         ns = region_mask(regions, ["neck", "shoulders"], n) & skin
         self.torso_tris = np.nonzero(ns[self.F].all(1))[0]
         hd = region_mask(regions, ["neck", "scalp", "ears", "face"], n) & skin

@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from synth.assets.fit.groom import Groom, Styling, setup
-from synth.assets.fit.strands import LEFT, UP, arc_length, push_out_strands, scale_count, unit
+from synth.assets.fit.strands import LEFT, UP, arc_length, push_out_strands, scale_count
+from synth.geometry.normals import normalize
 
 
 def counts(resolution: int, density: float = 1.0) -> int:
@@ -76,7 +77,7 @@ def groom(ctx, entry) -> Groom:
     nrm = surface.normals(tri, bary)
     ang = np.radians(70.0 - 85.0 * s) + np.radians(40.0) * unruly * rng.normal(0, 1, N)
     d = np.cos(ang)[:, None] * side[:, None] * LEFT[None] + np.sin(ang)[:, None] * UP[None]
-    d = unit(d - np.einsum("nd,nd->n", d, nrm)[:, None] * nrm)
+    d = normalize(d - np.einsum("nd,nd->n", d, nrm)[:, None] * nrm)
     L = (0.008 - 0.003 * s) * rng.uniform(0.7, 1.1, N) * (0.8 if sid == "sparse" else 1.0)
     lift = rng.uniform(0.3, 0.5 + 0.4 * unruly, N)
     k = np.linspace(0.0, 1.0, 5)[None, :, None]

@@ -7,7 +7,8 @@ import numpy as np
 
 from synth.appearance import pigment as pig
 from synth.assets.fit.groom import Groom, Styling, colour_of
-from synth.assets.fit.strands import DOWN, FORWARD, LEFT, UP, Surface, arc_length, push_out_strands, scale_count, unit
+from synth.assets.fit.strands import DOWN, FORWARD, LEFT, UP, Surface, arc_length, push_out_strands, scale_count
+from synth.geometry.normals import normalize
 
 
 def counts(resolution: int, density: float = 1.0) -> int:
@@ -82,7 +83,7 @@ def groom(ctx, entry) -> Groom:
             s_out = s_out / max(np.ptp(np.abs(P[:, 0])), 1e-6)
             vert = UP if lid == "upper" else DOWN
             lat = np.sign(eye_c[0]) * LEFT
-            d = unit(FORWARD[None] * 1.0 + vert[None] * 0.35 + lat[None] * (0.5 * s_out[:, None] ** 2))
+            d = normalize(FORWARD[None] * 1.0 + vert[None] * 0.35 + lat[None] * (0.5 * s_out[:, None] ** 2))
             L = (0.0095 if lid == "upper" else 0.0055) * lscale * (0.55 + 0.45 * np.sin(np.pi * (0.15 + 0.8 * s_out)))
             L *= rng.uniform(0.85, 1.1, len(L))
             tris.append(tri)
@@ -104,7 +105,7 @@ def groom(ctx, entry) -> Groom:
     theta = np.radians(75.0) * curl * k[None, :] ** 1.5 + np.radians(5.0) * rng.normal(0, 1, (N, 1))
     seg = (L / (npts - 1))[:, None, None]
     axis_d = d0[:, None, :]
-    perp = unit(vert - np.einsum("nd,nd->n", vert, d0)[:, None] * d0)[:, None, :]
+    perp = normalize(vert - np.einsum("nd,nd->n", vert, d0)[:, None] * d0)[:, None, :]
     steps = np.cos(theta)[..., None] * axis_d + np.sin(theta)[..., None] * perp
     pts = np.empty((N, npts, 3))
     pts[:, 0] = R

@@ -16,8 +16,8 @@ import numpy as np
 
 from synth.assets.fit.attach import push_out
 from synth.assets.fit.body import Body, Parts, WaveNoise
-from synth.assets.fit.meshops import (boundary_loops, grid_faces, icosphere, laplacian_smooth, normalize,
-                                      sweep_tube)
+from synth.assets.fit.meshops import boundary_loops, grid_faces, icosphere, laplacian_smooth, sweep_tube
+from synth.geometry.normals import normalize
 
 
 def front_weight(th):

@@ -12,7 +12,8 @@ import numpy as np
 
 from synth.assets.fit.groom import Groom, Styling, setup
 from synth.assets.fit.strands import (BACK, DOWN, FORWARD, LEFT, UP, add_curl, arc_length, grow, interpolate,
-                                      push_out_strands, resample_fast, scale_count, transport_frames, trim_below, unit)
+                                      push_out_strands, resample_fast, scale_count, transport_frames, trim_below)
+from synth.geometry.normals import normalize
 
 POINTS = {"buzz_cut": 4, "short_straight": 10, "short_curly": 14, "undercut": 14, "medium_wavy": 22, "bob": 20,
           "long_straight": 28, "long_curly": 40, "afro": 32, "bun": 28, "ponytail": 30, "braids": 40}
@@ -29,17 +30,17 @@ def _tie_point(surface, hf, direction):
     V = surface.V
     sc = V[surface.data.regions["scalp"]]
     c = hf["centre"]
-    u = unit(np.asarray(direction, np.float64))
-    j = int(np.argmax(unit(sc - c) @ u))
+    u = normalize(np.asarray(direction, np.float64))
+    j = int(np.argmax(normalize(sc - c) @ u))
     p = sc[j]
-    n = unit(p - c)
+    n = normalize(p - c)
     return p, n
 
 
 def _sphere_path(c, roots, target, n_points, lift=0.004):
     """Paths from roots to a target point over a sphere around c (radius interpolated)."""
     target = np.broadcast_to(np.asarray(target, np.float64), roots.shape)
-    ur, ut = unit(roots - c), unit(target - c)
+    ur, ut = normalize(roots - c), normalize(target - c)
     rr, rt = np.linalg.norm(roots - c, axis=1), np.linalg.norm(target - c, axis=1)[:, None]
     cosw = np.clip(np.einsum("nd,nd->n", ur, ut), -1.0, 1.0)
     w = np.arccos(cosw)
@@ -47,7 +48,7 @@ def _sphere_path(c, roots, target, n_points, lift=0.004):
     sw = np.maximum(np.sin(w), 1e-6)[:, None]
     a = np.where(w[:, None] > 1e-4, np.sin((1 - t) * w[:, None]) / sw, 1 - t)
     b = np.where(w[:, None] > 1e-4, np.sin(t * w[:, None]) / sw, t)
-    dirs = unit(a[..., None] * ur[:, None] + b[..., None] * ut[:, None])
+    dirs = normalize(a[..., None] * ur[:, None] + b[..., None] * ut[:, None])
     rad = (1 - t) * rr[:, None] + t * rt + lift * np.sin(np.pi * t) ** 0.5
     return c + dirs * rad[..., None]
 
@@ -123,7 +124,7 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
     group = np.zeros(G, np.int64)  # interpolation groups (children never mix groups)
     if sid == "buzz_cut":
         L = rng.uniform(*sorted((float(prm.get("length_m", 0.006)) * 0.85, float(prm.get("length_m", 0.006)))), G)
-        sweep = unit(BACK[None] * 0.6 + DOWN[None] * 0.6 + 0.0 * gr)
+        sweep = normalize(BACK[None] * 0.6 + DOWN[None] * 0.6 + 0.0 * gr)
         grav, lift, layer, bend = 0.3, 0.002, np.full(G, 0.0008), 1.0
         sweep_w = 1.0
     elif sid == "undercut":
@@ -132,7 +133,7 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
         Lt, Ls = float(prm.get("top_length_m", 0.08)), float(prm.get("side_length_m", 0.006))
         L = np.where(is_top, Lt * rng.uniform(0.85, 1.0, G), Ls * rng.uniform(0.8, 1.0, G))
         sw = {"back": BACK, "left": LEFT, "right": -LEFT}[str(prm.get("swept", "back"))]
-        sweep = np.where(is_top[:, None], unit(sw[None] + 0.15 * UP[None] + 0 * gr), unit(DOWN + BACK * 0.4 + 0 * gr))
+        sweep = np.where(is_top[:, None], normalize(sw[None] + 0.15 * UP[None] + 0 * gr), normalize(DOWN + BACK * 0.4 + 0 * gr))
         grav, lift, bend = 0.25, np.where(is_top, 0.015, 0.002), 1.0
         layer = np.where(is_top, rng.uniform(0.004, 0.014, G), 0.001)
         sweep_w = 1.0
@@ -142,7 +143,7 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
         ce = c + np.array([0.0, 0.01, 0.025])
         env = 0.095 + R
         L = np.clip(env - np.linalg.norm(gr - ce, axis=1), 0.02, None) * 1.15 * rng.uniform(0.9, 1.0, G)
-        sweep = unit(unit(gr - ce) + 0.25 * UP)
+        sweep = normalize(normalize(gr - ce) + 0.25 * UP)
         grav, lift, layer, bend = 0.05, 0.03, rng.uniform(0.01, 0.03, G), 1.0
         sweep_w = 1.0
         extra["volume_radius_m"] = R
@@ -161,7 +162,7 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
             sweep = np.where(fr[:, None], FORWARD[None] * 0.5 + 0 * sweep, sweep)
             extra["fringe"] = True
         sweep = np.where(np.linalg.norm(sweep, axis=1, keepdims=True) < 1e-6, DOWN[None] + 0 * sweep, sweep)
-        sweep = unit(sweep)
+        sweep = normalize(sweep)
         grav = 0.55 if short else 1.0
         lift = 0.006 if short else 0.01
         layer = rng.uniform(0.002, 0.008 if short else 0.012, G)
@@ -179,7 +180,7 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
         w = sweep_w * np.clip((p[:, 2] - (zc - 0.03)) / 0.05, 0.0, 1.0)[:, None]
         if sid in ("afro", "buzz_cut"):
             w = np.ones_like(w)
-        vol = 0.15 * unit(p - c)
+        vol = 0.15 * normalize(p - c)
         # keep hair out of the face: in front of the face plane, push sideways and back
         in_face = ((p[:, 1] < face_y) & (p[:, 2] > chin_z) & (p[:, 2] < hf["brow_z"] + 0.03)
                    & (np.abs(p[:, 0] - c[0]) < 0.08)) * guard
@@ -261,9 +262,9 @@ def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
         if sid == "bun":
             rb = float(prm.get("bun_radius_m", 0.04))
             Bc = Bs + Bn * rb * 0.85
-            e1 = unit(B - Bc)[None].repeat(N, 0)
-            rnd = unit(rng.normal(size=(N, 3)))
-            e2 = unit(rnd - (rnd @ e1[0])[:, None] * e1)
+            e1 = normalize(B - Bc)[None].repeat(N, 0)
+            rnd = normalize(rng.normal(size=(N, 3)))
+            e2 = normalize(rnd - (rnd @ e1[0])[:, None] * e1)
             rr = rb * np.sqrt(rng.uniform(0.35, 1.0, N))
             turns = rng.uniform(0.9, 1.6, N)
             th = np.linspace(0.0, 1.0, n2)[1:][None] * turns[:, None] * 2 * np.pi
@@ -275,12 +276,12 @@ def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
             if sel.any():
                 nrm = surface.normals(c_tri[sel], c_bary[sel])
                 free = grow(surface, R[sel], nrm, rng.uniform(0.06, 0.14, int(sel.sum())), P,
-                              lambda p, s, k: DOWN[None] + 0.2 * unit(p - c), 0.008, layer[sel])
+                              lambda p, s, k: DOWN[None] + 0.2 * normalize(p - c), 0.008, layer[sel])
                 pts[sel] = free
             g_used = 1
         else:
             Lt = float(prm.get("tail_length_m", 0.25))
-            start_dir = unit(BACK * 0.8 + (UP * 0.6 if h in ("top", "high") else DOWN * 0.3))
+            start_dir = normalize(BACK * 0.8 + (UP * 0.6 if h in ("top", "high") else DOWN * 0.3))
             centre = grow(surface, B[None], start_dir[None], np.array([Lt]), n2 + 1,
                             lambda p, s, k: DOWN[None] * 1.0 + 0.25 * BACK[None], 0.05, 0.02)[0]
             t, b1, b2 = transport_frames(centre[None], LEFT)
@@ -316,7 +317,7 @@ def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
         part1 = _sphere_path(c, R, Bk[assign], n1 + 1, lift=0.002)
         # per-braid centre lines hanging down from their bases
         cent = grow(surface, Bk, bn, Lb * rng.uniform(0.85, 1.0, K), n2 + 1,
-                      lambda p, s, k: DOWN[None] + 0.3 * unit(p - c), 0.01, 0.01)
+                      lambda p, s, k: DOWN[None] + 0.3 * normalize(p - c), 0.01, 0.01)
         _, b1, b2 = transport_frames(cent, np.tile(LEFT, (K, 1)))
         rb = float(np.clip(0.012 * np.sqrt(6.0 / K), 0.003, 0.012))
         sub = np.arange(N) % 3

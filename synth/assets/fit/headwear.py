@@ -24,10 +24,10 @@ import numpy as np
 
 from synth.assets.fit.attach import push_out
 from synth.assets.fit.body import Body, Cloth, Parts, Shell, WaveNoise
-from synth.assets.fit.meshops import (boundary_loops, grid_faces, icosphere, laplacian_smooth, normalize, smoothstep,
-                                      sweep_tube)
+from synth.assets.fit.meshops import boundary_loops, grid_faces, icosphere, laplacian_smooth, smoothstep, sweep_tube
 
 CLEARANCE = 0.0015
+from synth.geometry.normals import normalize
 
 
 def _plane(body: Body, front_up: float, ear_up: float):

@@ -1,6 +1,6 @@
 """Mesh operations for the fitted shells (garments, headwear), pure numpy.
 
-* normals (face, area-weighted vertex) and small helpers (``normalize``, ``smoothstep``);
+* ``smoothstep`` (unit vectors and normals come from :mod:`synth.geometry.normals`);
 * :func:`clip_by_field` cuts a triangle set at the zero level of a per-vertex scalar field
   (neckline, cap plane...) exactly, returning new vertices as sparse linear combinations of
   body vertices (``W``, a scipy CSR matrix), so a shell is ``W @ V + offset * normal``;
@@ -16,27 +16,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
-
-def face_normals(V: np.ndarray, F: np.ndarray, unit: bool = True) -> np.ndarray:
-    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    if unit:
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-20)
-    return n
-
-
-def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals (unit; zero-area / unused vertices get +Z)."""
-    fn = face_normals(V, F, unit=False)
-    n = np.zeros_like(V)
-    for k in range(3):
-        np.add.at(n, F[:, k], fn)
-    ln = np.linalg.norm(n, axis=1, keepdims=True)
-    out = np.where(ln > 1e-20, n / np.maximum(ln, 1e-20), np.array([0.0, 0.0, 1.0]))
-    return out
-
-
-def normalize(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-20)
+from synth.geometry.normals import normalize
 
 
 def smoothstep(e0: float, e1: float, x):

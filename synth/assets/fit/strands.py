@@ -19,6 +19,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from synth.assets.fit.closest import closest_on_triangles
+from synth.geometry.normals import normalize
 
 UP = np.array([0.0, 0.0, 1.0])
 DOWN = -UP
@@ -29,11 +30,6 @@ LEFT = np.array([1.0, 0.0, 0.0])  # subject's left
 #: regions whose vertices are inside the head (never pushed against)
 _INTERIOR = ("mouth_interior", "teeth", "lash_helper_l_upper", "lash_helper_l_lower", "lash_helper_r_upper",
              "lash_helper_r_lower")
-
-
-def unit(v, axis=-1):
-    n = np.linalg.norm(v, axis=axis, keepdims=True)
-    return v / np.maximum(n, 1e-12)
 
 
 def scale_count(resolution: int, per_px: float, lo: int, hi: int) -> int:
@@ -67,11 +63,11 @@ class Surface:
         p = self.V[self.T]
         cr = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
         self.area = 0.5 * np.linalg.norm(cr, axis=1)
-        self.tri_n = unit(cr)
+        self.tri_n = normalize(cr)
         vn = np.zeros_like(self.V)
         for k in range(3):
             np.add.at(vn, self.T[:, k], cr)
-        self.vn = unit(vn)
+        self.vn = normalize(vn)
 
     # -- regions
     def mask(self, region: str) -> np.ndarray:
@@ -108,14 +104,14 @@ class Surface:
 
     def normals(self, tri, bary) -> np.ndarray:
         """Smooth (vertex-interpolated) normals at the roots."""
-        return unit(np.einsum("nk,nkd->nd", bary, self.vn[self.T[tri]]))
+        return normalize(np.einsum("nk,nkd->nd", bary, self.vn[self.T[tri]]))
 
     def frames(self, tri, V=None) -> np.ndarray:
         """(n, 3, 3) orthonormal frames of triangles (columns: edge, binormal, normal)."""
         V = self.V if V is None else V
         p = V[self.T[tri]]
-        e1 = unit(p[:, 1] - p[:, 0])
-        n = unit(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]))
+        e1 = normalize(p[:, 1] - p[:, 0])
+        n = normalize(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]))
         e2 = np.cross(n, e1)
         return np.stack([e1, e2, n], axis=2)
 
@@ -148,7 +144,7 @@ class Surface:
         r = np.arange(len(flat))
         q = Q[r, j]
         t = tri[r, j]
-        n = unit(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
+        n = normalize(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
         sd = np.einsum("nd,nd->n", flat - q, n)
         return q, sd, n
 
@@ -207,16 +203,16 @@ def grow(surface: Surface, roots: np.ndarray, normals: np.ndarray, lengths: np.n
     for k in range(1, n_points):
         s = seg * (k - 1)
         a = np.exp(-s / np.maximum(lift, 1e-6))[:, None]
-        tgt = unit(direction(out[:, k - 1], s, k))
-        d = unit(a * normals + (1.0 - a) * tgt)
-        d = unit((1.0 - bend) * prev + bend * d) if bend < 1.0 else d
+        tgt = normalize(direction(out[:, k - 1], s, k))
+        d = normalize(a * normals + (1.0 - a) * tgt)
+        d = normalize((1.0 - bend) * prev + bend * d) if bend < 1.0 else d
         p = out[:, k - 1] + seg[:, None] * d
         if collide:
             c = np.minimum(clr, 0.6 * seg * k)
             p = surface.push_out(p, c, iterations=1)
-            p = out[:, k - 1] + seg[:, None] * unit(p - out[:, k - 1])
+            p = out[:, k - 1] + seg[:, None] * normalize(p - out[:, k - 1])
             p = surface.push_out(p, c, iterations=1)
-        prev = unit(p - out[:, k - 1])
+        prev = normalize(p - out[:, k - 1])
         out[:, k] = p
     return out
 
@@ -237,14 +233,14 @@ def transport_frames(P: np.ndarray, ref: np.ndarray) -> tuple[np.ndarray, np.nda
     t = np.empty_like(P)
     t[:, :-1] = P[:, 1:] - P[:, :-1]
     t[:, -1] = t[:, -2]
-    t = unit(t)
+    t = normalize(t)
     b1 = np.empty_like(P)
-    b = unit(np.cross(t[:, 0], ref))
+    b = normalize(np.cross(t[:, 0], ref))
     bad = np.linalg.norm(np.cross(t[:, 0], ref), axis=1) < 1e-6
     if np.any(bad):
-        b[bad] = unit(np.cross(t[bad, 0], LEFT))
+        b[bad] = normalize(np.cross(t[bad, 0], LEFT))
     for k in range(P.shape[1]):
-        b = unit(b - np.einsum("nd,nd->n", b, t[:, k])[:, None] * t[:, k])
+        b = normalize(b - np.einsum("nd,nd->n", b, t[:, k])[:, None] * t[:, k])
         b1[:, k] = b
     b2 = np.cross(t, b1)
     return t, b1, b2
