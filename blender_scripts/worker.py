@@ -24,11 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from renderer_jobs.events import Commit, Error, Frame, Rss, Skip, Start, emit
+from synth.assets.classes import RECORD_ORDER
 from synth.errors import SynthError
-
-
-#: Classes listed under "assets" in every frame JSON (null where absent).
-ASSET_CLASSES = ("hair", "beard", "eyebrows", "eyelashes", "garment", "glasses", "headwear", "makeup", "iris", "skin")
 
 
 def rss_mb() -> float:
@@ -51,14 +48,15 @@ def software_versions() -> dict:
 
 
 def _dress(ident: dict, ctx, rigs_out: dict) -> dict:
-    """Build the identity's chosen assets (only those). Returns class -> frame-JSON record."""
+    """Build the identity's chosen assets (only those). Returns class -> frame-JSON record, every
+    registered class in RECORD_ORDER (null where absent)."""
     from blender_scripts import assets as basset
 
-    chosen = {c: ident.get("assets", {}).get(c) for c in ASSET_CLASSES}
+    chosen = {c: ident.get("assets", {}).get(c) for c in RECORD_ORDER}
     rigs = basset.dress(ctx, {c: e for c, e in chosen.items() if e})
     rigs_out.update(rigs)
     record = {}
-    for c in ASSET_CLASSES:
+    for c in RECORD_ORDER:
         e = chosen[c]
         if not e:
             record[c] = None
@@ -94,7 +92,7 @@ class IdentityScene:
         from blender_scripts import camera as bcam
         from blender_scripts import materials as bmat
         from blender_scripts import scene as bscene
-        from synth.skin import skin_albedo
+        from synth.appearance.skin import skin_albedo
 
         self.ident, self.hm, self.render_cfg = ident, hm, render_cfg
         self.run_seed, self.model_info, self.versions, self.shard_id = run_seed, model_info, versions, shard_id

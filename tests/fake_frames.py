@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from synth.assets.classes import RECORD_ORDER
 from synth.dataset.exr import CHANNELS
 from synth.dataset.layout import frame_key, parse_frame_key, shard_name
-
-ASSET_CLASSES = ["hair", "beard", "eyebrows", "eyelashes", "garment", "glasses", "headwear", "makeup", "iris", "skin"]
 
 
 def camera(size: int, radius: float = 1.0) -> dict:
@@ -31,7 +30,7 @@ def frame_json(key: str, size: int = 16) -> dict:
     pc = lm3 @ cam["world_to_camera"][:3, :3].T + cam["world_to_camera"][:3, 3]
     p = pc @ cam["K"].T
     lm2 = p[:, :2] / p[:, 2:3]
-    assets = {k: None for k in ASSET_CLASSES}
+    assets = {k: None for k in RECORD_ORDER}
     assets["hair"] = {"id": "hair_short_01", "params": {"melanin": 0.4}}
     return {
         "frame_id": key, "identity_index": ident, "expression_index": expr, "view_index": view,

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 import fake_frames as ff
+from synth.assets.classes import RECORD_ORDER
 from synth.conventions import project
 from synth.dataset.frame_json import build_frame_record, validate_frame_json
 from synth.dataset.fsio import dumps_json
@@ -71,7 +72,7 @@ def test_a_new_frame_validates_and_is_plain_json():
         identity_code=np.zeros(4, np.float32), planned_expression={"kind": "preset", "preset": "smile", "pose": {}},
         expression_code=np.ones(3), joint_rotations={"jaw": np.array([0.1, 0.0, 0.0]), "head": np.zeros(3)},
         head_pose=np.eye(4), landmarks_3d=lm3, landmarks_2d=uv.astype(np.float32), landmarks_visible=z > 0,
-        assets={c: None for c in ff.ASSET_CLASSES}, skin={"melanin": 0.1}, lighting={"environment": "uniform"},
+        assets={c: None for c in RECORD_ORDER}, skin={"melanin": 0.1}, lighting={"environment": "uniform"},
         render_preset="ci", render_settings={"engine": "CYCLES", "samples": 4, "denoiser": None, "device": "cpu"},
         software={"synth": "0", "blender": "none", "python": "3.11"})
     assert validate_frame_json(record) == []

@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 
 from synth.cli.main import main
-from synth.config import ASSET_CLASSES, ExpressionConfig, IdentityConfig, load_config
+from synth.assets.catalogue import load_catalogue
+from synth.assets.classes import NAMES
+from synth.config import ExpressionConfig, IdentityConfig, load_config
 from synth.conventions import project
 from synth.dataset.layout import frame_key
 from synth.errors import SynthError
@@ -217,8 +219,8 @@ def test_identity_codes_match_the_prior():
 
 
 def test_catalogue_is_valid_and_complete():
-    cat = assets.load_catalogue()
-    assert set(cat.classes) == set(ASSET_CLASSES)
+    cat = load_catalogue()
+    assert set(cat.classes) == set(NAMES)
     n = {c: len(v["assets"]) for c, v in cat.classes.items()}
     assert n["hair"] >= 8 and n["beard"] >= 5 and n["glasses"] >= 6 and n["eyelashes"] == 2 and n["garment"] >= 7
     assert cat.classes["glasses"]["presence"] < 1 and cat.classes["headwear"]["presence"] < 1
@@ -226,13 +228,13 @@ def test_catalogue_is_valid_and_complete():
 
 
 def test_asset_sampling_respects_rules_weights_and_ranges():
-    cat = assets.load_catalogue()
+    cat = load_catalogue()
     picks = assets.sample_assets_batch(9, np.arange(6000), cat)
     assert picks[123] == assets.sample_assets(9, 123, cat)
     tags = {c: {a["id"]: set(a.get("tags", [])) for a in v["assets"]} for c, v in cat.classes.items()}
     n_headwear = 0
     for p in picks:
-        assert set(p) == set(ASSET_CLASSES) and p["skin"] is not None and p["iris"] is not None
+        assert set(p) == set(NAMES) and p["skin"] is not None and p["iris"] is not None
         if p["headwear"]:
             n_headwear += 1
             assert p["hair"] is None or not (tags["hair"][p["hair"]["id"]] & {"long_hair", "voluminous_hair", "updo"})
@@ -262,7 +264,7 @@ def test_asset_sampling_respects_rules_weights_and_ranges():
 def test_bad_catalogues_are_refused(tmp_path, text, what):
     (tmp_path / "hair.toml").write_text(text)
     with pytest.raises(SynthError) as e:
-        assets.load_catalogue(tmp_path)
+        load_catalogue(tmp_path)
     assert what in str(e.value) and "hair.toml" in str(e.value) and "\n" not in str(e.value)
 
 

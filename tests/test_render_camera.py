@@ -17,7 +17,7 @@ def rendered(tmp_path_factory):
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world, project
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
-    from synth.skin import skin_albedo
+    from synth.appearance.skin import skin_albedo
 
     m = load_default_model()
     hm = HeadModel(m)

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from synth import seeds
+from synth.assets.catalogue import Catalogue, load_catalogue
 from synth.config import Config
 from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
 from synth.dataset.layout import frame_key, shard_name
@@ -60,7 +61,7 @@ class PlanArrays:
     height: int
 
 
-def sample_plan(cfg: Config, model: HeadModelData, catalogue: assets_mod.Catalogue, seed: int,
+def sample_plan(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: int,
                 first_identity: int, n_identities: int) -> PlanArrays:
     """Sample identities [first_identity, first_identity + n_identities) (vectorised)."""
     cfg = cfg.resolved()
@@ -170,7 +171,7 @@ class ShardSpecs:
                         "identities": idents}
 
 
-def replan_frame(cfg: Config, model: HeadModelData, catalogue: assets_mod.Catalogue, seed: int, identity: int,
+def replan_frame(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: int, identity: int,
                  expression: int, view: int) -> dict[str, Any]:
     """Re-plan one frame alone (as plain JSON data): the same object as in any plan with this
     seed, config, model and catalogue that contains the frame."""
@@ -222,7 +223,7 @@ def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first
     cameras.check_feasible(cfg.camera, cfg.dataset.views_per_expression)
     io.check_out_dir(Path(out))  # fail fast, before the sampling
     model, model_rec = model_record(model_path)
-    cat = assets_mod.load_catalogue(cfg.assets.manifest_dir or None)
+    cat = load_catalogue(cfg.assets.manifest_dir or None)
     d = cfg.dataset
     S = d.identities_per_shard
     n_shards = -(-n_identities // S)
