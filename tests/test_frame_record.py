@@ -12,8 +12,8 @@ import fake_frames as ff
 from synth.assets.classes import RECORD_ORDER
 from synth.conventions import project
 from synth.dataset.frame_json import build_frame_record, validate_frame_json
-from synth.dataset.fsio import dumps_json
 from synth.dataset.layout import frame_key
+from synth.io import dumps_json
 
 #: A frame JSON written by the bpy worker (`synth render --identities 2 --expressions 2 --views 3
 #: --preset ci --seed 7`, before the builder moved out of the worker), bytes as stored.

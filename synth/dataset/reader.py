@@ -40,9 +40,9 @@ import numpy as np
 
 from synth.dataset.exr import decode_frame_exr
 from synth.dataset.frame_json import check_frame_json
-from synth.dataset.fsio import loads_json
 from synth.dataset.layout import MANIFEST_FILE, SHARDS_DIR, SHARD_ID_RE
 from synth.errors import SynthError
+from synth.io import loads_json
 
 #: Largest frame member read from a tar stream (bytes); a larger one is refused, not read.
 MAX_MEMBER_BYTES = 1 << 30

@@ -18,7 +18,6 @@ import dataclasses
 import io
 import json
 import os
-import tempfile
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -26,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from synth.errors import ModelFormatError
+from synth.io import atomic_place
 
 FORMAT_NAME = "synth-head-model"
 FORMAT_VERSION = 1
@@ -290,18 +290,12 @@ def write_model(m: HeadModelData, path: str | os.PathLike, compress: bool = Fals
     validate_model(m, where=str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     members = _to_members(m)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    os.chmod(tmp, 0o644)  # mkstemp creates 0600; a model or mesh is meant to be shared
-    try:
-        with os.fdopen(fd, "wb") as f:
+
+    def fill(tmp: Path) -> None:
+        with open(tmp, "wb") as f:
             (np.savez_compressed if compress else np.savez)(f, **members)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+
+    atomic_place(path, fill)
     return path
 
 

@@ -25,13 +25,13 @@ up, face toward +Z; synth is Z up, face toward -Y: (x, y, z) -> (x, -z, y).
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 import numpy as np
 
 from synth.errors import ModelFormatError, SynthError
 from synth.geometry.normals import normalize
+from synth.io import sha256_file
 from synth.model import meshutil as mu
 from synth.model.format import HeadModelData
 from synth.model.importers import regions as rg
@@ -54,14 +54,6 @@ def to_synth(p: np.ndarray) -> np.ndarray:
     """FLAME (m, Y up, face +Z) -> synth (m, Z up, face -Y) on the last axis."""
     p = np.asarray(p, np.float64)
     return np.stack([p[..., 0], -p[..., 2], p[..., 1]], axis=-1)
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def _array(d: dict, key: str, where: str, ndim: int, kind: str = "f") -> np.ndarray:
@@ -245,7 +237,7 @@ def import_flame(model_file: str | Path, landmark_embedding: str | Path | None =
         license=LICENSE_TEXT,
         provenance={
             "source": "FLAME (MPI-IS), user-supplied", "source_file": model_file.name,
-            "source_sha256": _sha256(model_file), "landmark_file": Path(landmark_embedding).name,
+            "source_sha256": sha256_file(model_file), "landmark_file": Path(landmark_embedding).name,
             "masks_file": Path(masks).name if masks is not None else None,
             "importer": "synth.model.importers.flame", "importer_version": IMPORTER_VERSION,
             "vertices": n, "triangles": int(len(f)), "identity_dims": identity_dims,

@@ -7,6 +7,7 @@ from pathlib import Path
 
 
 def cache_dir() -> Path:
+    """The cache folder (created if missing): ``$SYNTH_CACHE_DIR``, else the platform's user cache."""
     env = os.environ.get("SYNTH_CACHE_DIR")
     if env:
         p = Path(env)
