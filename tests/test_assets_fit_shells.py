@@ -26,9 +26,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from synth.assets.fit.attach import Binding, SurfaceQuery, push_out
+from synth.assets.fit.attach import Binding, body_query, push_out
 from synth.assets.fit.body import Body, WaveNoise, fit_shell
-from synth.assets.fit.closest import closest_on_triangles
 from synth.assets.fit.garment import CLEARANCE as GARMENT_CLEARANCE
 from synth.assets.fit.garment import garment_shell
 from synth.assets.fit.headwear import CLEARANCE as HEADWEAR_CLEARANCE
@@ -99,22 +98,6 @@ def _penetration(ctx, pts: np.ndarray, k: int = 12) -> tuple[float, float, float
 
 # ----------------------------------------------------------------------------- building blocks
 
-def test_closest_on_triangles_matches_brute_force():
-    rng = np.random.default_rng(0)
-    A, B, C = rng.normal(size=(3, 500, 3))
-    P = rng.normal(size=(500, 3)) * 2
-    pts, bary = closest_on_triangles(P, A, B, C)
-    assert np.allclose(bary.sum(1), 1) and (bary >= 0).all()
-    assert np.allclose(pts, trimesh.triangles.closest_point(np.stack([A, B, C], 1), P), atol=1e-9)  # library oracle
-    # brute force on a dense barycentric grid: never closer than the analytic answer
-    g = np.array([(u, v) for u in np.linspace(0, 1, 41) for v in np.linspace(0, 1, 41) if u + v <= 1 + 1e-12])
-    S = A[:, None] * (1 - g.sum(1))[None, :, None] + B[:, None] * g[None, :, :1] + C[:, None] * g[None, :, 1:]
-    brute = np.linalg.norm(S - P[:, None], axis=2).min(1)
-    mine = np.linalg.norm(pts - P, axis=1)
-    assert np.all(mine <= brute + 1e-9)
-    assert np.all(brute - mine < 0.05 * np.maximum(1.0, np.linalg.norm(B - A, axis=1)))
-
-
 def _sphere(r=1.0):
     V, F = icosphere(3)
     return V * r, F
@@ -122,14 +105,14 @@ def _sphere(r=1.0):
 
 def test_signed_distance_and_push_out_on_sphere():
     V, F = _sphere(0.1)
-    q = SurfaceQuery(V, F)
+    q = body_query(V, F)
     rng = np.random.default_rng(1)
     d = normalize(rng.normal(size=(400, 3)))
     rad = rng.uniform(0.05, 0.15, 400)
-    sd = q.signed_distance(d * rad[:, None])
+    sd = q(d * rad[:, None])
     assert np.allclose(sd, rad - 0.1, atol=0.002)  # icosphere(3) chord error < 2 mm at r = 10 cm
     P = push_out(d * rad[:, None], q, 0.003)
-    assert q.signed_distance(P).min() >= 0.0029  # pushed along the interpolated normal: ~clearance
+    assert q(P).min() >= 0.0029  # pushed along the interpolated normal: ~clearance
     out = rad > 0.103 + 0.002
     assert np.allclose(P[out], (d * rad[:, None])[out])  # points already clear do not move
 

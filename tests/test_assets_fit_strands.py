@@ -14,7 +14,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from synth.assets.fit.groom import Groom, Styling, attach
-from synth.assets.fit.strands import Surface, arc_length, resample_fast, rotate_between, transport_frames
+from synth.assets.fit.strands import Surface, arc_length, resample_fast, transport_frames
 from synth.model.default import load_default_model
 from synth.model.head import HeadModel
 from tests import asset_scene
@@ -57,23 +57,6 @@ def test_attachment_reproduces_and_follows_a_rigid_motion():
     t = np.array([0.02, -0.01, 0.03])
     moved = att.positions(_sphere_ctx(ctx.vertices @ R.T + t))
     assert np.allclose(moved, placed @ R.T + t, atol=1e-12)
-
-
-def test_rotate_between_matches_scipy():
-    rng = np.random.default_rng(6)
-    a = rng.normal(size=(40, 3))
-    b = rng.normal(size=(40, 3))
-    a /= np.linalg.norm(a, axis=1, keepdims=True)
-    b /= np.linalg.norm(b, axis=1, keepdims=True)
-    x = rng.normal(size=(40, 5, 3))
-    got = rotate_between(a, b, x)
-    for i in range(40):
-        # the minimal rotation a -> b: axis a x b, angle acos(a . b)
-        axis = np.cross(a[i], b[i])
-        ang = np.arccos(np.clip(a[i] @ b[i], -1, 1))
-        R = Rotation.from_rotvec(axis / np.linalg.norm(axis) * ang)
-        assert np.allclose(got[i], R.apply(x[i]), atol=1e-10)
-        assert np.allclose(rotate_between(a[i:i + 1], b[i:i + 1], a[i][None, None])[0, 0], b[i], atol=1e-10)
 
 
 def test_resample_and_frames_on_a_helix():

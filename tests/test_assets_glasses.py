@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from synth.assets.classes import CLASSES
+from synth.assets.fit.glasses.contact import head_surface
 from synth.assets.fit.glasses.front import build_front
 from synth.assets.fit.glasses.solve import FRAME_PARTS, fit_glasses
 from synth.assets.fit.glasses.spec import STYLES, frame_spec
-from synth.assets.fit.glasses.surface import Surface
 from synth.model.default import load_default_model
 from synth.model.head import HeadModel
 from tests import asset_scene
@@ -79,39 +79,10 @@ def _lateral(frame_v, lens_v):
 # ----------------------------------------------------------------------------- pure numpy
 
 
-def test_closest_point_matches_trimesh():
-    import trimesh
-
-    from synth.assets.fit.closest import closest_on_triangles
-
-    rng = np.random.default_rng(0)
-    tri = rng.normal(size=(200, 3, 3))
-    p = rng.normal(size=(200, 3)) * 2
-    q, bary = closest_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2])
-    ref = trimesh.triangles.closest_point(tri, p)
-    np.testing.assert_allclose(q, ref, atol=1e-9)
-    np.testing.assert_allclose(bary.sum(1), 1.0, atol=1e-9)
-
-
-def test_ray_parity_on_a_sphere_with_a_fold():
-    import trimesh
-
-    from synth.assets.fit.glasses.surface import RayGrid
-
-    s = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
-    g = RayGrid(s.vertices, s.faces, [0, 1, 0], cell=0.004)
-    rng = np.random.default_rng(1)
-    p = rng.uniform(-0.07, 0.07, (500, 3))
-    inside = np.linalg.norm(p, axis=1) < 0.05
-    sure = np.abs(np.linalg.norm(p, axis=1) - 0.05) > 1e-3
-    assert np.all(g.inside(p[sure], -1.0) == inside[sure])
-    assert np.all(g.inside(p[sure], 1.0) == inside[sure])
-
-
 @pytest.mark.parametrize("case", ["id+3_brows"])
 def test_fit_all_styles_pure(case):
     data, verts, lms = _head(case)
-    surf = Surface(verts, data.triangles)
+    surf = head_surface(verts, data.triangles)
     for style in STYLES:
         spec = frame_spec(style, {}, np.random.default_rng(3))
         fit = fit_glasses(verts, data.triangles, data.regions, lms, spec, surface=surf)

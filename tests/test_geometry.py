@@ -15,8 +15,9 @@ from trimesh.intersections import planes_lines
 from trimesh.triangles import points_to_barycentric
 
 from synth.geometry.normals import face_normals, normalize, vertex_normals
-from synth.geometry.raycast import first_hits, ray_hit_counts
-from synth.geometry.rotations import axis_angle_to_matrix, fit_rigid, matrix_to_axis_angle, rotation_pivot
+from synth.geometry.raycast import RayGrid, first_hits, ray_hit_counts
+from synth.geometry.rotations import (axis_angle_to_matrix, fit_rigid, matrix_to_axis_angle, rotate_between,
+                                      rotation_pivot)
 
 
 def _bumpy_sphere_with_degenerates(seed: int = 0):
@@ -149,6 +150,48 @@ def test_ray_casting_degenerate_cases():
     assert tri.tolist() == [-1]
 
 
+def _torus_mesh():
+    m = trimesh.creation.torus(0.1, 0.03, major_sections=40, minor_sections=20)
+    return np.asarray(m.vertices), np.asarray(m.faces)
+
+
+@pytest.mark.parametrize("axis", [[0.0, 1.0, 0.0], [1.0, 0.3, 0.1], [0.0, 0.0, 1.0]])
+def test_ray_grid_matches_brute_force_crossings(axis):
+    """Lines along one axis through a torus (up to four crossings: a surface that folds back
+    over itself): the grid gives the same crossings as brute-force ray casting both ways, and
+    the parity on either side decides inside (the winding number is 1 inside a torus)."""
+    V, F = _torus_mesh()
+    d = np.asarray(axis) / np.linalg.norm(axis)
+    g = RayGrid(V, F, d, cell=0.004)
+    rng = np.random.default_rng(7)
+    P = rng.uniform(-0.14, 0.14, (400, 3)) * [1, 1, 0.3]
+    t = g.hits(P)
+    fwd = ray_hit_counts(P, np.broadcast_to(d, P.shape), V, F, t_min=0.0)
+    back = ray_hit_counts(P, np.broadcast_to(-d, P.shape), V, F, t_min=0.0)
+    np.testing.assert_array_equal(np.sum(t > 0, axis=1), fwd)
+    np.testing.assert_array_equal(np.sum(t < 0, axis=1), back)
+    assert np.any(fwd + back == (2 if abs(d[2]) > 0.9 else 4))
+    ring = np.hypot(np.hypot(P[:, 0], P[:, 1]) - 0.1, P[:, 2])
+    sure = np.abs(ring - 0.03) > 2e-3  # away from the faceted surface
+    for direction in (1.0, -1.0):
+        np.testing.assert_array_equal(g.inside(P[sure], direction), ring[sure] < 0.03)
+    _, _, t_first = first_hits(P, np.broadcast_to(d, P.shape), V, F)
+    np.testing.assert_allclose(g.first_hit(P, 1.0), t_first, rtol=1e-9, atol=1e-12)
+
+
+def test_ray_grid_outside_the_grid_and_shared_edges():
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], np.float64)
+    F = np.array([[0, 1, 2], [1, 3, 2]])
+    g = RayGrid(V, F, [0.0, 0.0, 1.0], cell=0.25)
+    far = np.array([[5.0, 5.0, 1.0], [-3.0, 0.5, -1.0]])
+    assert np.isnan(g.hits(far)).all() and not g.inside(far).any() and np.isinf(g.first_hit(far)).all()
+    # the documented edge rule: a shared edge's interior counts in both triangles; a corner
+    # only where it is corner 2 (vertex 2 is corner 2 of both triangles, vertex 1 of neither)
+    lines = np.array([[0.5, 0.5, -1.0], [0.25, 0.75, -2.0], [0.0, 1.0, -1.0], [1.0, 0.0, -1.0], [0.2, 0.2, -3.0]])
+    np.testing.assert_array_equal(np.sum(g.hits(lines) > 0, axis=1), [2, 2, 2, 0, 1])
+    np.testing.assert_allclose(g.first_hit(lines), [1.0, 2.0, 1.0, np.inf, 3.0])
+
+
 # --------------------------------------------------------------------------- rotations
 
 def _rotvecs(rng):
@@ -258,3 +301,24 @@ def test_rotation_pivot_at_180_degrees():
     assert abs(abs(axis[0]) - 1.0) < 1e-12 and abs(slide) < 1e-12
     with pytest.raises(ValueError, match="no rotation"):
         rotation_pivot(np.eye(3), np.zeros(3))
+
+
+def test_rotate_between_matches_scipy():
+    rng = np.random.default_rng(6)
+    a = rng.normal(size=(40, 3))
+    b = rng.normal(size=(40, 3))
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    b /= np.linalg.norm(b, axis=1, keepdims=True)
+    x = rng.normal(size=(40, 5, 3))
+    got = rotate_between(a, b, x)
+    for i in range(40):
+        # the minimal rotation a -> b: axis a x b, angle acos(a . b)
+        axis = np.cross(a[i], b[i])
+        ang = np.arccos(np.clip(a[i] @ b[i], -1, 1))
+        R = Rotation.from_rotvec(axis / np.linalg.norm(axis) * ang)
+        assert np.allclose(got[i], R.apply(x[i]), atol=1e-10)
+        assert np.allclose(rotate_between(a[i:i + 1], b[i:i + 1], a[i][None, None])[0, 0], b[i], atol=1e-10)
+    # no rotation when a == b; a quarter turn exactly
+    e = np.eye(3)
+    np.testing.assert_allclose(rotate_between(e[:1], e[:1], x[:1]), x[:1], atol=1e-15)
+    np.testing.assert_allclose(rotate_between(e[:1], e[1:2], e[None, :1]), e[None, 1:2], atol=1e-15)
