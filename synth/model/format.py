@@ -70,17 +70,9 @@ class HeadModelData:
     landmark_names: dict[str, list[str]] = dataclasses.field(default_factory=dict)
     extra: dict[str, Any] = dataclasses.field(default_factory=dict)  # free-form JSON metadata
 
-    @property
-    def num_vertices(self) -> int:
-        return int(self.template.shape[0])
-
-    @property
-    def identity_dims(self) -> int:
-        return int(self.identity_basis.shape[0])
-
-    @property
-    def expression_dims(self) -> int:
-        return int(self.expression_basis.shape[0])
+    num_vertices = property(lambda self: int(self.template.shape[0]), doc="V, the number of vertices.")
+    identity_dims = property(lambda self: int(self.identity_basis.shape[0]), doc="Ki, identity code length.")
+    expression_dims = property(lambda self: int(self.expression_basis.shape[0]), doc="Ke, expression code length.")
 
     def meta(self) -> dict[str, Any]:
         return {
@@ -102,28 +94,19 @@ class HeadModelData:
 
 # --------------------------------------------------------------------------- schema
 
-# member name -> (dtype kind, ndim); shapes are cross-checked in validate_model.
+# member name -> (dtype kind, ndim), one concept a line; shapes are cross-checked in
+# validate_model. The order is the order of the members in the file.
 _ARRAY_SCHEMA: dict[str, tuple[str, int]] = {
-    "template": ("f", 2),
-    "triangles": ("i", 2),
-    "identity_basis": ("f", 3),
-    "identity_scale": ("f", 1),
-    "expression_basis": ("f", 3),
-    "expression_scale": ("f", 1),
-    "joint_parents": ("i", 1),
-    "joint_rest": ("f", 2),
-    "joint_identity_basis": ("f", 3),
+    "template": ("f", 2), "triangles": ("i", 2),
+    "identity_basis": ("f", 3), "identity_scale": ("f", 1),
+    "expression_basis": ("f", 3), "expression_scale": ("f", 1),
+    "joint_parents": ("i", 1), "joint_rest": ("f", 2), "joint_identity_basis": ("f", 3),
     "skin_weights": ("f", 2),
-    "prior_weights": ("f", 1),
-    "prior_means": ("f", 2),
-    "prior_covs": ("f", 3),
+    "prior_weights": ("f", 1), "prior_means": ("f", 2), "prior_covs": ("f", 3),
 }
 _OPTIONAL_ARRAYS: dict[str, tuple[str, int]] = {
-    "poly_offsets": ("i", 1),
-    "poly_indices": ("i", 1),
-    "uvs": ("f", 2),
-    "tri_uv": ("i", 2),
-    "poly_uv": ("i", 1),
+    "poly_offsets": ("i", 1), "poly_indices": ("i", 1),
+    "uvs": ("f", 2), "tri_uv": ("i", 2), "poly_uv": ("i", 1),
 }
 
 _META_SCHEMA = {
