@@ -141,10 +141,6 @@ class Dataset:
         except ManifestError as e:
             raise SynthError(str(e), str(p), "run `synth validate`; re-render the shard into a new --out") from None
 
-    def update_index(self) -> dict:
-        self._need_writable()
-        return update_index(self.root, self.plan_hash)
-
     # -- writing -----------------------------------------------------------------------------
     def _need_writable(self) -> None:
         if not self.writable:

@@ -32,7 +32,8 @@ FORMAT_VERSION = 1
 
 #: Joints every model must have (more are allowed).
 REQUIRED_JOINTS = ("neck", "head", "jaw", "eye_l", "eye_r")
-#: Region names every model should define (a missing one is an error only if listed here).
+#: Region names every model is expected to define (the asset rigs read them; hair needs
+#: ``scalp``). validate_model does not require them.
 REQUIRED_REGIONS = ("face", "scalp", "ears", "eyes", "teeth", "mouth_interior", "eyelash_lines", "neck")
 #: Landmark sets every model must define.
 REQUIRED_LANDMARK_SETS = ("ibug68",)
