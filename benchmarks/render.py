@@ -22,7 +22,6 @@ import argparse
 import os
 import platform
 import resource
-import shutil
 import sys
 import tempfile
 import time

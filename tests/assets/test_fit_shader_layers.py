@@ -15,11 +15,8 @@ from synth.model.meshutil import fit_sphere
 
 
 @pytest.fixture(scope="module")
-def head():
-    from synth.model.default import load_default_model
-    from synth.model.head import HeadModel
-
-    hm = HeadModel(load_default_model())
+def head(default_head):
+    hm = default_head
     d = hm.data
     ev = hm.evaluate(np.zeros(d.identity_dims), np.zeros(d.expression_dims), np.zeros((hm.J, 3)))
     return d, ev.vertices[0].astype(np.float64), ev.landmarks["ibug68"][0].astype(np.float64)
