@@ -1,13 +1,13 @@
 """Dump every asset rig's geometry for a few planned identities, or compare two such dumps.
 
-    PYTHONPATH=OLD .venv/bin/python scripts/compare_rigs.py dump /tmp/rigs-old [--identities 12]
-    PYTHONPATH=NEW .venv/bin/python scripts/compare_rigs.py dump /tmp/rigs-new [--identities 12]
+    PYTHONPATH=OLD .venv/bin/python scripts/compare_rigs.py dump /tmp/rigs-old [--identities 24 --seed 3]
+    PYTHONPATH=NEW .venv/bin/python scripts/compare_rigs.py dump /tmp/rigs-new [--identities 24 --seed 3]
     .venv/bin/python scripts/compare_rigs.py compare /tmp/rigs-old /tmp/rigs-new
 
 ``dump`` (needs bpy) plans ``--identities`` identities (the catalogue's own presence
-probabilities: use enough identities to meet every class), builds each identity's scene as the worker does (head, materials,
-assets) for its first two planned expressions, and writes per identity and expression: the
-evaluated vertices of every rig object, the head's point attributes written by shader-layer
+probabilities; the defaults meet every class), builds each identity's scene as the worker
+does (head, materials, assets) for its two planned expressions, and writes per identity and
+expression: the evaluated vertices of every rig object, the head's point attributes written by shader-layer
 rigs (makeup and skin masks, iris coordinates) and the rigs' frame-JSON ``build`` records.
 ``compare`` prints every array or record that is not bit-identical and exits 1 if any.
 Used to show that a refactor of the fitting code leaves the rigs unchanged, without the
@@ -130,8 +130,8 @@ def main() -> int:
     sub = ap.add_subparsers(dest="cmd", required=True)
     d = sub.add_parser("dump")
     d.add_argument("out", type=Path)
-    d.add_argument("--identities", type=int, default=12)
-    d.add_argument("--seed", type=int, default=7)
+    d.add_argument("--identities", type=int, default=24)
+    d.add_argument("--seed", type=int, default=3)
     c = sub.add_parser("compare")
     c.add_argument("a", type=Path)
     c.add_argument("b", type=Path)

@@ -1,9 +1,9 @@
 """Makeup rig: shader layers over the skin material (no new objects).
 
 Masks are computed per vertex with numpy from the head regions and ibug68 landmarks
-(:func:`synth.assets.fit.masks.makeup_masks`) and written to the head mesh as two point colour attributes (``makeup_mask``: lips, eyeshadow,
-eyeliner, blush; ``makeup_mask2``: foundation, eyeliner wing), read back in the skin
-material by Attribute nodes and mixed over the skin's base colour / roughness / coat.
+(:func:`synth.assets.fit.masks.makeup_masks`) and written to the head mesh as two point
+colour attributes (``makeup_mask``: lips, eyeshadow, eyeliner, blush; ``makeup_mask2``:
+foundation, eyeliner wing), read back in the skin material by Attribute nodes and mixed over the skin's base colour / roughness / coat.
 Looks: ``light_foundation``, ``lipstick`` (with gloss), ``eyeliner`` (optional wing),
 ``eyeshadow`` (with shimmer), ``blush``, ``full_look`` (lips + shadow + liner + blush).
 """

@@ -11,8 +11,8 @@
   grid-accelerated parity rays along one axis.
 
 The package imports only numpy; ``closest`` and ``sdf`` (scipy KD trees) are imported by name
-when needed. OBJ reading lives in :mod:`synth.model.importers.obj`; general mesh utilities (sphere fits,
-connectivity, boundaries, sampling) in :mod:`synth.model.meshutil`.
+when needed. OBJ reading lives in :mod:`synth.model.importers.obj`; general mesh utilities
+(sphere fits, connectivity, boundaries, sampling) in :mod:`synth.model.meshutil`.
 """
 
 from synth.geometry.normals import dot, face_normals, normalize, vertex_normals

@@ -107,7 +107,8 @@ def skin_detail_mask(data, V, lm) -> np.ndarray:
     brow_c = 0.5 * (lm[19] + lm[24])
     tz = np.maximum(feather(np.abs(V[:, 0] - nose_tip[0]), 0.008, 0.02) * (V[:, 2] > nose_tip[2] - 0.01)
                     * (V[:, 2] < brow_c[2] + 0.05), feather(np.linalg.norm(V - lm[8], axis=1), 0.01, 0.025))
-    forehead = (V[:, 2] > brow_c[2] + 0.012) * feather(np.abs(V[:, 0] - brow_c[0]), 0.035, 0.055) * (V[:, 1] < brow_c[1] + 0.03)
+    forehead = ((V[:, 2] > brow_c[2] + 0.012) * feather(np.abs(V[:, 0] - brow_c[0]), 0.035, 0.055)
+                * (V[:, 1] < brow_c[1] + 0.03))
     crows = np.maximum(feather(np.linalg.norm(V - (lm[45] + [0.01, 0.004, 0]), axis=1), 0.002, 0.012),
                        feather(np.linalg.norm(V - (lm[36] + [-0.01, 0.004, 0]), axis=1), 0.002, 0.012))
     wr = np.maximum(forehead, crows)
