@@ -7,8 +7,9 @@
 ``dump`` (needs bpy) plans ``--identities`` identities (the catalogue's own presence
 probabilities; the defaults meet every class), builds each identity's scene as the worker
 does (head, materials, assets) for its two planned expressions, and writes per identity and
-expression: the evaluated vertices of every rig object, the head's point attributes written by shader-layer
-rigs (makeup and skin masks, iris coordinates) and the rigs' frame-JSON ``build`` records.
+expression: the evaluated vertices of every rig object, the head's point attributes written
+by shader-layer rigs (makeup and skin masks, iris coordinates) and the rigs' frame-JSON
+``build`` records.
 ``compare`` prints every array or record that is not bit-identical and exits 1 if any.
 Used to show that a refactor of the fitting code leaves the rigs unchanged, without the
 sampling noise of a render.
