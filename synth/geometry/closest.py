@@ -81,18 +81,28 @@ class Closest(NamedTuple):
     distance: np.ndarray
 
 
-def nearest_on_candidates(points, vertices, triangles, candidates) -> Closest:
+def nearest_on_candidates(points, vertices, triangles, candidates, by: str = "squared") -> Closest:
     """The closest point of each point's candidate triangles: ``candidates`` (N, K) indices into
-    ``triangles`` (rows may repeat an index). Ties go to the first candidate of the row."""
+    ``triangles`` (rows may repeat an index). Ties go to the first candidate of the row.
+
+    ``by`` is what is compared: ``"squared"`` distances, or the ``"distance"`` itself, whose
+    square root rounds candidates within about an ulp of each other (a point nearest to an
+    edge shared by two triangles) to a tie. Both give the same distance; the triangle (and so
+    the barycentrics and a face normal) can differ in such near-ties. The strand rigs use
+    ``"distance"``, everything else ``"squared"``, which keeps every rig's geometry as it was
+    before the two implementations became one."""
+    if by not in ("squared", "distance"):
+        raise ValueError(f"by must be 'squared' or 'distance', not {by!r}")
     P = np.asarray(points, np.float64).reshape(-1, 3)
     V = np.asarray(vertices, np.float64)
     cand = np.asarray(candidates, np.int64).reshape(len(P), -1)
     tri = np.asarray(triangles, np.int64)[cand]
     q, bary = closest_on_triangles(P[:, None, :], V[tri[..., 0]], V[tri[..., 1]], V[tri[..., 2]])
     d2 = ((q - P[:, None, :]) ** 2).sum(-1)
-    best = np.argmin(d2, axis=1)
+    dist = np.sqrt(d2)
+    best = np.argmin(d2 if by == "squared" else dist, axis=1)
     r = np.arange(len(P))
-    return Closest(q[r, best], cand[r, best], bary[r, best], np.sqrt(d2[r, best]))
+    return Closest(q[r, best], cand[r, best], bary[r, best], dist[r, best])
 
 
 class ClosestPoints:
@@ -101,14 +111,16 @@ class ClosestPoints:
     The candidates for a point are the ``k`` triangles whose centroids are nearest to it: exact
     whenever the closest triangle is among them, which holds for points near a surface whose
     triangles are of similar size (a point on a triangle is within its circumradius of the
-    centroid). Memory is bounded by answering ``chunk`` points at a time."""
+    centroid). Memory is bounded by answering ``chunk`` points at a time. ``by``: see
+    :func:`nearest_on_candidates`."""
 
-    def __init__(self, vertices, triangles, faces=None, k: int = 16, chunk: int = 4096):
+    def __init__(self, vertices, triangles, faces=None, k: int = 16, chunk: int = 4096, by: str = "squared"):
         self.V = np.asarray(vertices, np.float64)
         self.F = np.asarray(triangles, np.int64)
         self.faces = np.arange(len(self.F)) if faces is None else np.asarray(faces, np.int64)
         self.k = int(min(k, len(self.faces)))
         self.chunk = int(chunk)
+        self.by = by
         t = self.V[self.F[self.faces]]
         self.tree = cKDTree((t[:, 0] + t[:, 1] + t[:, 2]) / 3.0)
 
@@ -123,4 +135,4 @@ class ClosestPoints:
 
     def _query(self, P) -> Closest:
         _, cand = self.tree.query(P, k=self.k, workers=-1)
-        return nearest_on_candidates(P, self.V, self.F, self.faces[np.asarray(cand).reshape(len(P), -1)])
+        return nearest_on_candidates(P, self.V, self.F, self.faces[np.asarray(cand).reshape(len(P), -1)], self.by)

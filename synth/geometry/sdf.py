@@ -14,7 +14,8 @@ per use (``sign``):
     plane (equal to the signed distance when the closest point is inside the triangle).
 
 The normals come from the whole mesh ``triangles``; queries can be restricted to a subset
-``faces``. A point exactly on the surface counts as outside (sign +1).
+``faces``. A point exactly on the surface counts as outside (sign +1). ``k`` and ``by`` pass
+to :class:`synth.geometry.closest.ClosestPoints`.
 """
 
 from __future__ import annotations
@@ -44,13 +45,13 @@ class SurfaceHit(NamedTuple):
 class SignedDistance:
     """Signed-distance queries against a triangle mesh (see the module docstring for ``sign``)."""
 
-    def __init__(self, vertices, triangles, *, faces=None, sign: str = "pseudo", k: int = 16):
+    def __init__(self, vertices, triangles, *, faces=None, sign: str = "pseudo", k: int = 16, by: str = "squared"):
         if sign not in SIGNS:
             raise ValueError(f"sign must be one of {SIGNS}, not {sign!r}")
         self.V = np.asarray(vertices, np.float64)
         self.F = np.asarray(triangles, np.int64)
         self.sign = sign
-        self.closest = ClosestPoints(self.V, self.F, faces, k=k)
+        self.closest = ClosestPoints(self.V, self.F, faces, k=k, by=by)
         self.face_normals = face_normals(self.V, self.F)
         if sign == "pseudo":
             self.vertex_normals = vertex_normals(self.V, self.F, "angle")

@@ -143,3 +143,25 @@ def test_nearest_on_candidates_ties_go_to_the_first_candidate():
     assert nearest_on_candidates(P, V, F, [[0, 1]]).face[0] == 0
     assert nearest_on_candidates(P, V, F, [[1, 0]]).face[0] == 1
     assert nearest_on_candidates(P, V, F, [[1, 0]]).distance[0] == 1.0
+
+
+def test_near_ties_by_squared_distance_or_by_distance():
+    """A point above an edge shared by two triangles: the closest points computed on either
+    triangle differ by round-off, so their squared distances differ by an ulp while the
+    distances (square roots) are equal. ``by="squared"`` takes the smaller, ``by="distance"``
+    the first candidate; both report the same distance."""
+    V = np.array([[-0.43138603184179836, 0.9574239667720826, -1.2387743263168363],
+                  [1.2929511646847092, 0.47479931873797876, -0.22838809024354395],
+                  [-0.14232728717871945, 0.8299271042495487, -1.4313942795106365],
+                  [2.040761939896942, -0.8134195295344778, -0.7652832419470891]])
+    F = np.array([[0, 1, 2], [1, 0, 3]])
+    P = np.array([[1.242270374823056, 2.222182821423372, -0.7891898989840453]])
+    q, _ = closest_on_triangles(P, V[F[:, 0]], V[F[:, 1]], V[F[:, 2]])
+    d2 = ((q - P) ** 2).sum(-1)
+    assert d2[0] < d2[1] and np.sqrt(d2[0]) == np.sqrt(d2[1])
+    sq = nearest_on_candidates(P, V, F, [[1, 0]], by="squared")
+    di = nearest_on_candidates(P, V, F, [[1, 0]], by="distance")
+    assert sq.face[0] == 0 and di.face[0] == 1 and sq.distance[0] == di.distance[0]
+    assert ClosestPoints(V, F, by="distance")(P).distance[0] == sq.distance[0]
+    with pytest.raises(ValueError, match="by"):
+        nearest_on_candidates(P, V, F, [[0, 1]], by="manhattan")

@@ -128,7 +128,7 @@ class Surface:
         """Closest points on the exterior head triangles (the 16 with the nearest centroids
         tried), the height above the closest face's plane and that face's unit normal."""
         if self._exact is None:
-            self._exact = SignedDistance(self.V, self.T, faces=self.ext_tris, sign="face", k=16)
+            self._exact = SignedDistance(self.V, self.T, faces=self.ext_tris, sign="face", k=16, by="distance")
         h = self._exact.query(P.reshape(-1, 3))
         return h.point, h.signed, h.normal
 
