@@ -59,7 +59,7 @@ def _evaluated_points(ob) -> np.ndarray:
     return p.reshape(-1, 3).astype(np.float64) @ mw[:3, :3].T + mw[:3, 3]
 
 
-def dump(out: Path, identities: int, seed: int) -> None:
+def dump(out: Path, identities: int, seed: int, preset: str = "ci") -> None:
     from blender_scripts import scene as bscene
     from blender_scripts.worker import IdentityScene
     from synth.config import load_config
@@ -71,7 +71,7 @@ def dump(out: Path, identities: int, seed: int) -> None:
     arrays: dict[str, np.ndarray] = {}
     records: dict[str, object] = {}
     with tempfile.TemporaryDirectory(prefix="synth-rigs-") as d:
-        cfg = load_config(None, ['render.preset="ci"', "dataset.expressions_per_identity=2",
+        cfg = load_config(None, [f'render.preset="{preset}"', "dataset.expressions_per_identity=2",
                                  "dataset.views_per_expression=1"])
         run_plan(cfg, identities, Path(d) / "plan", seed=seed)
         plan = load_plan(Path(d) / "plan")
@@ -133,12 +133,13 @@ def main() -> int:
     d.add_argument("out", type=Path)
     d.add_argument("--identities", type=int, default=24)
     d.add_argument("--seed", type=int, default=3)
+    d.add_argument("--preset", default="ci", help="render preset: its resolution sets the strand counts")
     c = sub.add_parser("compare")
     c.add_argument("a", type=Path)
     c.add_argument("b", type=Path)
     args = ap.parse_args()
     if args.cmd == "dump":
-        dump(args.out, args.identities, args.seed)
+        dump(args.out, args.identities, args.seed, args.preset)
         return 0
     return compare(args.a, args.b)
 
