@@ -20,7 +20,7 @@ import torch
 
 from prior.data.bounds import intersect_sphere
 from prior.data.sampler import pixel_radius
-from synth.dataset.fsio import atomic_place, atomic_write_bytes, atomic_write_json
+from synth.io import atomic_place, atomic_write_bytes, atomic_write_json
 from synth.dataset.reader import camera_rays
 from synth.errors import SynthError
 

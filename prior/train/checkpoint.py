@@ -26,7 +26,7 @@ import torch
 from prior.data.codes import CodeLayout
 from prior.data.store import IdentityInfo
 from prior.train import config as run_config
-from synth.dataset.fsio import atomic_write_bytes, sha256_bytes
+from synth.io import atomic_write_bytes, sha256_bytes
 from synth.errors import SynthError
 
 FORMAT = "synth-prior-checkpoint/1"

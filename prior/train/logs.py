@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from synth.dataset.fsio import atomic_write_bytes
+from synth.io import atomic_write_bytes
 
 METRICS_FILE = "metrics.jsonl"
 TB_DIR = "tb"

@@ -20,7 +20,7 @@ from prior.data.store import FrameStore, load_store
 from prior.train import checkpoint as ckpt
 from prior.train import config as run_config
 from prior.train.setup import fit_scene
-from synth.dataset.fsio import atomic_write_bytes, atomic_write_json
+from synth.io import atomic_write_bytes, atomic_write_json
 from synth.errors import SynthError
 
 CONFIG_FILE = "config.toml"

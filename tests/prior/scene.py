@@ -4,16 +4,13 @@ as committed shards through the real dataset writer. Used by the prior's data/tr
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: fake_frames
-
-import fake_frames as ff  # noqa: E402
-from synth.dataset.reader import camera_rays  # noqa: E402
-from synth.dataset.shards import open_dataset  # noqa: E402
+from synth.dataset.reader import camera_rays
+from synth.dataset.shards import open_dataset
+from tests.support import fake_frames as ff
 
 ID_SIZE, EXPR_SIZE = 4, 3
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-import scene
+from tests.prior import scene
 from prior.train import checkpoint as ckpt
 from prior.train.loop import Trainer
 from prior.train.run import prepare

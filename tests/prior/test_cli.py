@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import scene
+from tests.prior import scene
 
 pytest.importorskip("OpenEXR")
 ROOT = Path(__file__).resolve().parents[2]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import scene
+from tests.prior import scene
 from prior.data import CodeLayout, RaySampler, bounding_sphere, intersect_sphere, load_store
 from synth.dataset.reader import iter_frames
 from synth.errors import SynthError

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-import scene
+from tests.prior import scene
 from prior.train import checkpoint as ckpt
 from prior.train import loop
 from prior.train.config import TrainConfig
