@@ -86,19 +86,29 @@ def _set_environment(ident: dict, plan) -> dict:
 
 
 class IdentityScene:
-    """One identity's scene: built once (head, materials, lighting, assets, camera); each
-    expression is a vertex update (+ rig updates) and each view a camera move."""
+    """One identity's scene, built once on the identity's neutral head (head, materials,
+    lighting, assets, camera); each expression is a vertex update (+ rig updates) and each view
+    a camera move.
+
+    Resume gives the same bytes: what an expression's frames show depends only on the identity
+    and that expression, never on the expressions rendered before it in this process. So the
+    assets are fitted to the neutral head (not to whichever expression happens to come first),
+    every ``set_expression`` is a pure function of the built rigs and the new expression, and
+    Cycles' persistent data (BVH, shaders) is dropped at each expression change: it is kept
+    only between the views of one expression, where nothing but the camera moves.
+    """
 
     def __init__(self, ident: dict, hm, plan, render_cfg: dict, run_seed: int, model_info: dict,
                  versions: dict, shard_id: str = "", asset_resolution: int | None = None):
         from blender_scripts import camera as bcam
+        from blender_scripts import head as bhead
         from blender_scripts import materials as bmat
         from blender_scripts import scene as bscene
+        from blender_scripts.assets import HeadContext
         from synth.skin import skin_albedo
 
         self.ident, self.hm, self.render_cfg = ident, hm, render_cfg
         self.run_seed, self.model_info, self.versions, self.shard_id = run_seed, model_info, versions, shard_id
-        self.asset_resolution = asset_resolution  # benchmarks: strand counts independent of the image size
         bscene.reset()
         f0 = ident["expressions"][0]["frames"][0]["camera"]
         self.width, self.height = int(f0["width"]), int(f0["height"])
@@ -109,17 +119,30 @@ class IdentityScene:
         self.skin_record = {**skin, "albedo_linear_srgb": [round(a, 6) for a in albedo]}
         self.materials = bmat.head_materials(skin, albedo)
         self.beta = np.asarray(ident["identity_code"], np.float64)
-        zero_psi = np.zeros(hm.data.expression_dims)
-        self.rest = hm.evaluate(self.beta, zero_psi, np.zeros((hm.J, 3)), landmarks=False).vertices[0].astype(np.float64)
-        self.head_ob = self.ctx = None
+        rest = self._evaluate(np.zeros(hm.data.expression_dims), np.zeros((hm.J, 3)))
+        self.rest = rest[0]
+        self.head_ob = bhead.build_head_object(hm.data, self.rest, self.materials)
+        bhead.set_rest_positions(self.head_ob, self.rest)
+        self.effective["subdivision_levels"] = bhead.add_render_subdivision(self.head_ob, max(self.width, self.height))
+        # asset_resolution: benchmarks keep strand counts independent of the image size
+        self.ctx = HeadContext(data=hm.data, head=self.head_ob, materials=self.materials, rest_vertices=self.rest,
+                               vertices=self.rest, joint_transforms=rest[2], joint_index=dict(hm.joint_index),
+                               landmarks=rest[1], resolution=asset_resolution or max(self.width, self.height),
+                               identity_index=int(ident["identity_index"]), run_seed=run_seed)
         self.rigs: dict = {}
-        self.assets_record: dict = {}
+        self.assets_record = _dress(ident, self.ctx, self.rigs)
         self.cam_ob = bcam.make_camera()
         self.expr = None
 
+    def _evaluate(self, psi: np.ndarray, rot: np.ndarray):
+        """(vertices, landmarks by set, joint transforms) of this identity, float64."""
+        ev = self.hm.evaluate(self.beta, psi, rot)
+        return (ev.vertices[0].astype(np.float64), {k: v[0].astype(np.float64) for k, v in ev.landmarks.items()},
+                ev.joint_transforms[0].astype(np.float64))
+
     def set_expression(self, e: dict) -> None:
         from blender_scripts import head as bhead
-        from blender_scripts.assets import HeadContext
+        from blender_scripts import scene as bscene
         from blender_scripts.assets import update as update_rigs
 
         hm = self.hm
@@ -127,25 +150,11 @@ class IdentityScene:
         rot = np.zeros((hm.J, 3))
         for name, r in (e.get("joint_rotations") or {}).items():
             rot[hm.joint_index[name]] = r
-        ev = hm.evaluate(self.beta, psi, rot)
-        verts = ev.vertices[0].astype(np.float64)
-        lms = {k: v[0].astype(np.float64) for k, v in ev.landmarks.items()}
-        joints = ev.joint_transforms[0].astype(np.float64)
-        if self.head_ob is None:
-            self.head_ob = bhead.build_head_object(hm.data, verts, self.materials)
-            bhead.set_rest_positions(self.head_ob, self.rest)
-            self.effective["subdivision_levels"] = bhead.add_render_subdivision(self.head_ob,
-                                                                                max(self.width, self.height))
-            self.ctx = HeadContext(data=hm.data, head=self.head_ob, materials=self.materials,
-                                   rest_vertices=self.rest, vertices=verts, joint_transforms=joints,
-                                   joint_index=dict(hm.joint_index), landmarks=lms,
-                                   resolution=self.asset_resolution or max(self.width, self.height),
-                                   identity_index=int(self.ident["identity_index"]), run_seed=self.run_seed)
-            self.assets_record = _dress(self.ident, self.ctx, self.rigs)
-        else:
-            bhead.set_vertices(self.head_ob, verts)
-            self.ctx.vertices, self.ctx.joint_transforms, self.ctx.landmarks = verts, joints, lms
-            update_rigs(self.rigs, self.ctx)
+        verts, lms, joints = self._evaluate(psi, rot)
+        bhead.set_vertices(self.head_ob, verts)
+        self.ctx.vertices, self.ctx.joint_transforms, self.ctx.landmarks = verts, joints, lms
+        update_rigs(self.rigs, self.ctx)
+        bscene.drop_render_cache()
         self.expr = {"e": e, "psi": psi, "rot": rot, "lm3d": lms["ibug68"],
                      "head_pose": joints[hm.joint_index["head"]]}
 
