@@ -2,10 +2,13 @@
 
     python -m blender_scripts.worker --dataset DIR --plan PLAN_DIR --shards shard_000000,shard_000001
 
-Per identity one scene is built (head mesh, materials, lights, camera); each expression is a
-vertex update and each view a camera move, so nothing is rebuilt per view. Frames already
-written by an interrupted run are skipped. Progress goes to stdout as JSON-line events
-(``renderer_jobs.events``: start, frame, rss, skip, commit, error).
+Per identity one scene is built on the neutral head (head mesh, materials, lights, assets,
+camera); each expression is a vertex update and each view a camera move, so nothing is rebuilt
+per view, and a frame's bytes do not depend on which frames the process rendered before it.
+Frames already written by an interrupted run are skipped. Progress goes to stdout as JSON-line
+events (``renderer_jobs.events``: start, frame, rss, heartbeat, skip, commit, error); the exit
+status says how it ended (0, 2 input error, 4 disk full, 128 + signal when told to stop).
+Signals and the death of the parent stop it at once (``renderer_jobs.guard``).
 The worker draws no random numbers: every choice comes from the plan.
 """
 
@@ -15,7 +18,6 @@ import argparse
 import os
 import platform
 import resource
-import signal
 import sys
 import tempfile
 import time
@@ -23,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from renderer_jobs.events import Commit, Error, Frame, Rss, Skip, Start, emit
+from renderer_jobs.events import EXIT_DISK_FULL, EXIT_INPUT, Commit, Error, Frame, Rss, Skip, Start, emit
 from synth.errors import SynthError
 
 
@@ -188,7 +190,7 @@ class IdentityScene:
         self.ctx = self.head_ob = None
 
 
-def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> int:
+def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path, lease_ttl: float) -> int:
     """Render the missing frames of one shard and commit it. Returns frames rendered."""
     spec = plan.shard(shard_id)
     render_cfg = plan.render_settings()
@@ -196,7 +198,7 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> in
     rendered = 0
     seeds = {f["frame_id"]: f["seed"] for ident in spec["identities"] for e in ident["expressions"]
              for f in e["frames"]}
-    st = ds.try_staging(shard_id)
+    st = ds.try_staging(shard_id, lease_ttl)
     if st is None:  # committed meanwhile, or another process holds it
         emit(Skip(shard=shard_id))
         return 0
@@ -226,19 +228,26 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> in
 
 
 def main(argv: list[str] | None = None) -> int:
+    from renderer_jobs import guard
+    from synth.dataset.lease import DEFAULT_TTL_S, held_leases
+
     ap = argparse.ArgumentParser(description="synth render worker (one bpy process)")
     ap.add_argument("--dataset", required=True)
     ap.add_argument("--plan", required=True)
     ap.add_argument("--shards", required=True)
+    ap.add_argument("--lease-seconds", type=float, default=DEFAULT_TTL_S)
     args = ap.parse_args(argv)
+    # SIGTERM/SIGINT/SIGHUP, or the death of the process that started us: release the shard
+    # leases and exit at once, also mid-render (renderer_jobs/guard.py)
+    guard.install()
     emit(Start(shards=tuple(args.shards.split(",")), pid=os.getpid(), host=platform.node()))
+    guard.heartbeat(min(10.0, args.lease_seconds / 4),
+                    lambda: tuple(lease.path.name.removesuffix(".lease") for lease in held_leases()))
 
-    # SIGTERM (Ctrl-C in the parent) -> stop between frames; staged frames are kept.
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
-
+    from synth.dataset.shards import open_dataset
+    from synth.errors import disk_full, is_disk_full
     from synth.model.head import HeadModel
     from synth.plan.io import load_plan
-    from synth.dataset.shards import open_dataset
 
     try:
         plan = load_plan(Path(args.plan))
@@ -249,14 +258,32 @@ def main(argv: list[str] | None = None) -> int:
         with tempfile.TemporaryDirectory(prefix="synth-worker-") as tmp:
             for shard_id in args.shards.split(","):
                 t0 = time.perf_counter()
-                n = render_shard(ds, plan, shard_id, hm, model_info, Path(tmp))
+                n = render_shard(ds, plan, shard_id, hm, model_info, Path(tmp), args.lease_seconds)
                 print(f"worker: {shard_id}: {n} frames in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     except SynthError as e:
         emit(Error(shard=args.shards, message=str(e)))
         print(f"synth worker: error: {e}", file=sys.stderr)
-        return 2
+        return EXIT_INPUT
+    except OSError as e:
+        if not is_disk_full(e):
+            raise
+        err = disk_full(e.filename or args.dataset, e)
+        emit(Error(shard=args.shards, message=str(err)))
+        print(f"synth worker: error: {err}", file=sys.stderr)
+        return EXIT_DISK_FULL
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from renderer_jobs.guard import finish
+
+    try:
+        rc = main()
+    except SystemExit as e:  # argparse
+        rc = e.code if isinstance(e.code, int) else 2
+    except BaseException:
+        import traceback
+
+        traceback.print_exc()
+        rc = 1
+    finish(rc)
