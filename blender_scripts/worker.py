@@ -23,7 +23,13 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
+# One BLAS thread, whatever the machine: a matrix product's last bits depend on how many
+# threads share it, and frames must be the same bytes on every host and backend (Ray sets
+# OMP_NUM_THREADS=1 for its tasks, a 64-core node would use 64). Set before numpy loads BLAS.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import numpy as np  # noqa: E402
 
 from renderer_jobs.events import EXIT_DISK_FULL, EXIT_INPUT, Commit, Error, Frame, Rss, Skip, Start, emit
 from synth.errors import SynthError

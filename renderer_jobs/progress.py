@@ -48,7 +48,7 @@ class Progress:
     docstring); :func:`auto_mode` picks bar or lines from the output stream."""
 
     def __init__(self, total: int, done: int, mode: str = "lines", every: float = 30.0,
-                 json_log: Path | None = None, out: IO[str] | None = None, workers: int = 1):
+                 json_log: Path | None = None, out: IO[str] | None = None, workers: int | None = None):
         self.total, self.done, self.mode, self.every, self.workers = total, done, mode, every, workers
         self.out = sys.stdout if out is None else out
         self.rendered = 0
@@ -128,9 +128,11 @@ class Progress:
         left = self.total - self.done
         eta = eta_text(left / fps) if fps > 0 else "?"
         pct = 100.0 * self.done / max(self.total, 1)
-        return (f"synth render: {self.done}/{self.total} frames ({pct:.1f}%), {fps:.2f} frames/s, ETA {eta}, "
-                f"{self.failures} failure{'s' if self.failures != 1 else ''}, {self.workers} worker"
-                f"{'s' if self.workers != 1 else ''}")
+        text = (f"synth render: {self.done}/{self.total} frames ({pct:.1f}%), {fps:.2f} frames/s, ETA {eta}, "
+                f"{self.failures} failure{'s' if self.failures != 1 else ''}")
+        if self.workers is not None:
+            text += f", {self.workers} worker{'s' if self.workers != 1 else ''}"
+        return text
 
     def _line(self) -> None:
         self._last_line = time.monotonic()

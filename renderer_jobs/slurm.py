@@ -78,7 +78,7 @@ class SlurmRun(RemoteRun):
 
     def __init__(self, job: Job, opts: SlurmOptions, stall_timeout: float):
         super().__init__(job)
-        ex = submitit.SlurmExecutor(folder=job.log_dir / "submitit" / "%A_%a")
+        ex = submitit.SlurmExecutor(folder=job.log_dir / "submitit" / "%j")
         params = dict(cpus_per_task=opts.cpus_per_task, job_name="synth-render", signal_delay_s=120,
                       setup=[f"export PYTHONPATH={worker_env()['PYTHONPATH']}"])
         if opts.partition:

@@ -102,7 +102,7 @@ def render_cmd(
         be = make_backend(backend, workers=workers, stall_timeout=stall_timeout, ray_address=ray_address,
                           partition=slurm_partition, time_min=slurm_time, cpus_per_task=cpus_per_task,
                           gpus_per_task=gpus_per_task, array_parallelism=array_parallelism)
-        progress = Progress(0, 0, auto_mode(quiet), progress_every, log_json, workers=getattr(be, "workers", 1))
+        progress = Progress(0, 0, auto_mode(quiet), progress_every, log_json, workers=be.workers if backend == "local" else None)
         res = render_plan(out, pdir, be, shards_per_worker, retries=retries, log_dir=run_log_dir(out, backend),
                           wait=not no_wait, progress=progress)
     except KeyboardInterrupt:
