@@ -101,8 +101,12 @@ class Progress:
         """One JSON line in the log (no-op without one)."""
         if self._json is not None:
             stamp = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
-            self._json.write(json.dumps({"time": stamp, **obj}) + "\n")
-            self._json.flush()
+            try:
+                self._json.write(json.dumps({"time": stamp, **obj}) + "\n")
+                self._json.flush()
+            except OSError as e:  # e.g. its disk is full: the render goes on without it
+                print(f"synth render: --log-json abandoned ({e.strerror})", file=sys.stderr, flush=True)
+                self._json = None
 
     def tick(self) -> None:
         """Print the plain line when ``every`` seconds have passed since the last one."""

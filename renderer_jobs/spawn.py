@@ -79,10 +79,21 @@ class WorkerProcess:
             t.start()
 
     def logline(self, line: str) -> None:
-        if self._log is not None:
-            with self._log_lock:
+        """Append to the log; a log that cannot be written (disk full) is given up, never the
+        worker's events."""
+        with self._log_lock:
+            if self._log is None:
+                return
+            try:
                 self._log.write(line if line.endswith("\n") else line + "\n")
                 self._log.flush()
+            except OSError as e:
+                self.tail.append(f"(worker log abandoned: {e.strerror})")
+                try:
+                    self._log.close()
+                except OSError:
+                    pass
+                self._log = None
 
     def _read_stdout(self) -> None:
         for line in self.proc.stdout:  # type: ignore[union-attr]
@@ -137,9 +148,12 @@ class WorkerProcess:
         """After the process ended: let the readers reach the end of its output."""
         for t in self._threads:
             t.join(timeout=5.0)
-        if self._log is not None:
-            with self._log_lock:
-                self._log.close()
+        with self._log_lock:
+            if self._log is not None:
+                try:
+                    self._log.close()
+                except OSError:
+                    pass
                 self._log = None
 
     def batch_end(self, batch: int, attempt: int, retries: int, cancelled: bool = False) -> BatchEnd:
