@@ -83,6 +83,14 @@ def kill(pids) -> None:
             pass
 
 
+def leave_nothing_running(ctl: subprocess.Popen, out: Path) -> None:
+    """After a test (passed or not): kill the workers of ``out`` and the controller's group."""
+    kill(worker_pids(out))
+    if ctl.poll() is None:
+        os.killpg(ctl.pid, signal.SIGKILL)
+        ctl.wait()
+
+
 def staged(out: Path) -> list[Path]:
     d = out / ".staging"
     return sorted(d.glob("*/id*.json")) if d.is_dir() else []

@@ -12,8 +12,8 @@ import subprocess
 import time
 
 import pytest
-from farm_helpers import alive, compare, frame_keys, kill, lease_holder, staged, start_synth, synth, wait_for, \
-    worker_pids
+from farm_helpers import alive, compare, frame_keys, leave_nothing_running, lease_holder, staged, start_synth, synth, \
+    wait_for, worker_pids
 
 pytest.importorskip("bpy")
 
@@ -38,7 +38,7 @@ def test_killed_controller_strands_nothing_and_the_rerun_finishes(tmp_path):
         assert lease_holder(out, "shard_000000") is None, "the dead worker's claim was not released"
         p = synth(*args, check=False)
     finally:
-        kill(worker_pids(out))
+        leave_nothing_running(ctl, out)
     assert p.returncode == 0, p.stderr
     assert "12/12 frames in 2/2 shards committed" in p.stdout
     synth("validate", out)
@@ -63,9 +63,7 @@ def test_sigterm_mid_render_stops_the_worker_and_releases_its_claim(tmp_path):
         assert lease_holder(out, "shard_000000") is None, "claim not released"
         _, err = ctl.communicate(timeout=120)
     finally:
-        kill(worker_pids(out))
-        if ctl.poll() is None:
-            os.killpg(ctl.pid, signal.SIGKILL)
+        leave_nothing_running(ctl, out)
     assert ctl.returncode == 3, err
     assert "stopped (SIGTERM)" in err and "synth: error: 1 shard(s) failed after their retries" in err
     p = synth(*args, check=False)
@@ -157,7 +155,7 @@ def test_a_worker_killed_mid_shard_is_retried_and_the_data_is_the_same(one_go, t
         os.kill(pid, signal.SIGKILL)
         stdout, err = ctl.communicate(timeout=600)
     finally:
-        kill(worker_pids(out))
+        leave_nothing_running(ctl, out)
     assert ctl.returncode == 0, err
     assert "1/1 shards committed" in stdout and "2 worker process(es)" in stdout  # the retry
     assert json.loads((out / "index.json").read_text())["num_frames"] == 6

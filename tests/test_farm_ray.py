@@ -8,8 +8,8 @@ import os
 import signal
 
 import pytest
-from farm_helpers import SMALL, compare, frame_keys, kill, lease_holder, staged, start_synth, synth, wait_for, \
-    worker_pids
+from farm_helpers import SMALL, compare, frame_keys, leave_nothing_running, lease_holder, staged, start_synth, synth, \
+    wait_for
 
 pytest.importorskip("bpy")
 ray = pytest.importorskip("ray")
@@ -60,9 +60,7 @@ def test_ray_render_with_a_killed_worker_is_retried_and_equals_local(cluster, fa
         os.kill(killed, signal.SIGKILL)
         stdout, err = ctl.communicate(timeout=900)
     finally:
-        kill(worker_pids(out))
-        if ctl.poll() is None:
-            os.killpg(ctl.pid, signal.SIGKILL)
+        leave_nothing_running(ctl, out)
     assert ctl.returncode == 0, stdout + err
     assert "6/6 frames in 3/3 shards committed" in stdout
     assert len(list(out.glob("logs/ray-*/batch_*.1.log"))) == 1, "exactly one task ran a second attempt"

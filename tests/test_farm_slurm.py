@@ -6,11 +6,10 @@ backend. Skipped, saying why, where a local Slurm cannot be installed or started
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 
 import pytest
-from farm_helpers import ROOT, SMALL, compare, env, frame_keys, kill, start_synth, synth, wait_for, worker_pids
+from farm_helpers import ROOT, SMALL, compare, env, frame_keys, leave_nothing_running, start_synth, synth, wait_for
 
 pytest.importorskip("bpy")
 pytest.importorskip("submitit")
@@ -57,9 +56,7 @@ def test_slurm_array_with_a_cancelled_task_then_rerun_equals_local(slurm, farm_r
         subprocess.run(["scancel", task], check=True, env=env(**slurm))
         stdout, err = ctl.communicate(timeout=900)
     finally:
-        kill(worker_pids(out))
-        if ctl.poll() is None:
-            os.killpg(ctl.pid, signal.SIGKILL)
+        leave_nothing_running(ctl, out)
     assert ctl.returncode == 3, stdout + err
     assert "synth: error: 1 shard(s) failed after their retries" in err
     assert len(list(out.glob("shards/*/manifest.json"))) == 2  # the other tasks ran on

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
+from farm_helpers import alive
 
 from renderer_jobs import local
 from renderer_jobs.backend import Job
@@ -32,14 +33,6 @@ def submit(tmp_path, shards, behaviour=None, workers=1, per_worker=2, **job):
     backend = local.LocalBackend(workers=workers, cmd=fake_cmd)
     return backend.submit(Job(dataset=tmp_path, plan_dir=tmp_path / "plan", batches=make_batches(shards, per_worker),
                               **job))
-
-
-def alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/status").read_text().split("State:")[1].split()[0]
-    except (FileNotFoundError, IndexError):
-        return False
-    return state not in ("Z", "X")
 
 
 def test_events_of_each_batch_end_with_its_batch_end(tmp_path):

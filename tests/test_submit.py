@@ -9,6 +9,7 @@ import os
 import platform
 import subprocess
 import time
+from contextlib import contextmanager
 from dataclasses import asdict
 
 import fake_frames as ff
@@ -186,27 +187,30 @@ def test_a_reported_input_error_is_exit_2(planned):
     assert ei.value.exit_code == 2 and str(ei.value) == "HDR environment file not found (x)"
 
 
-def _hold(out, shard: str, proc: subprocess.Popen) -> None:
-    """Write the lease a live process on this host would hold."""
-    h = Holder(host=platform.node(), boot_id=_boot_id(), pid=proc.pid, start=process_start(proc.pid), token="x",
-               heartbeat=time.time(), ttl=60.0)
-    lease_path(out, shard).write_text(json.dumps(asdict(h)))
+@contextmanager
+def held(planned, shard: str, seconds: int):
+    """``shard``'s lease held by a live process on this host (a ``sleep``) for ``seconds``."""
+    out, pdir = planned
+    plan = load_plan(pdir)
+    open_dataset(out, plan.plan_hash, plan.expected())
+    proc = subprocess.Popen(["sleep", str(seconds)])
+    try:
+        h = Holder(host=platform.node(), boot_id=_boot_id(), pid=proc.pid, start=process_start(proc.pid), token="x",
+                   heartbeat=time.time(), ttl=60.0)
+        lease_path(out, shard).write_text(json.dumps(asdict(h)))
+        yield proc
+    finally:
+        proc.kill()
+        proc.wait()
 
 
 def test_a_shard_held_by_a_live_process_is_waited_for_then_rendered(planned):
     out, pdir = planned
-    plan = load_plan(pdir)
-    open_dataset(out, plan.plan_hash, plan.expected())
-    holder = subprocess.Popen(["sleep", "3"])
-    try:
-        _hold(out, "shard_000001", holder)
-        text = io.StringIO()
-        be = FakeBackend()
+    text = io.StringIO()
+    be = FakeBackend()
+    with held(planned, "shard_000001", 3) as holder:
         res = render_plan(out, pdir, be, shards_per_worker=3, poll_s=0.1,
                           progress=Progress(0, 0, "lines", every=3600, out=text))
-    finally:
-        holder.kill()
-        holder.wait()
     assert [j.batches for j in be.jobs] == [(Batch(0, ("shard_000000", "shard_000002")),),
                                             (Batch(0, ("shard_000001",)),)]
     assert f"waiting for 1 shard(s) held by other processes: shard_000001 ({platform.node()} pid {holder.pid})" \
@@ -216,18 +220,12 @@ def test_a_shard_held_by_a_live_process_is_waited_for_then_rendered(planned):
 
 def test_no_wait_reports_the_held_shards_and_exits_1(planned):
     out, pdir = planned
-    plan = load_plan(pdir)
-    open_dataset(out, plan.plan_hash, plan.expected())
-    holder = subprocess.Popen(["sleep", "60"])
-    try:
-        _hold(out, "shard_000002", holder)
+    with held(planned, "shard_000002", 60) as holder:
         with pytest.raises(Incomplete, match=f"1 shard.s. are being rendered by other processes: shard_000002 "
                                              f".{platform.node()} pid {holder.pid}.") as ei:
             render_plan(out, pdir, FakeBackend(), shards_per_worker=3, quiet=True, wait=False)
-    finally:
-        holder.kill()
-        holder.wait()
     assert ei.value.exit_code == 1
+    plan = load_plan(pdir)
     assert open_dataset(out, plan.plan_hash, plan.expected()).summary()["shards_committed"] == 2
 
 
