@@ -26,7 +26,8 @@ def env(**extra) -> dict:
     return e
 
 
-def synth(*args, check: bool = True, timeout: float = 900, extra_env: dict | None = None) -> subprocess.CompletedProcess:
+def synth(*args, check: bool = True, timeout: float = 900,
+          extra_env: dict | None = None) -> subprocess.CompletedProcess:
     p = subprocess.run([*SYNTH, *map(str, args)], capture_output=True, text=True, timeout=timeout,
                        env=env(**(extra_env or {})), cwd=ROOT)
     if check and p.returncode != 0:

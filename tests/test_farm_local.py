@@ -71,6 +71,22 @@ def test_sigterm_mid_render_stops_the_worker_and_releases_its_claim(tmp_path):
     assert "3/3 frames in 1/1 shards committed" in p.stdout
 
 
+def test_sigterm_to_the_controller_stops_everything_like_ctrl_c(tmp_path):
+    out = tmp_path / "ds"
+    ctl = start_synth("render", *TWO, "--set", "render.samples=128", "--out", out, "-q")
+    try:
+        wait_for(lambda: staged(out), "a staged frame")
+        pids = worker_pids(out)
+        os.kill(ctl.pid, signal.SIGTERM)
+        _, err = ctl.communicate(timeout=60)
+        wait_for(lambda: not any(alive(p) for p in pids), "the workers to stop", 15.0)
+    finally:
+        leave_nothing_running(ctl, out)
+    assert ctl.returncode == 130, err
+    assert "interrupted: frames rendered so far are kept" in err
+    assert not list(out.glob(".staging/*.lease")) and staged(out)
+
+
 @pytest.fixture
 def small_disk(tmp_path):
     """An 8 MiB tmpfs (needs root); unmounted after the test."""

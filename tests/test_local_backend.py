@@ -196,7 +196,8 @@ from renderer_jobs import local
 from renderer_jobs.backend import Job
 from renderer_jobs.submit import make_batches
 d = Path({d!r})
-for ev in local.LocalBackend(workers=1, cmd=fake_cmd).submit(Job(dataset=d, plan_dir=d, batches=make_batches(["a"], 1))).events():
+job = Job(dataset=d, plan_dir=d, batches=make_batches(["a"], 1))
+for ev in local.LocalBackend(workers=1, cmd=fake_cmd).submit(job).events():
     print(ev, flush=True)
 """
 

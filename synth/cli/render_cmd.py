@@ -16,6 +16,7 @@ processes, Ray tasks or a Slurm job array; docs/farm.md).
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 from typing import Optional
 
@@ -35,6 +36,12 @@ def _overrides(expressions, views, preset, workers_device, set_):
     if workers_device is not None:
         sets.append(f'render.device="{workers_device}"')
     return sets
+
+
+def _interrupt(signum, frame):
+    """SIGTERM (kill, systemd, a scheduler) stops a render as Ctrl-C does: workers stopped,
+    staged frames kept, exit 130."""
+    raise KeyboardInterrupt
 
 
 def render_cmd(
@@ -87,6 +94,7 @@ def render_cmd(
 
     if backend not in NAMES:
         raise SynthError(f"unknown backend {backend!r}", "--backend", f"use one of {', '.join(NAMES)}")
+    previous = signal.getsignal(signal.SIGTERM)
     try:
         if plan_dir is not None:
             if any(x is not None for x in (identities, expressions, views, config, preset, seed, model, device)) \
@@ -102,7 +110,9 @@ def render_cmd(
         be = make_backend(backend, workers=workers, stall_timeout=stall_timeout, ray_address=ray_address,
                           partition=slurm_partition, time_min=slurm_time, cpus_per_task=cpus_per_task,
                           gpus_per_task=gpus_per_task, array_parallelism=array_parallelism)
-        progress = Progress(0, 0, auto_mode(quiet), progress_every, log_json, workers=be.workers if backend == "local" else None)
+        progress = Progress(0, 0, auto_mode(quiet), progress_every, log_json,
+                            workers=be.workers if backend == "local" else None)
+        signal.signal(signal.SIGTERM, _interrupt)  # not before: the planner's forked children keep the default
         res = render_plan(out, pdir, be, shards_per_worker, retries=retries, log_dir=run_log_dir(out, backend),
                           wait=not no_wait, progress=progress)
     except KeyboardInterrupt:
@@ -112,6 +122,8 @@ def render_cmd(
         if not is_disk_full(e):
             raise
         raise disk_full(e.filename or out, e) from None
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     fps = res["frames_rendered"] / max(res["wall_seconds"], 1e-9)
     typer.echo(f"{out}: {res['frames_committed']}/{res['frames']} frames in {res['shards_committed']}/"
                f"{res['shards']} shards committed; rendered {res['frames_rendered']} now in "

@@ -234,7 +234,8 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
         else:
             leftovers = [n for n in os.listdir(root) if is_temp_name(n)]  # a creation killed half-way
             others = sorted(n for n in os.listdir(root)
-                            if n not in (LOCK_FILE, PLAN_DIR, LOGS_DIR) and n not in leftovers and not n.startswith(".plan-"))
+                            if n not in (LOCK_FILE, PLAN_DIR, LOGS_DIR) and n not in leftovers
+                            and not n.startswith(".plan-"))
             if others:
                 raise SynthError(f"directory is not empty and holds no dataset.json (found {others[0]!r})",
                                  str(root), "use an empty or new --out directory")
