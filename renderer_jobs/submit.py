@@ -145,10 +145,12 @@ def raise_on_failures(stats: RunStats) -> None:
         raise DiskFull(stats.disk_full[0]) from None
     if stats.input_errors:
         raise SynthError(stats.input_errors[0]) from None
-    first = stats.failures[-1] if not stats.failed_shards else next(
-        f for f in stats.failures if f.startswith("worker for "))
-    raise WorkerFailed(f"{len(stats.failed_shards)} shard(s) failed after their retries; first: "
-                       f"{first.splitlines()[0].rstrip(':')}", "render",
+    if stats.failed_shards:
+        first = next(f for f in stats.failures if f.startswith("worker for "))
+        what = f"{len(stats.failed_shards)} shard(s) failed after their retries; first: {first.splitlines()[0]}"
+    else:  # e.g. an event of another protocol version from a worker that otherwise finished
+        what = f"a worker reported an error: {stats.failures[0].splitlines()[0]}"
+    raise WorkerFailed(what.rstrip(":"), "render",
                        "see the worker log above and in DIR/logs; rerun the same command to resume") from None
 
 

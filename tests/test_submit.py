@@ -244,3 +244,12 @@ def test_progress_lines_and_json_log(planned, tmp_path):
     ends = [r for r in recs if r["event"] == "batch_end"]
     assert [(e["returncode"], e["retry"]) for e in ends] == [(1, True), (0, False)]
     assert all("time" in r for r in recs) and recs[-1]["frames_committed"] == 12
+
+
+def test_an_error_event_from_a_batch_that_finished_still_fails_the_run(planned):
+    out, pdir = planned
+    with pytest.raises(WorkerFailed, match="a worker reported an error: shard_000000,shard_000001,shard_000002: "
+                                           "unreadable worker event") as ei:
+        render_plan(out, pdir, FakeBackend(error="unreadable worker event: protocol version 9"), shards_per_worker=3,
+                    quiet=True)
+    assert ei.value.exit_code == 3
