@@ -53,11 +53,13 @@ def atomic_place(path: Path, fill, *, durable: bool = True, sync_file: bool = Tr
         if durable and sync_file:
             fsync_file(tmp)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
+        if isinstance(e, OSError) and e.filename is None:  # os.write says no name: "disk full writing WHAT?"
+            raise OSError(e.errno, e.strerror, str(path)) from e
         raise
     if durable:
         fsync_dir(path.parent)
