@@ -111,6 +111,18 @@ def configure_render(settings: dict[str, Any], width: int, height: int) -> dict[
     return settings_out
 
 
+def drop_render_cache() -> None:
+    """Free Cycles' persistent data (BVH, synced scene, compiled shaders) so the next render
+    starts from the scene's data alone. Setting ``use_persistent_data`` to False frees it (the
+    property's update callback); the views after it cache again. Called at each expression
+    change: an incremental Cycles update after a geometry change does not always give the same
+    pixels as a fresh sync (see docs/farm.md, "Resume gives the same bytes")."""
+    r = bpy.context.scene.render
+    keep = r.use_persistent_data
+    r.use_persistent_data = False
+    r.use_persistent_data = keep
+
+
 def uniform_environment(strength: float = 1.0, color=(1.0, 1.0, 1.0)) -> None:
     """One uniform, well-lit environment (the paper's setting): no directional shadows."""
     scene = bpy.context.scene

@@ -2,10 +2,13 @@
 
     python -m blender_scripts.worker --dataset DIR --plan PLAN_DIR --shards shard_000000,shard_000001
 
-Per identity one scene is built (head mesh, materials, lights, camera); each expression is a
-vertex update and each view a camera move, so nothing is rebuilt per view. Frames already
-written by an interrupted run are skipped. Progress goes to stdout as JSON-line events
-(``renderer_jobs.events``: start, frame, rss, skip, commit, error).
+Per identity one scene is built on the neutral head (head mesh, materials, lights, assets,
+camera); each expression is a vertex update and each view a camera move, so nothing is rebuilt
+per view, and a frame's bytes do not depend on which frames the process rendered before it.
+Frames already written by an interrupted run are skipped. Progress goes to stdout as JSON-line
+events (``renderer_jobs.events``: start, frame, rss, heartbeat, skip, commit, error); the exit
+status says how it ended (0, 2 input error, 4 disk full, 128 + signal when told to stop).
+Signals and the death of the parent stop it at once (``renderer_jobs.guard``).
 The worker draws no random numbers: every choice comes from the plan.
 """
 
@@ -15,15 +18,20 @@ import argparse
 import os
 import platform
 import resource
-import signal
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
+# One BLAS thread, whatever the machine: a matrix product's last bits depend on how many
+# threads share it, and frames must be the same bytes on every host and backend (Ray sets
+# OMP_NUM_THREADS=1 for its tasks, a 64-core node would use 64). Set before numpy loads BLAS.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ[_var] = "1"
 
-from renderer_jobs.events import Commit, Error, Frame, Rss, Skip, Start, emit
+import numpy as np  # noqa: E402
+
+from renderer_jobs.events import EXIT_DISK_FULL, EXIT_INPUT, Commit, Error, Frame, Rss, Skip, Start, emit
 from synth.assets.classes import RECORD_ORDER
 from synth.errors import SynthError
 
@@ -84,19 +92,29 @@ def _set_environment(ident: dict, plan) -> dict:
 
 
 class IdentityScene:
-    """One identity's scene: built once (head, materials, lighting, assets, camera); each
-    expression is a vertex update (+ rig updates) and each view a camera move."""
+    """One identity's scene, built once on the identity's neutral head (head, materials,
+    lighting, assets, camera); each expression is a vertex update (+ rig updates) and each view
+    a camera move.
+
+    Resume gives the same bytes: what an expression's frames show depends only on the identity
+    and that expression, never on the expressions rendered before it in this process. So the
+    assets are fitted to the neutral head (not to whichever expression happens to come first),
+    every ``set_expression`` is a pure function of the built rigs and the new expression, and
+    Cycles' persistent data (BVH, shaders) is dropped at each expression change: it is kept
+    only between the views of one expression, where nothing but the camera moves.
+    """
 
     def __init__(self, ident: dict, hm, plan, render_cfg: dict, run_seed: int, model_info: dict,
                  versions: dict, shard_id: str = "", asset_resolution: int | None = None):
         from blender_scripts import camera as bcam
+        from blender_scripts import head as bhead
         from blender_scripts import materials as bmat
         from blender_scripts import scene as bscene
+        from blender_scripts.assets import HeadContext
         from synth.appearance.skin import skin_albedo
 
         self.ident, self.hm, self.render_cfg = ident, hm, render_cfg
         self.run_seed, self.model_info, self.versions, self.shard_id = run_seed, model_info, versions, shard_id
-        self.asset_resolution = asset_resolution  # benchmarks: strand counts independent of the image size
         bscene.reset()
         f0 = ident["expressions"][0]["frames"][0]["camera"]
         self.width, self.height = int(f0["width"]), int(f0["height"])
@@ -107,17 +125,30 @@ class IdentityScene:
         self.skin_record = {**skin, "albedo_linear_srgb": [round(a, 6) for a in albedo]}
         self.materials = bmat.head_materials(skin, albedo)
         self.beta = np.asarray(ident["identity_code"], np.float64)
-        zero_psi = np.zeros(hm.data.expression_dims)
-        self.rest = hm.evaluate(self.beta, zero_psi, np.zeros((hm.J, 3)), landmarks=False).vertices[0].astype(np.float64)
-        self.head_ob = self.ctx = None
+        rest = self._evaluate(np.zeros(hm.data.expression_dims), np.zeros((hm.J, 3)))
+        self.rest = rest[0]
+        self.head_ob = bhead.build_head_object(hm.data, self.rest, self.materials)
+        bhead.set_rest_positions(self.head_ob, self.rest)
+        self.effective["subdivision_levels"] = bhead.add_render_subdivision(self.head_ob, max(self.width, self.height))
+        # asset_resolution: benchmarks keep strand counts independent of the image size
+        self.ctx = HeadContext(data=hm.data, head=self.head_ob, materials=self.materials, rest_vertices=self.rest,
+                               vertices=self.rest, joint_transforms=rest[2], joint_index=dict(hm.joint_index),
+                               landmarks=rest[1], resolution=asset_resolution or max(self.width, self.height),
+                               identity_index=int(ident["identity_index"]), run_seed=run_seed)
         self.rigs: dict = {}
-        self.assets_record: dict = {}
+        self.assets_record = _dress(ident, self.ctx, self.rigs)
         self.cam_ob = bcam.make_camera()
         self.expr = None
 
+    def _evaluate(self, psi: np.ndarray, rot: np.ndarray):
+        """(vertices, landmarks by set, joint transforms) of this identity, float64."""
+        ev = self.hm.evaluate(self.beta, psi, rot)
+        return (ev.vertices[0].astype(np.float64), {k: v[0].astype(np.float64) for k, v in ev.landmarks.items()},
+                ev.joint_transforms[0].astype(np.float64))
+
     def set_expression(self, e: dict) -> None:
         from blender_scripts import head as bhead
-        from blender_scripts.assets import HeadContext
+        from blender_scripts import scene as bscene
         from blender_scripts.assets import update as update_rigs
 
         hm = self.hm
@@ -125,25 +156,11 @@ class IdentityScene:
         rot = np.zeros((hm.J, 3))
         for name, r in (e.get("joint_rotations") or {}).items():
             rot[hm.joint_index[name]] = r
-        ev = hm.evaluate(self.beta, psi, rot)
-        verts = ev.vertices[0].astype(np.float64)
-        lms = {k: v[0].astype(np.float64) for k, v in ev.landmarks.items()}
-        joints = ev.joint_transforms[0].astype(np.float64)
-        if self.head_ob is None:
-            self.head_ob = bhead.build_head_object(hm.data, verts, self.materials)
-            bhead.set_rest_positions(self.head_ob, self.rest)
-            self.effective["subdivision_levels"] = bhead.add_render_subdivision(self.head_ob,
-                                                                                max(self.width, self.height))
-            self.ctx = HeadContext(data=hm.data, head=self.head_ob, materials=self.materials,
-                                   rest_vertices=self.rest, vertices=verts, joint_transforms=joints,
-                                   joint_index=dict(hm.joint_index), landmarks=lms,
-                                   resolution=self.asset_resolution or max(self.width, self.height),
-                                   identity_index=int(self.ident["identity_index"]), run_seed=self.run_seed)
-            self.assets_record = _dress(self.ident, self.ctx, self.rigs)
-        else:
-            bhead.set_vertices(self.head_ob, verts)
-            self.ctx.vertices, self.ctx.joint_transforms, self.ctx.landmarks = verts, joints, lms
-            update_rigs(self.rigs, self.ctx)
+        verts, lms, joints = self._evaluate(psi, rot)
+        bhead.set_vertices(self.head_ob, verts)
+        self.ctx.vertices, self.ctx.joint_transforms, self.ctx.landmarks = verts, joints, lms
+        update_rigs(self.rigs, self.ctx)
+        bscene.drop_render_cache()
         self.expr = {"e": e, "psi": psi, "rot": rot, "lm3d": lms["ibug68"],
                      "head_pose": joints[hm.joint_index["head"]]}
 
@@ -177,7 +194,7 @@ class IdentityScene:
         self.ctx = self.head_ob = None
 
 
-def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> int:
+def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path, lease_ttl: float) -> int:
     """Render the missing frames of one shard and commit it. Returns frames rendered."""
     spec = plan.shard(shard_id)
     render_cfg = plan.render_settings()
@@ -185,7 +202,7 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> in
     rendered = 0
     seeds = {f["frame_id"]: f["seed"] for ident in spec["identities"] for e in ident["expressions"]
              for f in e["frames"]}
-    st = ds.try_staging(shard_id)
+    st = ds.try_staging(shard_id, lease_ttl)
     if st is None:  # committed meanwhile, or another process holds it
         emit(Skip(shard=shard_id))
         return 0
@@ -215,19 +232,26 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path) -> in
 
 
 def main(argv: list[str] | None = None) -> int:
+    from renderer_jobs import guard
+    from synth.dataset.lease import DEFAULT_TTL_S, held_leases
+
     ap = argparse.ArgumentParser(description="synth render worker (one bpy process)")
     ap.add_argument("--dataset", required=True)
     ap.add_argument("--plan", required=True)
     ap.add_argument("--shards", required=True)
+    ap.add_argument("--lease-seconds", type=float, default=DEFAULT_TTL_S)
     args = ap.parse_args(argv)
+    # SIGTERM/SIGINT/SIGHUP, or the death of the process that started us: release the shard
+    # leases and exit at once, also mid-render (renderer_jobs/guard.py)
+    guard.install()
     emit(Start(shards=tuple(args.shards.split(",")), pid=os.getpid(), host=platform.node()))
+    guard.heartbeat(min(10.0, args.lease_seconds / 4),
+                    lambda: tuple(lease.path.name.removesuffix(".lease") for lease in held_leases()))
 
-    # SIGTERM (Ctrl-C in the parent) -> stop between frames; staged frames are kept.
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
-
+    from synth.dataset.shards import open_dataset
+    from synth.errors import disk_full, is_disk_full
     from synth.model.head import HeadModel
     from synth.plan.io import load_plan
-    from synth.dataset.shards import open_dataset
 
     try:
         plan = load_plan(Path(args.plan))
@@ -238,14 +262,32 @@ def main(argv: list[str] | None = None) -> int:
         with tempfile.TemporaryDirectory(prefix="synth-worker-") as tmp:
             for shard_id in args.shards.split(","):
                 t0 = time.perf_counter()
-                n = render_shard(ds, plan, shard_id, hm, model_info, Path(tmp))
+                n = render_shard(ds, plan, shard_id, hm, model_info, Path(tmp), args.lease_seconds)
                 print(f"worker: {shard_id}: {n} frames in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     except SynthError as e:
         emit(Error(shard=args.shards, message=str(e)))
         print(f"synth worker: error: {e}", file=sys.stderr)
-        return 2
+        return EXIT_INPUT
+    except OSError as e:
+        if not is_disk_full(e):
+            raise
+        err = disk_full(e.filename or args.dataset, e)
+        emit(Error(shard=args.shards, message=str(err)))
+        print(f"synth worker: error: {err}", file=sys.stderr)
+        return EXIT_DISK_FULL
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from renderer_jobs.guard import finish
+
+    try:
+        rc = main()
+    except SystemExit as e:  # argparse
+        rc = e.code if isinstance(e.code, int) else 2
+    except BaseException:
+        import traceback
+
+        traceback.print_exc()
+        rc = 1
+    finish(rc)

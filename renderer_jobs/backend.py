@@ -78,3 +78,7 @@ class Backend(ABC):
     @abstractmethod
     def submit(self, job: Job) -> Run:
         ...
+
+    def close(self) -> None:
+        """Release what the backend set up for its runs (a local Ray runtime); called once,
+        after the last run."""

@@ -11,9 +11,16 @@ Wire format (``docs/farm.md``)::
 
     {"v": 1, "event": "frame", "shard": "shard_000000", "key": "id000000_ex00_v00", "render_seconds": 1.25}
 
-Events sent by workers: ``start``, ``frame``, ``rss``, ``skip``, ``commit``, ``error``.
-``batch_end`` is made by the backend when a worker process ends (its exit status and the
-tail of its log); it shares the encoding so a backend can log every event in one format.
+Events sent by workers: ``start``, ``frame``, ``rss``, ``skip``, ``commit``, ``error``,
+``heartbeat``. ``batch_end`` is made by the backend when a worker process ends (its exit
+status and the tail of its log); it shares the encoding so a backend can log every event in
+one format (the remote backends write it into the attempt's log, where the controller reads it).
+
+A worker's exit status is part of the protocol: :data:`EXIT_OK`, :data:`EXIT_INPUT` (a
+user-facing error, reported with an ``error`` event; a retry would repeat it),
+:data:`EXIT_DISK_FULL` (an ``error`` event names the path and the space left), 128 + the
+signal number when told to stop (:func:`stopped_by_signal`); anything else is a crash, and
+a backend retries the batch.
 """
 
 from __future__ import annotations
@@ -21,11 +28,33 @@ from __future__ import annotations
 import json
 import math
 import sys
+import threading
 from dataclasses import asdict, dataclass, fields
 from typing import IO, ClassVar, Union
 
 #: Bumped whenever an event's fields change meaning or a required field is added.
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
+
+#: Worker exit statuses (see the module docstring).
+EXIT_OK = 0
+EXIT_INPUT = 2
+EXIT_DISK_FULL = 4
+
+
+def stopped_by_signal(returncode: int) -> bool:
+    """The worker stopped because it was told to (SIGTERM, SIGINT, SIGHUP): not a crash to retry.
+    ``returncode`` as ``subprocess`` gives it (negative: killed by that signal without a handler)."""
+    import signal
+
+    stops = {signal.SIGTERM, signal.SIGINT, signal.SIGHUP}
+    return returncode in {128 + s for s in stops} or -returncode in stops
+
+
+def should_retry(returncode: int, reported_error: bool) -> bool:
+    """Whether a batch whose worker ended so is worth running again: a crash (non-zero, no
+    ``error`` event, not a stop, not out of disk space)."""
+    return (returncode != EXIT_OK and not reported_error and returncode != EXIT_DISK_FULL
+            and not stopped_by_signal(returncode))
 
 
 class EventError(ValueError):
@@ -46,6 +75,14 @@ class Rss:
     """The worker's resident memory after an identity's scene was closed."""
     kind: ClassVar[str] = "rss"
     rss_mb: float
+
+
+@dataclass(frozen=True)
+class Heartbeat:
+    """The worker is alive (sent every few seconds by its lease heartbeat, also mid-render);
+    ``shards`` are the shards it holds now. A backend's watchdog stops a silent worker."""
+    kind: ClassVar[str] = "heartbeat"
+    shards: tuple[str, ...]
 
 
 @dataclass(frozen=True)
@@ -94,8 +131,8 @@ class BatchEnd:
     retry: bool
 
 
-Event = Union[Start, Frame, Rss, Skip, Commit, Error, BatchEnd]
-EVENT_TYPES: dict[str, type] = {t.kind: t for t in (Start, Frame, Rss, Skip, Commit, Error, BatchEnd)}
+Event = Union[Start, Frame, Rss, Heartbeat, Skip, Commit, Error, BatchEnd]
+EVENT_TYPES: dict[str, type] = {t.kind: t for t in (Start, Frame, Rss, Heartbeat, Skip, Commit, Error, BatchEnd)}
 
 
 def encode(ev: Event) -> str:
@@ -103,11 +140,17 @@ def encode(ev: Event) -> str:
     return json.dumps({"v": PROTOCOL_VERSION, "event": ev.kind, **asdict(ev)}, allow_nan=False)
 
 
+_EMIT_LOCK = threading.Lock()
+
+
 def emit(ev: Event, stream: IO[str] | None = None) -> None:
-    """Write ``ev`` as one line to ``stream`` (default: stdout) and flush it at once."""
+    """Write ``ev`` as one line to ``stream`` (default: stdout) and flush it at once (a lock
+    keeps lines whole when several threads emit)."""
     out = sys.stdout if stream is None else stream
-    out.write(encode(ev) + "\n")
-    out.flush()
+    line = encode(ev) + "\n"
+    with _EMIT_LOCK:
+        out.write(line)
+        out.flush()
 
 
 def _field(kind: str, name: str, annotation: str, value):

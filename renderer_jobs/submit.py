@@ -1,11 +1,14 @@
-"""Plan or resume, then render what is missing with a backend.
+"""Plan or resume, then render what is missing with a backend, until the dataset is complete.
 
 ``DIR/plan/`` holds the plan. :func:`prepare_plan` plans into it, or, when it exists,
 re-plans into a temporary directory and refuses arguments that give another plan hash.
-:func:`render_plan` opens (or resumes) the dataset, reads from its files which shards are
-not committed yet, groups them into batches of ``shards_per_worker`` (one fresh worker
-process each), runs them on a backend while tallying its events, and summarises from the
-files again.
+:func:`render_plan` opens (or resumes) the dataset and loops, reading from its files each
+time: the shards not committed yet that no live process holds are grouped into batches of
+``shards_per_worker`` (one fresh worker process each) and run on a backend while its events
+are tallied; shards that another live process holds (another ``synth render``, a worker of
+a killed controller still exiting, another host) are waited for, or reported with
+``wait=False``. It returns only when every shard is committed, and otherwise raises the
+error whose exit code says why (docs/farm.md, "Exit codes").
 """
 
 from __future__ import annotations
@@ -13,13 +16,19 @@ from __future__ import annotations
 import os
 import shutil
 import time
+from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from renderer_jobs.backend import Backend, Batch, Job, Run
-from renderer_jobs.events import BatchEnd, Error, Event, Frame, Rss
-from synth.errors import SynthError
+from renderer_jobs.events import EXIT_DISK_FULL, EXIT_INPUT, BatchEnd, Error, Event, Frame, Rss
+from renderer_jobs.progress import Progress
+from synth.errors import DiskFull, Incomplete, SynthError, WorkerFailed
+
+#: How many times one invocation hands the same pending shard to a backend before it gives up
+#: (a worker that ends without error but without committing it, e.g. it found it busy).
+MAX_ROUNDS = 3
 
 
 def prepare_plan(out: Path, identities: int, config: Path | None, sets: list[str], seed: int | None,
@@ -60,6 +69,13 @@ def existing_plan(plan_dir: Path) -> Path:
     return plan_dir.resolve()
 
 
+def run_log_dir(out: Path, backend: str) -> Path:
+    """``DIR/logs/<backend>-<UTC time>-<pid>/``: this invocation's worker (or task) logs."""
+    from synth.dataset.layout import LOGS_DIR
+
+    return Path(out) / LOGS_DIR / f"{backend}-{time.strftime('%Y%m%dT%H%M%SZ', time.gmtime())}-{os.getpid()}"
+
+
 def make_batches(shard_ids: Sequence[str], shards_per_worker: int) -> tuple[Batch, ...]:
     """Consecutive groups of at most ``shards_per_worker`` shards, in the given order."""
     if shards_per_worker < 1:
@@ -76,7 +92,11 @@ class RunStats:
     render_seconds: float = 0.0  # pure Cycles sampling time reported by workers
     worker_starts: int = 0  # worker processes that ran (one batch_end each)
     failures: list[str] = field(default_factory=list)
+    failed_shards: set[str] = field(default_factory=set)
+    input_errors: list[str] = field(default_factory=list)  # error events of batches that exited EXIT_INPUT
+    disk_full: list[str] = field(default_factory=list)  # error events of batches that ran out of space
     peak_rss_mb: float = 0.0
+    _errors: dict[str, str] = field(default_factory=dict)
 
     def add(self, ev: Event) -> None:
         if isinstance(ev, Frame):
@@ -86,48 +106,52 @@ class RunStats:
             self.peak_rss_mb = max(self.peak_rss_mb, ev.rss_mb)
         elif isinstance(ev, Error):
             self.failures.append(f"{ev.shard}: {ev.message}")
+            self._errors[ev.shard] = ev.message
         elif isinstance(ev, BatchEnd):
             self.worker_starts += 1
             if ev.returncode != 0 and not ev.retry:
                 self.failures.append(f"worker for {','.join(ev.shards)} exited with code {ev.returncode}:\n"
                                      f"{ev.log_tail}")
+                self.failed_shards.update(ev.shards)
+                msg = self._errors.get(",".join(ev.shards))
+                if ev.returncode == EXIT_DISK_FULL:
+                    self.disk_full.append(msg or f"out of disk space (worker for {','.join(ev.shards)})")
+                elif ev.returncode == EXIT_INPUT and msg:
+                    self.input_errors.append(msg)
 
 
-def tally(run: Run, frames_total: int, frames_done: int, show_progress: bool = True) -> RunStats:
-    """Drive ``run`` to its end, adding up its events under a progress bar. On Ctrl-C the run
+def tally(run: Run, stats: RunStats, progress: Progress) -> None:
+    """Drive ``run`` to its end, adding up its events and reporting progress. On Ctrl-C the run
     is cancelled (workers stopped, staged frames kept) and KeyboardInterrupt re-raised."""
-    from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
-                               TimeRemainingColumn)
-
-    stats = RunStats()
-    progress = Progress(TextColumn("[bold]rendering"), BarColumn(), MofNCompleteColumn(),
-                        TextColumn("{task.fields[fps]:.2f} frames/s"), TimeElapsedColumn(), TextColumn("ETA"),
-                        TimeRemainingColumn(), disable=not show_progress, transient=False)
-    task = progress.add_task("frames", total=frames_total, completed=frames_done, fps=0.0)
-    t_start = time.perf_counter()
     try:
-        with progress:
-            for ev in run.events():
-                stats.add(ev)
-                if isinstance(ev, Frame):
-                    elapsed = time.perf_counter() - t_start
-                    progress.update(task, advance=1, fps=stats.frames_rendered / max(elapsed, 1e-9))
+        for ev in run.events():
+            stats.add(ev)
+            progress.event(ev)
     except KeyboardInterrupt:
         run.cancel()
         raise
-    return stats
 
 
 def raise_on_failures(stats: RunStats) -> None:
-    """Print every failure to stderr and raise one SynthError naming the first."""
-    if stats.failures:
-        import sys
+    """Print every failure to stderr and raise the one-line error of the gravest kind: out of
+    disk space (exit 4), a user-facing input error (2), a worker or task failure (3)."""
+    if not stats.failures:
+        return
+    import sys
 
-        for f in stats.failures:
-            print(f, file=sys.stderr)
-        first = stats.failures[0]
-        raise SynthError(f"{len(stats.failures)} worker(s) failed; first: {first.splitlines()[0]}",
-                         "render", "see the worker log above; rerun the same command to resume") from None
+    for f in stats.failures:
+        print(f, file=sys.stderr)
+    if stats.disk_full:
+        raise DiskFull(stats.disk_full[0]) from None
+    if stats.input_errors:
+        raise SynthError(stats.input_errors[0]) from None
+    if stats.failed_shards:
+        first = next(f for f in stats.failures if f.startswith("worker for "))
+        what = f"{len(stats.failed_shards)} shard(s) failed after their retries; first: {first.splitlines()[0]}"
+    else:  # e.g. an event of another protocol version from a worker that otherwise finished
+        what = f"a worker reported an error: {stats.failures[0].splitlines()[0]}"
+    raise WorkerFailed(what.rstrip(":"), "render",
+                       "see the worker log above and in DIR/logs; rerun the same command to resume") from None
 
 
 def staged_frames(ds, shard_ids: Iterable[str]) -> int:
@@ -140,9 +164,18 @@ def staged_frames(ds, shard_ids: Iterable[str]) -> int:
     return n
 
 
+def _held_text(held: dict) -> str:
+    items = sorted(held.items())
+    text = ", ".join(f"{s} ({h.describe()})" for s, h in items[:3])
+    return text + (f" and {len(items) - 3} more" if len(items) > 3 else "")
+
+
 def render_plan(out: Path, plan_dir: Path, backend: Backend, shards_per_worker: int, quiet: bool = False,
-                retries: int = 0, log_dir: Path | None = None) -> dict:
-    """Open (or resume) the dataset for ``plan_dir`` in ``out`` and render what is missing."""
+                retries: int = 0, log_dir: Path | None = None, wait: bool = True, progress: Progress | None = None,
+                poll_s: float = 2.0) -> dict:
+    """Open (or resume) the dataset for ``plan_dir`` in ``out`` and render until every shard is
+    committed (see the module docstring). Raises :class:`Incomplete` (exit 1),
+    :class:`WorkerFailed` (3), :class:`DiskFull` (4) or a :class:`SynthError` (2)."""
     from synth.dataset.shards import open_dataset
     from synth.plan.io import load_plan
 
@@ -153,12 +186,55 @@ def render_plan(out: Path, plan_dir: Path, backend: Backend, shards_per_worker: 
     pending = ds.pending_shards()
     total = sum(len(v) for v in ds.expected.values())
     before = total - sum(len(ds.expected[s]) for s in pending) + staged_frames(ds, pending)
-    job = Job(dataset=out, plan_dir=plan_dir, batches=make_batches(pending, shards_per_worker), retries=retries,
-              log_dir=log_dir)
+    if progress is None:
+        progress = Progress(total, before, mode="none" if quiet else "lines")
+    progress.total, progress.done = total, before
+    stats, rounds = RunStats(), Counter()
     t0 = time.perf_counter()
-    stats = tally(backend.submit(job), total, before, show_progress=not quiet)
-    wall = time.perf_counter() - t0
+    with progress:
+        try:
+            _render_until_done(ds, out, plan_dir, backend, shards_per_worker, retries, log_dir, wait, progress,
+                               poll_s, stats, rounds)
+        finally:
+            backend.close()
+        wall = time.perf_counter() - t0
+        summary = ds.summary()
+        progress.record({"event": "summary", **summary, "frames_rendered": stats.frames_rendered,
+                         "failures": len(stats.failed_shards)})
     raise_on_failures(stats)
-    summary = ds.summary()
+    if summary["shards_committed"] < summary["shards"]:
+        left = ds.pending_shards()
+        raise Incomplete(f"{len(left)} shard(s) not committed (first: {left[0]}) although no worker reported a failure",
+                         str(out), "rerun the same command to resume; see the worker logs in DIR/logs")
     return {"wall_seconds": wall, "render_seconds": stats.render_seconds, "frames_rendered": stats.frames_rendered,
-            "frames_before": before, "worker_starts": stats.worker_starts, "peak_worker_rss_mb": stats.peak_rss_mb, **summary}
+            "frames_before": before, "worker_starts": stats.worker_starts, "peak_worker_rss_mb": stats.peak_rss_mb,
+            **summary}
+
+
+def _render_until_done(ds, out, plan_dir, backend, shards_per_worker, retries, log_dir, wait, progress, poll_s,
+                       stats: RunStats, rounds: Counter) -> None:
+    """The loop of :func:`render_plan`: submit what nobody holds, wait for what others hold."""
+    noted: set[str] = set()
+    while True:
+        pending = ds.pending_shards()
+        held = ds.claims(pending)
+        todo = [s for s in pending if s not in held and s not in stats.failed_shards and rounds[s] < MAX_ROUNDS]
+        if todo:
+            rounds.update(todo)
+            job = Job(dataset=out, plan_dir=plan_dir, batches=make_batches(todo, shards_per_worker),
+                      retries=retries, log_dir=log_dir)
+            tally(backend.submit(job), stats, progress)
+            continue
+        if not held:
+            return
+        if not wait:
+            raise Incomplete(f"{len(held)} shard(s) are being rendered by other processes: {_held_text(held)}",
+                             str(out), "rerun when they are done (without --no-wait, synth render waits)")
+        if set(held) != noted:
+            noted = set(held)
+            progress.note(f"synth render: waiting for {len(held)} shard(s) held by other processes: "
+                          f"{_held_text(held)}")
+            progress.record({"event": "waiting", "shards": sorted(held)})
+        while set(ds.claims(held)) == set(held) and set(held) <= set(ds.pending_shards()):
+            time.sleep(poll_s)
+            progress.tick()

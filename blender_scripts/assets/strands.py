@@ -133,6 +133,23 @@ def make_curves_object(name: str, pts: np.ndarray, head_ob, material, surface: S
     return ob
 
 
+def set_curves_positions(ob, pts: np.ndarray) -> None:
+    """Move the points of a Curves object (same topology) and drop its derived caches.
+
+    ``position_data.foreach_set`` alone leaves the curves' cached derived data (evaluated
+    lengths, which Geometry Nodes' Spline Parameter and so "Set Hair Curve Profile"'s radius
+    use) as computed for the old positions: the evaluated copy made for a render shares those
+    caches with the original. Resizing every curve to its own size marks the topology changed,
+    which clears them, so the next evaluation depends on the new positions only."""
+    cv = ob.data
+    cv.position_data.foreach_set("vector", np.ascontiguousarray(pts, np.float32).ravel())
+    offsets = np.empty(len(cv.curves) + 1, np.int32)
+    cv.curve_offset_data.foreach_get("value", offsets)
+    cv.resize_curves(np.diff(offsets).tolist())
+    cv.update_tag()
+    ob.update_tag()
+
+
 def apply_styling(ob, st: Styling) -> list[str]:
     applied = []
     if st.clump > 0.0:
@@ -171,8 +188,4 @@ class StrandRig(Rig):
         return cls_(g.cls, ob, attachment, info)
 
     def update(self, ctx) -> None:
-        pts = self.attachment.positions(ctx)
-        cv = self.ob.data
-        cv.position_data.foreach_set("vector", np.ascontiguousarray(pts, np.float32).ravel())
-        cv.update_tag()
-        self.ob.update_tag()
+        set_curves_positions(self.ob, self.attachment.positions(ctx))

@@ -6,10 +6,11 @@
       dataset.json          plan hash, expected shards -> frame keys, meta, created, versions
       index.json            committed shards (derived from the manifests; rebuildable)
       .lock                 flock for dataset-wide updates (dataset.json creation, index)
+      logs/                 worker and task logs of `synth render` (one file per attempt)
       plan/                 the plan ``synth render`` made (docs/plan-format.md)
       shards/<shard>/       committed, read-only: KEY.exr, KEY.json, manifest.json
       .staging/<shard>/     in progress (same files, no manifest yet)
-      .staging/<shard>.lock flock held by the process rendering that shard
+      .staging/<shard>.lease claim of the process rendering that shard (synth.dataset.lease)
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ INDEX_FORMAT = "synth-index/1"
 DATASET_FILE = "dataset.json"
 INDEX_FILE = "index.json"
 LOCK_FILE = ".lock"
+LOGS_DIR = "logs"
 SHARDS_DIR = "shards"
 STAGING_DIR = ".staging"
 MANIFEST_FILE = "manifest.json"
@@ -76,6 +78,11 @@ def check_shard_id(shard_id: str) -> str:
 def frame_files(key: str) -> tuple[str, str]:
     """The two files of a frame: ``(KEY.exr, KEY.json)``."""
     return f"{key}.exr", f"{key}.json"
+
+
+def lease_path(root: Path, shard_id: str) -> Path:
+    """``DIR/.staging/<shard>.lease``: the claim of the process rendering the shard."""
+    return Path(root) / STAGING_DIR / f"{check_shard_id(shard_id)}.lease"
 
 
 def shard_dir(root: Path, shard_id: str) -> Path:

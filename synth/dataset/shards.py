@@ -4,7 +4,7 @@ Typical worker loop::
 
     ds = open_dataset(out, plan_hash, expected={shard_id: [keys...], ...}, meta={...})
     for shard_id in ds.pending_shards():
-        with ds.staging(shard_id) as st:          # flock: one process per shard
+        with ds.staging(shard_id) as st:          # lease: one process per shard, across hosts
             done = st.frames_done()               # frames finished by an interrupted run
             for key in st.expected_keys:
                 if key not in done:
@@ -19,7 +19,9 @@ Crash safety (kill -9 at any instant):
 - a commit fsyncs every file, writes ``manifest.json`` (sha256 of every file) atomically,
   fsyncs, then renames the whole staging directory to ``shards/<id>`` in one ``rename(2)``:
   a shard is either committed complete or not at all;
-- the index is updated last, under a lock, and is repaired from the files on the next open.
+- the index is updated last, under a lock, and is repaired from the files on the next open;
+- a shard is claimed with a lease file (:mod:`synth.dataset.lease`) that a process on another
+  host can see and, once its holder is gone, break: flock is not reliable on NFS or Lustre.
 """
 
 from __future__ import annotations
@@ -32,8 +34,10 @@ from pathlib import Path
 import synth
 from synth.dataset.index import ManifestError, parse_manifest, read_index, update_index
 from synth.dataset.frame_json import jsonable
-from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, LOCK_FILE, MANIFEST_FILE, SHARDS_DIR,
-                                  STAGING_DIR, check_shard_id, flock, shard_dir, staging_dir, utc_now)
+from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, LOCK_FILE, LOGS_DIR, MANIFEST_FILE,
+                                  SHARDS_DIR, STAGING_DIR, check_shard_id, flock, lease_path, shard_dir, staging_dir,
+                                  utc_now)
+from synth.dataset.lease import DEFAULT_TTL_S, Holder, read_holder
 from synth.dataset.staging import ShardBusy, ShardCommitted, StagingShard
 from synth.errors import SynthError
 from synth.io import atomic_write_json, is_temp_name, loads_json
@@ -146,29 +150,40 @@ class Dataset:
         if not self.writable:
             raise SynthError("dataset opened read-only", str(self.root), "use open_dataset() to write")
 
-    def staging(self, shard_id: str) -> StagingShard:
-        """Lock and open the staging area of one shard (use as a context manager).
+    def staging(self, shard_id: str, lease_ttl: float = DEFAULT_TTL_S) -> StagingShard:
+        """Claim and open the staging area of one shard (use as a context manager).
 
         Refuses a shard that is not in the plan, one already committed, and one another
-        process is rendering right now.
+        process is rendering right now (its lease is held; ``lease_ttl`` is how long this
+        process's own lease stays valid on other hosts without a heartbeat).
         """
         self._need_writable()
         check_shard_id(shard_id)
         if shard_id not in self.expected:
             raise SynthError(f"shard {shard_id} is not in this dataset's plan", str(self.root),
                              "use a shard id from the plan")
-        st = StagingShard(self.root, self.plan_hash, shard_id, self.expected[shard_id])
+        st = StagingShard(self.root, self.plan_hash, shard_id, self.expected[shard_id], lease_ttl)
         st._open()
         return st
 
-    def try_staging(self, shard_id: str) -> StagingShard | None:
+    def try_staging(self, shard_id: str, lease_ttl: float = DEFAULT_TTL_S) -> StagingShard | None:
         """Like :meth:`staging`, but ``None`` when another process is rendering the shard or has
         committed it meanwhile: the loop for several workers sharing one dataset is
         ``for s in ds.pending_shards(): st = ds.try_staging(s); if st is None: continue; with st: ...``."""
         try:
-            return self.staging(shard_id)
+            return self.staging(shard_id, lease_ttl)
         except (ShardBusy, ShardCommitted):
             return None
+
+    def claims(self, shard_ids: Sequence[str]) -> dict[str, Holder]:
+        """The shards among ``shard_ids`` that a live process holds (read from the lease files;
+        a lease whose holder is gone is not listed: the next claimant breaks it)."""
+        out = {}
+        for s in shard_ids:
+            h = read_holder(lease_path(self.root, s))
+            if h is not None and h.alive():
+                out[s] = h
+        return out
 
     def summary(self) -> dict:
         """Counts for progress displays, read from the files."""
@@ -215,7 +230,8 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
         else:
             leftovers = [n for n in os.listdir(root) if is_temp_name(n)]  # a creation killed half-way
             others = sorted(n for n in os.listdir(root)
-                            if n not in (LOCK_FILE, PLAN_DIR) and n not in leftovers and not n.startswith(".plan-"))
+                            if n not in (LOCK_FILE, PLAN_DIR, LOGS_DIR) and n not in leftovers
+                            and not n.startswith(".plan-"))
             if others:
                 raise SynthError(f"directory is not empty and holds no dataset.json (found {others[0]!r})",
                                  str(root), "use an empty or new --out directory")

@@ -6,7 +6,6 @@ crash-safety argument.
 
 from __future__ import annotations
 
-import fcntl
 import os
 import platform
 from collections.abc import Sequence
@@ -18,14 +17,17 @@ import synth
 from synth.dataset.exr import encode_frame_exr, read_frame_exr_header
 from synth.dataset.frame_json import check_frame_json, jsonable
 from synth.dataset.index import update_index
-from synth.dataset.layout import MANIFEST_FILE, SHARD_FORMAT, frame_files, shard_dir, staging_dir, utc_now
+from synth.dataset.layout import MANIFEST_FILE, SHARD_FORMAT, frame_files, lease_path, shard_dir, staging_dir, utc_now
+from synth.dataset.lease import DEFAULT_TTL_S, Lease, LeaseBusy
 from synth.errors import SynthError
 from synth.io import (atomic_write_bytes, atomic_write_json, dumps_json, file_digest, fsync_dir, is_temp_name,
                       loads_json, sha256_bytes)
 
 
 class ShardBusy(SynthError):
-    """Another process holds the shard's lock (it is rendering that shard)."""
+    """Another process holds the shard's lease (it is rendering that shard); ``holder`` says who."""
+
+    holder = None
 
 
 class ShardCommitted(SynthError):
@@ -47,12 +49,15 @@ def _writer_versions() -> dict:
 
 
 class StagingShard:
-    """One shard being rendered: ``.staging/<id>/`` plus the lock ``.staging/<id>.lock``.
+    """One shard being rendered: ``.staging/<id>/`` plus the lease ``.staging/<id>.lease``
+    (:mod:`synth.dataset.lease`: a claim that holds across hosts sharing the dataset).
 
-    Made by ``Dataset.staging`` (the dataset root, its plan hash and the shard's planned keys).
+    Made by ``Dataset.staging`` (the dataset root, its plan hash, the shard's planned keys and
+    the lease's ttl).
     """
 
-    def __init__(self, root: Path, plan_hash: str, shard_id: str, expected_keys: Sequence[str]):
+    def __init__(self, root: Path, plan_hash: str, shard_id: str, expected_keys: Sequence[str],
+                 lease_ttl: float = DEFAULT_TTL_S):
         self.root = Path(root)
         self.plan_hash = plan_hash
         self.shard_id = shard_id
@@ -60,8 +65,9 @@ class StagingShard:
         self.target = shard_dir(self.root, shard_id)
         self.expected_keys: list[str] = list(expected_keys)
         self._expected_set = set(self.expected_keys)
-        self._lock_path = self.dir.with_name(f"{shard_id}.lock")
-        self._lock_fd: int | None = None
+        self._lease_path = lease_path(self.root, shard_id)
+        self._lease_ttl = lease_ttl
+        self._lease: Lease | None = None
         self._committed = False
         #: Files removed when the staging area was opened (temp files, half-finished frames).
         self.cleaned: list[str] = []
@@ -69,14 +75,13 @@ class StagingShard:
     # -- lifecycle ---------------------------------------------------------------------------
     def _open(self) -> None:
         self.dir.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self._lock_path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            os.close(fd)
-            raise ShardBusy(f"shard {self.shard_id} is being rendered by another process", str(self.dir),
-                            "wait for it, or stop it first") from None
-        self._lock_fd = fd
+            self._lease = Lease.acquire(self._lease_path, self._lease_ttl)
+        except LeaseBusy as e:
+            busy = ShardBusy(f"shard {self.shard_id} is being rendered by another process ({e.holder.describe()})",
+                             str(self.dir), "wait for it, or stop it first")
+            busy.holder = e.holder
+            raise busy from None
         try:
             if self.target.exists():
                 raise ShardCommitted(f"shard {self.shard_id} is already committed", str(self.target),
@@ -88,11 +93,10 @@ class StagingShard:
             raise
 
     def close(self) -> None:
-        """Release the lock (the staging files stay for a later resume)."""
-        if self._lock_fd is not None:
-            fcntl.flock(self._lock_fd, fcntl.LOCK_UN)
-            os.close(self._lock_fd)
-            self._lock_fd = None
+        """Release the lease (the staging files stay for a later resume)."""
+        if self._lease is not None:
+            self._lease.release()
+            self._lease = None
 
     def __enter__(self) -> StagingShard:
         return self
@@ -104,7 +108,7 @@ class StagingShard:
         if self._committed:
             raise ShardCommitted(f"shard {self.shard_id} is already committed",
                                  str(self.target), "committed shards are never modified")
-        if self._lock_fd is None:
+        if self._lease is None:
             raise SynthError(f"staging area of {self.shard_id} is closed", str(self.dir),
                              "call dataset.staging() again")
 
@@ -257,16 +261,15 @@ class StagingShard:
         if target.exists():
             raise ShardCommitted(f"shard {self.shard_id} is already committed", str(target),
                                  "committed shards are never modified")
+        if not self._lease.held():  # broken by another host after a missed heartbeat: let it commit
+            raise ShardBusy(f"shard {self.shard_id}: this process's claim was broken by another process; "
+                            "not committed", str(self.dir), "the other process finishes the shard")
         os.rename(self.dir, target)  # the commit point
         self._committed = True
         if durable:
             fsync_dir(target.parent)
             fsync_dir(self.dir.parent)
         update_index(self.root, self.plan_hash, durable=durable)
-        try:  # nobody can use the lock any more: anyone who takes it sees the committed shard
-            os.unlink(self._lock_path)
-        except FileNotFoundError:
-            pass
-        self.close()
+        self.close()  # anyone who takes the lease now sees the committed shard
         manifest["manifest_sha256"] = sha256_bytes(data)
         return manifest

@@ -175,7 +175,7 @@ def _staging_warnings(root: Path) -> list[Defect]:
                 nj = sum(f.endswith(".json") for f in files)
                 out.append(Defect(n, None, "staging", f"uncommitted work: {nj} frame JSON(s), {len(files)} file(s) "
                                                       "in .staging (resume the render to finish it)"))
-        elif n.endswith(".lock") or is_temp_name(n):
+        elif n.endswith((".lock", ".lease")) or is_temp_name(n):
             continue
         else:
             out.append(Defect(None, None, "staging", f"stray file .staging/{n}"))

@@ -63,8 +63,10 @@ def atomic_place(path: Path, fill: Callable[[Path], object], *, durable: bool = 
         if durable and sync_file:
             fsync_file(tmp)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         _remove(tmp)
+        if isinstance(e, OSError) and e.filename is None:  # os.write names no file: "disk full writing WHAT?"
+            raise OSError(e.errno, e.strerror, str(path)) from e
         raise
     if durable:
         fsync_dir(path.parent)

@@ -11,6 +11,7 @@ def test_bad_arguments_give_one_line_and_write_nothing(tmp_path, capsys):
         (["render", "--plan", str(tmp_path / "nope"), "--out", str(tmp_path / "b")], "no plan.json"),
         (["render", "--out", str(tmp_path / "c")], "missing --identities"),
         (["render", "--plan", str(tmp_path), "-n", "2", "--out", str(tmp_path / "d")], "planning options"),
+        (["render", "-n", "1", "--backend", "cloud", "--out", str(tmp_path / "e")], "unknown backend 'cloud'"),
     ]
     for argv, needle in cases:
         assert main(argv) == 2, argv

@@ -1,17 +1,20 @@
 """The local backend (renderer_jobs.local) with a bpy-free fake worker (tests/fake_worker.py):
 events in order, one batch per process, retries, per-attempt logs, cancel (SIGTERM to the
-whole process group, SIGKILL after the grace time)."""
+whole process group, SIGKILL after the grace time), the watchdog, GPU pinning, and workers
+that die with their controller."""
 
 from __future__ import annotations
 
 import json
 import os
 import signal
+import subprocess
 import sys
 import time
 from pathlib import Path
 
 import pytest
+from farm_helpers import alive
 
 from renderer_jobs import local
 from renderer_jobs.backend import Job
@@ -30,14 +33,6 @@ def submit(tmp_path, shards, behaviour=None, workers=1, per_worker=2, **job):
     backend = local.LocalBackend(workers=workers, cmd=fake_cmd)
     return backend.submit(Job(dataset=tmp_path, plan_dir=tmp_path / "plan", batches=make_batches(shards, per_worker),
                               **job))
-
-
-def alive(pid: int) -> bool:
-    try:
-        state = Path(f"/proc/{pid}/status").read_text().split("State:")[1].split()[0]
-    except (FileNotFoundError, IndexError):
-        return False
-    return state not in ("Z", "X")
 
 
 def test_events_of_each_batch_end_with_its_batch_end(tmp_path):
@@ -120,7 +115,7 @@ def _wait_for(pred, what: str, limit: float = 30.0) -> None:
         time.sleep(0.02)
 
 
-@pytest.mark.parametrize("behaviour, rc", [("hang", -signal.SIGTERM), ("stubborn", -signal.SIGKILL)])
+@pytest.mark.parametrize("behaviour, rc", [("hang", 128 + signal.SIGTERM), ("stubborn", -signal.SIGKILL)])
 def test_cancel_stops_every_worker_and_its_children(tmp_path, monkeypatch, behaviour, rc):
     monkeypatch.setattr(local, "TERM_GRACE_S", 0.5)
     run = submit(tmp_path, ["a", "b", "c"], {"a": behaviour, "b": behaviour, "c": "ok"}, workers=2, per_worker=1)
@@ -150,6 +145,78 @@ def test_cancel_stops_every_worker_and_its_children(tmp_path, monkeypatch, behav
 
 def test_workers_get_the_environment_given(tmp_path):
     backend = local.LocalBackend(workers=1, env={"PATH": os.environ.get("PATH", ""), "FOO": "1"})
-    assert backend.env["FOO"] == "1" and backend.env["PYTHONUNBUFFERED"] == "1"
+    env = local.worker_env(backend.env)
+    assert env["FOO"] == "1" and env["PYTHONUNBUFFERED"] == "1" and env["SYNTH_PARENT_PID"] == str(os.getpid())
+    assert env["PYTHONPATH"].split(os.pathsep)[0] == str(Path(local.__file__).resolve().parents[1])
     assert "blender_scripts.worker" in local.worker_command(tmp_path, tmp_path / "plan", ["a", "b"])
     assert local.worker_command(tmp_path, tmp_path / "plan", ["a", "b"])[-1] == "a,b"
+
+
+def test_the_watchdog_stops_a_silent_worker_and_its_batch_is_retried(tmp_path):
+    (tmp_path / "behaviour.json").write_text(json.dumps({"a": "silent_once"}))
+    backend = local.LocalBackend(workers=1, cmd=fake_cmd, stall_timeout=1.0)
+    events = backend.submit(Job(dataset=tmp_path, plan_dir=tmp_path, batches=make_batches(["a"], 1),
+                                retries=1)).wait()
+    ends = [e for e in events if isinstance(e, BatchEnd)]
+    assert [(e.attempt, e.retry) for e in ends] == [(0, True), (1, False)]
+    assert ends[0].returncode == 128 + signal.SIGTERM and "watchdog: no output from the worker" in ends[0].log_tail
+    assert ends[1].returncode == 0 and [e.shard for e in events if isinstance(e, Commit)] == ["a"]
+
+
+def test_a_worker_told_to_stop_is_not_retried(tmp_path):
+    run = submit(tmp_path, ["a"], {"a": "wait"}, retries=2)
+    it = run.events()
+    next(it)  # its start event
+    _wait_for(lambda: (tmp_path / "a.pid").exists(), "worker not up")
+    os.kill(int((tmp_path / "a.pid").read_text()), signal.SIGTERM)  # systemd, Slurm or a user
+    ends = [e for e in it if isinstance(e, BatchEnd)]
+    assert [(e.returncode, e.retry) for e in ends] == [(128 + signal.SIGTERM, False)]
+    assert "synth worker: stopped (SIGTERM)" in ends[0].log_tail
+
+
+def test_one_worker_per_gpu_each_pinned_to_its_device(tmp_path):
+    (tmp_path / "behaviour.json").write_text(json.dumps({s: "env" for s in "abcd"}))
+    backend = local.LocalBackend(cmd=fake_cmd, gpus=["3", "5"])
+    assert backend.workers == 2
+    backend.submit(Job(dataset=tmp_path, plan_dir=tmp_path, batches=make_batches(list("abcd"), 1))).wait()
+    seen = [(tmp_path / f"{s}.env").read_text() for s in "abcd"]
+    assert sorted(set(seen)) == ["3", "5"]  # every worker saw exactly one of the GPUs
+    cpu = local.LocalBackend(cmd=fake_cmd, gpus=[])
+    assert cpu.workers == 1
+    cpu.submit(Job(dataset=tmp_path, plan_dir=tmp_path, batches=make_batches(["a"], 1))).wait()
+    assert (tmp_path / "a.env").read_text() == os.environ.get("CUDA_VISIBLE_DEVICES", "(unset)")
+
+
+CONTROLLER = """
+import sys
+from pathlib import Path
+sys.path[:0] = [{tests!r}, {root!r}]
+from test_local_backend import fake_cmd
+from renderer_jobs import local
+from renderer_jobs.backend import Job
+from renderer_jobs.submit import make_batches
+d = Path({d!r})
+job = Job(dataset=d, plan_dir=d, batches=make_batches(["a"], 1))
+for ev in local.LocalBackend(workers=1, cmd=fake_cmd).submit(job).events():
+    print(ev, flush=True)
+"""
+
+
+def test_workers_die_with_their_controller(tmp_path):
+    (tmp_path / "behaviour.json").write_text(json.dumps({"a": "wait"}))
+    code = CONTROLLER.format(tests=str(FAKE.parent), root=str(FAKE.parents[1]), d=str(tmp_path))
+    ctl = subprocess.Popen([sys.executable, "-c", code], start_new_session=True)
+    try:
+        _wait_for(lambda: (tmp_path / "a.pid").exists(), "worker not up")
+        worker = int((tmp_path / "a.pid").read_text())
+        assert alive(worker)
+        os.killpg(ctl.pid, signal.SIGKILL)  # kill -9 of the controller's whole group (not the worker's)
+        ctl.wait()
+        _wait_for(lambda: not alive(worker), "the worker outlived its controller", 10.0)
+    finally:
+        try:
+            os.killpg(ctl.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        if (tmp_path / "a.pid").exists() and alive(int((tmp_path / "a.pid").read_text())):
+            os.kill(int((tmp_path / "a.pid").read_text()), signal.SIGKILL)

@@ -3,17 +3,27 @@ frames through the dataset API: no bpy. What is done is read from the dataset's 
 
 from __future__ import annotations
 
+import io
+import json
 import os
+import platform
+import subprocess
+import time
+from contextlib import contextmanager
+from dataclasses import asdict
 
 from tests.support import fake_frames as ff
 import pytest
 from tests.support.toy_model import write_toy_model
 
 from renderer_jobs.backend import Backend, Batch, Job, Run
-from renderer_jobs.events import BatchEnd, Commit, Frame
-from renderer_jobs.submit import make_batches, prepare_plan, render_plan
+from renderer_jobs.events import EXIT_DISK_FULL, EXIT_INPUT, BatchEnd, Commit, Error, Frame
+from renderer_jobs.submit import MAX_ROUNDS, make_batches, prepare_plan, render_plan
+from renderer_jobs.progress import Progress
+from synth.dataset.layout import lease_path
+from synth.dataset.lease import Holder, _boot_id, process_start
 from synth.dataset.shards import open_dataset
-from synth.errors import SynthError
+from synth.errors import DiskFull, Incomplete, SynthError, WorkerFailed
 from synth.plan.io import load_plan
 
 SETS = ["dataset.expressions_per_identity=2", "dataset.views_per_expression=2", 'render.preset="ci"']
@@ -42,6 +52,8 @@ class FakeRun(Run):
                 else:  # claims work it never did
                     yield Frame(shard=sid, key="id000000_ex00_v00", render_seconds=0.25)
                 yield Commit(shard=sid)
+            if b.error:
+                yield Error(shard=",".join(batch.shards), message=b.error)
             for attempt, rc in enumerate(b.returncodes):
                 yield BatchEnd(batch=batch.index, shards=batch.shards, attempt=attempt, returncode=rc,
                                log_tail=f"log of batch {batch.index}", retry=attempt + 1 < len(b.returncodes))
@@ -53,8 +65,8 @@ class FakeRun(Run):
 class FakeBackend(Backend):
     name = "fake"
 
-    def __init__(self, lie=False, returncodes=(0,), interrupt=False):
-        self.lie, self.returncodes, self.interrupt = lie, returncodes, interrupt
+    def __init__(self, lie=False, returncodes=(0,), interrupt=False, error=None):
+        self.lie, self.returncodes, self.interrupt, self.error = lie, returncodes, interrupt, error
         self.jobs: list[Job] = []
         self.cancelled = False
 
@@ -101,18 +113,21 @@ def test_renders_what_is_missing_then_resumes_with_nothing(planned):
     assert (res["frames_committed"], res["shards_committed"], res["shards"]) == (12, 3, 3)
     assert res["render_seconds"] == pytest.approx(6 * 0.25) and res["worker_starts"] == 1
     again = render_plan(out, pdir, be, shards_per_worker=2, quiet=True)
-    assert be.jobs[1].batches == ()
+    assert len(be.jobs) == 1  # nothing left: nothing submitted
     assert (again["frames_before"], again["frames_rendered"], again["frames_committed"]) == (12, 0, 12)
 
 
 def test_done_is_read_from_the_dataset_not_from_events(planned):
     out, pdir = planned
     be = FakeBackend(lie=True)
-    res = render_plan(out, pdir, be, shards_per_worker=1, quiet=True)
-    assert res["frames_rendered"] == 3  # what the events said
-    assert (res["frames_committed"], res["shards_committed"]) == (0, 0)  # what the files say
-    render_plan(out, pdir, be, shards_per_worker=1, quiet=True)
-    assert be.jobs[1].batches == be.jobs[0].batches  # so the next run does it all again
+    with pytest.raises(Incomplete, match="3 shard.s. not committed") as ei:
+        render_plan(out, pdir, be, shards_per_worker=1, quiet=True)
+    assert ei.value.exit_code == 1  # never 0 unless every shard is committed
+    # each round reads what is pending from the files: the work is handed out again, a few times
+    assert len(be.jobs) == MAX_ROUNDS and all(j.batches == be.jobs[0].batches for j in be.jobs)
+    with pytest.raises(Incomplete):
+        render_plan(out, pdir, be, shards_per_worker=1, quiet=True)
+    assert be.jobs[MAX_ROUNDS].batches == be.jobs[0].batches  # so the next run does it all again
 
 
 def test_a_retried_batch_that_then_succeeds_is_no_failure(planned):
@@ -123,11 +138,14 @@ def test_a_retried_batch_that_then_succeeds_is_no_failure(planned):
 
 def test_a_failed_batch_fails_the_run_with_one_line(planned, capsys):
     out, pdir = planned
-    with pytest.raises(SynthError) as ei:
-        render_plan(out, pdir, FakeBackend(returncodes=(1, -9)), shards_per_worker=2, quiet=True)
+    be = FakeBackend(returncodes=(1, -9))
+    with pytest.raises(WorkerFailed) as ei:
+        render_plan(out, pdir, be, shards_per_worker=2, quiet=True)
+    assert ei.value.exit_code == 3 and len(be.jobs) == 1  # failed shards are not handed out again
     msg = str(ei.value)
     assert "\n" not in msg
-    assert msg.startswith("2 worker(s) failed; first: worker for shard_000000,shard_000001 exited with code -9:")
+    assert msg.startswith("3 shard(s) failed after their retries; first: worker for shard_000000,shard_000001 "
+                          "exited with code -9 (render); see the worker log")
     err = capsys.readouterr().err
     assert "log of batch 0" in err and "worker for shard_000002 exited with code -9" in err
 
@@ -150,3 +168,88 @@ def test_prepare_plan_reuses_the_same_plan_and_refuses_another(planned, toy):
         prepare_plan(out, 2, None, SETS, 7, toy)
     assert {p: p.stat().st_mtime_ns for p in sorted(pdir.rglob("*"))} == before
     assert sorted(os.listdir(out)) == ["plan"]  # no .plan-check leftovers
+
+
+def test_out_of_disk_space_is_exit_4_with_the_workers_line(planned, capsys):
+    out, pdir = planned
+    line = "out of disk space writing /x/y.exr (0.0 MiB left on /x); free some space and rerun"
+    with pytest.raises(DiskFull) as ei:
+        render_plan(out, pdir, FakeBackend(returncodes=(EXIT_DISK_FULL,), error=line), shards_per_worker=3,
+                    quiet=True)
+    assert ei.value.exit_code == 4 and str(ei.value) == line
+
+
+def test_a_reported_input_error_is_exit_2(planned):
+    out, pdir = planned
+    with pytest.raises(SynthError) as ei:
+        render_plan(out, pdir, FakeBackend(returncodes=(EXIT_INPUT,), error="HDR environment file not found (x)"),
+                    shards_per_worker=3, quiet=True)
+    assert ei.value.exit_code == 2 and str(ei.value) == "HDR environment file not found (x)"
+
+
+@contextmanager
+def held(planned, shard: str, seconds: int):
+    """``shard``'s lease held by a live process on this host (a ``sleep``) for ``seconds``."""
+    out, pdir = planned
+    plan = load_plan(pdir)
+    open_dataset(out, plan.plan_hash, plan.expected())
+    proc = subprocess.Popen(["sleep", str(seconds)])
+    try:
+        h = Holder(host=platform.node(), boot_id=_boot_id(), pid=proc.pid, start=process_start(proc.pid), token="x",
+                   heartbeat=time.time(), ttl=60.0)
+        lease_path(out, shard).write_text(json.dumps(asdict(h)))
+        yield proc
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+def test_a_shard_held_by_a_live_process_is_waited_for_then_rendered(planned):
+    out, pdir = planned
+    text = io.StringIO()
+    be = FakeBackend()
+    with held(planned, "shard_000001", 3) as holder:
+        res = render_plan(out, pdir, be, shards_per_worker=3, poll_s=0.1,
+                          progress=Progress(0, 0, "lines", every=3600, out=text))
+    assert [j.batches for j in be.jobs] == [(Batch(0, ("shard_000000", "shard_000002")),),
+                                            (Batch(0, ("shard_000001",)),)]
+    assert f"waiting for 1 shard(s) held by other processes: shard_000001 ({platform.node()} pid {holder.pid})" \
+        in text.getvalue()
+    assert res["frames_committed"] == 12
+
+
+def test_no_wait_reports_the_held_shards_and_exits_1(planned):
+    out, pdir = planned
+    with held(planned, "shard_000002", 60) as holder:
+        with pytest.raises(Incomplete, match=f"1 shard.s. are being rendered by other processes: shard_000002 "
+                                             f".{platform.node()} pid {holder.pid}.") as ei:
+            render_plan(out, pdir, FakeBackend(), shards_per_worker=3, quiet=True, wait=False)
+    assert ei.value.exit_code == 1
+    plan = load_plan(pdir)
+    assert open_dataset(out, plan.plan_hash, plan.expected()).summary()["shards_committed"] == 2
+
+
+def test_progress_lines_and_json_log(planned, tmp_path):
+    out, pdir = planned
+    text = io.StringIO()
+    log = tmp_path / "events.jsonl"
+    render_plan(out, pdir, FakeBackend(returncodes=(1, 0)), shards_per_worker=3,
+                progress=Progress(0, 0, "lines", every=0.0, json_log=log, out=text, workers=2))
+    lines = text.getvalue().splitlines()
+    assert lines[0].startswith("synth render: 1/12 frames (8.3%), ") and lines[0].endswith(", 0 failures, 2 workers")
+    assert lines[-1].startswith("synth render: 12/12 frames (100.0%)")
+    recs = [json.loads(x) for x in log.read_text().splitlines()]
+    kinds = [r["event"] for r in recs]
+    assert kinds.count("frame") == 12 and kinds.count("commit") == 3 and kinds[-1] == "summary"
+    ends = [r for r in recs if r["event"] == "batch_end"]
+    assert [(e["returncode"], e["retry"]) for e in ends] == [(1, True), (0, False)]
+    assert all("time" in r for r in recs) and recs[-1]["frames_committed"] == 12
+
+
+def test_an_error_event_from_a_batch_that_finished_still_fails_the_run(planned):
+    out, pdir = planned
+    with pytest.raises(WorkerFailed, match="a worker reported an error: shard_000000,shard_000001,shard_000002: "
+                                           "unreadable worker event") as ei:
+        render_plan(out, pdir, FakeBackend(error="unreadable worker event: protocol version 9"), shards_per_worker=3,
+                    quiet=True)
+    assert ei.value.exit_code == 3

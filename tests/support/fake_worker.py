@@ -11,7 +11,13 @@
 - ``error``: an ``error`` event and exit 2, as the real worker does on a SynthError;
 - ``bad_event``: a line of another protocol version, then ``ok``;
 - ``hang``: start a ``sleep`` child in the same process group (its pid in
-  ``DIR/<shard>.child``), then wait for a signal; ``stubborn``: the same, ignoring SIGTERM.
+  ``DIR/<shard>.child``), then wait for a signal; ``stubborn``: the same, ignoring SIGTERM;
+- ``wait``: write its pid to ``DIR/<shard>.pid`` and wait for a signal (no child);
+- ``silent_once``: the first time, say nothing and wait (a stalled worker), then ``ok``;
+- ``env``: write the ``CUDA_VISIBLE_DEVICES`` it got to ``DIR/<shard>.env``, then ``ok``.
+
+Like the real worker it runs ``renderer_jobs.guard`` (signals stop it at once, it dies with
+its parent), except for ``stubborn``, which ignores SIGTERM.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
+from renderer_jobs import guard  # noqa: E402
 from renderer_jobs.events import Commit, Error, Frame, Start, emit  # noqa: E402
 
 
@@ -40,13 +47,23 @@ def main() -> int:
     root = Path(args.dataset)
     shards = args.shards.split(",")
     what = json.loads((root / "behaviour.json").read_text())
+    if "stubborn" in {what.get(s) for s in shards}:
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    else:
+        guard.install()
     emit(Start(shards=tuple(shards), pid=os.getpid(), host=platform.node()))
     for shard in shards:
         b = what.get(shard, "ok")
-        if b == "crash_once":
-            marker = root / f"{shard}.crashed"
-            b = "ok" if marker.exists() else "crash"
+        if b in ("crash_once", "silent_once"):
+            marker = root / f"{shard}.{b}"
+            b = "ok" if marker.exists() else b.removesuffix("_once")
             marker.touch()
+        if b == "env":
+            (root / f"{shard}.env").write_text(os.environ.get("CUDA_VISIBLE_DEVICES", "(unset)"))
+        if b in ("wait", "silent"):
+            (root / f"{shard}.pid").write_text(str(os.getpid()))
+            while True:
+                time.sleep(1)
         if b == "crash":
             print(f"Traceback: boom in {shard}", file=sys.stderr, flush=True)
             return 1
@@ -55,9 +72,7 @@ def main() -> int:
             print(f"synth worker: error: bad input for {shard}", file=sys.stderr, flush=True)
             return 2
         if b in ("hang", "stubborn"):
-            if b == "stubborn":
-                signal.signal(signal.SIGTERM, signal.SIG_IGN)
-            child = subprocess.Popen(["sleep", "600"])
+            child = subprocess.Popen(["sleep", "600"], preexec_fn=guard.unblock_signals)
             (root / f"{shard}.child").write_text(str(child.pid))
             while True:
                 time.sleep(1)
