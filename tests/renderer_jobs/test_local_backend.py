@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
-from farm_helpers import alive
+from tests.support.farm_helpers import alive
 
 from renderer_jobs import local
 from renderer_jobs.backend import Job
@@ -190,8 +190,8 @@ def test_one_worker_per_gpu_each_pinned_to_its_device(tmp_path):
 CONTROLLER = """
 import sys
 from pathlib import Path
-sys.path[:0] = [{tests!r}, {root!r}]
-from test_local_backend import fake_cmd
+sys.path[:0] = [{root!r}]
+from tests.renderer_jobs.test_local_backend import fake_cmd
 from renderer_jobs import local
 from renderer_jobs.backend import Job
 from renderer_jobs.submit import make_batches
@@ -204,7 +204,7 @@ for ev in local.LocalBackend(workers=1, cmd=fake_cmd).submit(job).events():
 
 def test_workers_die_with_their_controller(tmp_path):
     (tmp_path / "behaviour.json").write_text(json.dumps({"a": "wait"}))
-    code = CONTROLLER.format(tests=str(FAKE.parent), root=str(FAKE.parents[1]), d=str(tmp_path))
+    code = CONTROLLER.format(root=str(FAKE.parents[2]), d=str(tmp_path))
     ctl = subprocess.Popen([sys.executable, "-c", code], start_new_session=True)
     try:
         _wait_for(lambda: (tmp_path / "a.pid").exists(), "worker not up")
