@@ -78,3 +78,18 @@ def relative_pose_errors(w2c_fit, w2c_true, head_fit=None, head_true=None) -> tu
     Rd = rel_fit[..., :3, :3] @ np.swapaxes(rel_true[..., :3, :3], -1, -2)
     cos = np.clip((np.trace(Rd, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
     return np.degrees(np.arccos(cos)), np.linalg.norm(rel_fit[..., :3, 3] - rel_true[..., :3, 3], axis=-1)
+
+
+def scale_free_position_errors(w2c_fit, w2c_true, points_fit, points_true) -> np.ndarray:
+    """(N,) camera position errors (metres) with the head's size taken from the truth.
+
+    Scaling the head and every camera distance by one factor changes no pixel either, so
+    images fix the cameras only relative to the head's size, which only the model's shape
+    prior pins down. Here the fitted camera centres are taken relative to the centroid of
+    ``points_fit`` (e.g. the fitted 3D landmarks, head frame = world frame as with free
+    cameras) and rescaled by the ratio of the RMS radii of ``points_true`` and
+    ``points_fit``, then compared with the true centres relative to the true centroid."""
+    pf, pt = np.asarray(points_fit, np.float64), np.asarray(points_true, np.float64)
+    size = lambda p: np.sqrt(((p - p.mean(0)) ** 2).sum(1).mean())  # noqa: E731
+    cf = (camera_centres(w2c_fit) - pf.mean(0)) * (size(pt) / size(pf))
+    return np.linalg.norm(cf - (camera_centres(w2c_true) - pt.mean(0)), axis=-1)

@@ -36,6 +36,7 @@ class VertexSubset:
     template: torch.Tensor  # (n*3,)
     basis: torch.Tensor  # (Ki + Ke, n*3), scales applied
     weights: torch.Tensor  # (n, J) skinning weights
+    joints: torch.Tensor  # (k,) long, the joints with a non-zero weight on some vertex of the subset
 
 
 @dataclass
@@ -95,7 +96,8 @@ class TorchHeadModel:
             index=torch.as_tensor(idx, device=self.device),
             template=self._t(d.template[idx]).reshape(-1),
             basis=self._t(self._basis_np[:, idx]).reshape(self.Ki + self.Ke, -1),
-            weights=self._t(d.skin_weights[idx]))
+            weights=self._t(d.skin_weights[idx]),
+            joints=torch.as_tensor(np.nonzero(np.any(d.skin_weights[idx] != 0, axis=0))[0], device=self.device))
 
     def full(self) -> VertexSubset:
         if self._full is None:
@@ -171,8 +173,12 @@ class TorchHeadModel:
             return shaped
         P = self.pose(beta, rot, trans)
         offset = P.positions - (P.rotations @ P.rest.unsqueeze(-1)).squeeze(-1)  # (B, J, 3)
-        per_joint = torch.einsum("bjik,bnk->bjni", P.rotations, shaped) + offset.unsqueeze(2)  # (B, J, n, 3)
-        return torch.einsum("nj,bjni->bni", sub.weights, per_joint)
+        # blend the joints' affine maps per vertex, then apply them once (cheaper than
+        # transforming every vertex by every joint, notably under forward-mode autodiff);
+        # joints that move none of the subset's vertices are skipped
+        W, j = sub.weights[:, sub.joints], sub.joints
+        M = (W @ P.rotations[:, j].reshape(B, -1, 9)).reshape(B, -1, 3, 3)
+        return (M * shaped.unsqueeze(-2)).sum(-1) + W @ offset[:, j]
 
     def vertices(self, identity, expression, joint_rotations=None, translation=None) -> torch.Tensor:
         """(B, V, 3) posed vertices."""

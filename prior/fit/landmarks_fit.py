@@ -134,7 +134,7 @@ class _Problem:
     """Named parameter blocks, the residual vector and the identity term of one fit."""
 
     def __init__(self, model: HeadModelData, obs: Observations, opt: FitOptions, head: TorchHeadModel | None,
-                 gmm: TorchGMM | None):
+                 gmm: TorchGMM | None, start: tuple | None = None):
         dt = self.dt = torch.float64
         self.head = head or TorchHeadModel(model, dt)
         self.gmm = gmm or TorchGMM.from_model(model, dt)
@@ -169,20 +169,27 @@ class _Problem:
             "trans": torch.zeros(3, dtype=dt), "beta": self.gmm.mean().clone(),
             "psi": torch.zeros(1, Ke, dtype=dt), "jrot": torch.zeros(1, nj, 3, dtype=dt),
             "dpsi": torch.zeros(N, Ke, dtype=dt), "djrot": torch.zeros(N, nj, 3, dtype=dt)}
-        if obs.world_to_camera is not None:
+        if start is not None:  # given codes instead of the mean face
+            beta, psi, rot = start
+            self.values["beta"] = t(beta).reshape(self.head.Ki)
+            self.values["psi"] = t(psi).reshape(1, Ke)
+            if rot is not None:
+                self.values["jrot"] = t(rot).reshape(self.head.J, 3)[self.jidx].unsqueeze(0)
+        known = obs.world_to_camera is not None
+        self.camera_blocks = (["root_rot", "trans"] if known else ["omega", "tcam"]) + (
+            [] if obs.K is not None else ["log_f"])
+        if known:
             self.R0 = t(obs.world_to_camera[:, :3, :3])
             self.values["tcam"] = t(obs.world_to_camera[:, :3, 3])
-            rigid = ["root_rot", "trans"]
         else:
             self.R0, self.values["tcam"] = self._initial_cameras()
-            rigid = ["omega", "tcam"]
-        self.camera_blocks = rigid + ([] if obs.K is not None else ["log_f"])
         self.all_blocks = self.camera_blocks + ["beta", "psi", "jrot"] + (
             ["dpsi", "djrot"] if opt.per_image_expression else [])
 
     def _initial_cameras(self) -> tuple[torch.Tensor, torch.Tensor]:
+        v = self.values
         with torch.no_grad():
-            X = self.head.landmarks(self.gmm.mean(), torch.zeros(self.head.Ke, dtype=self.dt),
+            X = self.head.landmarks(v["beta"], v["psi"], self.joint_rotations(v, v["jrot"]),
                                     landmark_set=self.obs.landmark_set)[0].numpy()
         used = self.obs.used
         poses = [weak_perspective_pose(X[used[i]], self.obs.mean[i, used[i]], self.K0[i].numpy())
@@ -214,17 +221,18 @@ class _Problem:
     # ---- model ---------------------------------------------------------------------------
 
     def codes(self, v) -> tuple[torch.Tensor, torch.Tensor]:
-        """Per-image expression codes (N, Ke) and fitted joint rotations (N, nj, 3)."""
-        psi = v["psi"].expand(self.N, -1)
-        jrot = v["jrot"].expand(self.N, -1, -1)
+        """Expression codes (E, Ke) and fitted joint rotations (E, nj, 3): E = 1 when shared
+        (the head is then evaluated once for all images), else one row per image."""
         if self.opt.per_image_expression:
-            psi, jrot = psi + v["dpsi"], jrot + v["djrot"]
-        return psi, jrot
+            return v["psi"] + v["dpsi"], v["jrot"] + v["djrot"]
+        return v["psi"], v["jrot"]
 
     def joint_rotations(self, v, jrot: torch.Tensor) -> torch.Tensor:
-        rot = torch.zeros(self.N, self.head.J, 3, dtype=self.dt).index_copy(1, self.jidx, jrot)
+        """All joints' rotations (E, J, 3) from the fitted ones (and the root's, when fitted)."""
+        E = jrot.shape[0]
+        rot = torch.zeros(E, self.head.J, 3, dtype=self.dt).index_copy(1, self.jidx, jrot)
         if "root_rot" in self.camera_blocks:
-            rot = rot.index_copy(1, torch.tensor([self.root]), v["root_rot"].expand(self.N, 1, 3))
+            rot = rot.index_copy(1, torch.tensor([self.root]), v["root_rot"].expand(E, 1, 3))
         return rot
 
     def cameras(self, v) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -241,14 +249,14 @@ class _Problem:
     def project(self, v) -> tuple[torch.Tensor, torch.Tensor]:
         psi, jrot = self.codes(v)
         X = self.head.landmarks(v["beta"], psi, self.joint_rotations(v, jrot), v["trans"],
-                                landmark_set=self.obs.landmark_set)
+                                landmark_set=self.obs.landmark_set).expand(self.N, -1, -1)
         R, tcam, K = self.cameras(v)
         return project(X, R, tcam, K)
 
     def residual_parts(self, v) -> dict[str, torch.Tensor]:
         uv, z = self.project(v)
         psi, jrot = self.codes(v)
-        rows = 1.0 / self.N  # mean over images of |psi_i|^2 and |r_i|^2
+        rows = 1.0 / psi.shape[0]  # mean over images of |psi_i|^2 and |r_i|^2
         parts = {
             "landmarks": ((uv - self.mu) * self.w_px).reshape(-1),
             "expression": np.sqrt(2.0 * self.opt.w_expression * rows) * psi.reshape(-1),
@@ -319,13 +327,29 @@ def fit_landmarks(model: HeadModelData, obs: Observations, options: FitOptions |
     p = _Problem(model, obs, opt, head, gmm)
     rep1 = p.solve(p.camera_blocks, opt.camera_iters)
     rep2 = p.solve(p.all_blocks, opt.max_iters)
-    v = p.values
+    return _result(p, {"cameras": rep1, "all": rep2})
+
+
+def fit_cameras(model: HeadModelData, obs: Observations, identity, expression, joint_rotations=None,
+                options: FitOptions | None = None, *, head: TorchHeadModel | None = None) -> FitResult:
+    """Cameras (and focal length, when K is unknown) for a head with given codes: stages 0 and
+    1 of :func:`fit_landmarks` with the given identity (Ki,), expression (Ke,) and joint
+    rotations (J, 3) of ``options.joints`` (others ignored) instead of the mean face. With
+    the true codes of a synthetic scene this measures what the landmarks' noise alone allows."""
+    opt = options or FitOptions()
+    p = _Problem(model, obs, opt, head, None, start=(identity, expression, joint_rotations))
+    return _result(p, {"cameras": p.solve(p.camera_blocks, opt.max_iters)})
+
+
+def _result(p: _Problem, reports: dict) -> FitResult:
+    v, obs = p.values, p.obs
     with torch.no_grad():
         parts = p.residual_parts(v)
         uv, _ = p.project(v)
         R, tcam, K = p.cameras(v)
         psi, jrot = p.codes(v)
-        rot = p.joint_rotations(v, jrot)
+        rot = p.joint_rotations(v, jrot).expand(p.N, -1, -1)
+        psi = psi.expand(p.N, -1)
         energy = {k: 0.5 * float((r * r).sum()) for k, r in parts.items()}
         energy["identity"] = float(p.identity_term(v))
     energy["total"] = float(sum(energy.values()))
@@ -340,9 +364,10 @@ def fit_landmarks(model: HeadModelData, obs: Observations, options: FitOptions |
     uvn = uv.numpy()
     d2 = np.where(used, ((uvn - obs.mean) ** 2).sum(-1), 0.0)
     rmse = np.sqrt(d2.sum(1) / np.maximum(used.sum(1), 1))
+    last = list(reports.values())[-1]
     return FitResult(identity=v["beta"].numpy().copy(), expression=psi.numpy().copy(),
                      joint_rotations=rot.numpy().copy(), head_to_world=head_to_world, K=K.numpy().copy(),
                      world_to_camera=w2c, energy=energy, landmarks_2d=uvn, rmse_px=rmse,
-                     converged=rep1.converged and rep2.converged,
-                     iterations={"cameras": rep1.iterations, "all": rep2.iterations}, grad_norm=rep2.grad_norm,
-                     history=rep2.history)
+                     converged=all(r.converged for r in reports.values()),
+                     iterations={k: r.iterations for k, r in reports.items()}, grad_norm=last.grad_norm,
+                     history=last.history)

@@ -40,8 +40,9 @@ def levenberg_marquardt(residuals: Callable[[torch.Tensor], torch.Tensor],
     bounds ``lower <= theta <= upper`` (tensors like theta, +-inf where unbounded).
 
     Bounds use an active set: a parameter on a bound whose gradient points outward is held
-    for the step, the others take the damped Gauss-Newton step, and the result is clipped
-    into the box. ``accept(theta)`` (optional) is called on every accepted iterate and
+    for the step; the others take the damped Gauss-Newton step, and any of them that would
+    leave the box is stopped on its bound and held while the rest re-solve (see
+    :func:`_bounded_step`). ``accept(theta)`` (optional) is called on every accepted iterate and
     returns the parameters to continue from (used to re-centre rotation parameters).
     Converged when an accepted step lowers E by at most ``rel_tol`` relatively, or the
     projected gradient vanishes.
@@ -70,13 +71,10 @@ def levenberg_marquardt(residuals: Callable[[torch.Tensor], torch.Tensor],
         gnorm = float(g[free].norm())
         if gnorm <= 1e-12 * max(1.0, abs(E)):
             return theta, LMReport(it - 1, True, E, gnorm, history)
-        H = (J.T @ J + scalar_curvature(theta))[free][:, free]
+        H = J.T @ J + scalar_curvature(theta)
         d = H.diagonal().clamp_min(1e-12 * float(H.diagonal().max()) + 1e-30)
         while True:
-            A = H + lam * torch.diag(d)
-            step = torch.zeros_like(theta)
-            step[free] = -torch.linalg.solve(A, g[free])
-            cand = torch.minimum(torch.maximum(theta + step, lo), hi)
+            cand = theta + _bounded_step(H + lam * torch.diag(d), g, theta, lo, hi, free)
             with torch.no_grad():
                 E_new = float(energy(cand))
             if E_new <= E:
@@ -91,3 +89,26 @@ def levenberg_marquardt(residuals: Callable[[torch.Tensor], torch.Tensor],
         if decrease <= rel_tol * max(abs(E), 1.0):
             return theta, LMReport(it, True, E, gnorm, history)
     return theta, LMReport(max_iters, False, E, gnorm, history)
+
+
+def _bounded_step(A: torch.Tensor, g: torch.Tensor, theta: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,
+                  free: torch.Tensor) -> torch.Tensor:
+    """Minimise the model 0.5 s^T A s + g^T s over steps s that keep theta + s in [lo, hi]
+    and leave the held (non-free) parameters alone, by repeated solves: parameters whose
+    unconstrained step crosses a bound are moved onto it and fixed, the remaining free ones
+    are re-solved given those fixed moves (at most one pass per parameter; usually one or two)."""
+    step = torch.zeros_like(theta)
+    fixed = ~free
+    for _ in range(theta.numel()):
+        f = ~fixed
+        if not f.any():
+            break
+        rhs = g[f] + A[f][:, fixed] @ step[fixed]
+        step[f] = -torch.linalg.solve(A[f][:, f], rhs)
+        cand = theta + step
+        out = f & ((cand < lo) | (cand > hi))
+        if not out.any():
+            break
+        step[out] = torch.where(cand[out] < lo[out], lo[out], hi[out]) - theta[out]
+        fixed = fixed | out
+    return torch.minimum(torch.maximum(theta + step, lo), hi) - theta

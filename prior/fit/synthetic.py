@@ -17,7 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prior.fit.landmarks_fit import Observations
+from prior.fit.camera import relative_pose_errors, scale_free_position_errors
+from prior.fit.landmarks_fit import FitResult, Observations
 from synth import seeds
 from synth.config import load_config
 from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world, project
@@ -84,3 +85,19 @@ def make_scene(model: HeadModelData, seed: int, identity_index: int, azimuths_de
     facing = np.einsum("lk,nlk->nl", normal, c2w[:, None, :3, 3] - X[None]) > 0
     inside = np.all((uv >= 0) & (uv <= resolution), -1) & (z > 0)
     return Scene(beta, psi, rot, K, w2c, resolution, resolution, uv, facing & inside)
+
+
+def scene_errors(scene: Scene, fit: FitResult, head: HeadModel, landmark_set: str = "ibug68") -> dict[str, np.ndarray]:
+    """Per-camera errors of a fit against the scene's truth, all relative to the head:
+    rotation (deg), position (m), scale-free position (m, :func:`scale_free_position_errors`
+    on the 3D landmarks), and per-image reprojection RMSE (px) against the true (noise-free)
+    projections of the visible landmarks."""
+    rot, pos = relative_pose_errors(fit.world_to_camera, scene.world_to_camera, fit.head_to_world)
+    X_fit = head.landmarks(fit.identity, fit.expression[0], fit.joint_rotations[0], landmark_set=landmark_set)[0]
+    X_true = head.landmarks(scene.identity, scene.expression, scene.joint_rotations, landmark_set=landmark_set)[0]
+    d2 = ((fit.landmarks_2d - scene.landmarks_2d) ** 2).sum(-1)
+    clean = np.sqrt((d2 * scene.visible).sum(1) / np.maximum(scene.visible.sum(1), 1))
+    return {"rotation_deg": rot, "position_m": pos,
+            "position_scale_free_m": scale_free_position_errors(fit.world_to_camera, scene.world_to_camera,
+                                                                 X_fit, X_true),
+            "rmse_observed_px": fit.rmse_px, "rmse_true_px": clean}
