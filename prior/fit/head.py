@@ -104,6 +104,17 @@ class TorchHeadModel:
             self._full = self.subset(np.arange(self.V))
         return self._full
 
+    def define_landmarks(self, name: str, triangles, bary) -> None:
+        """Add (or replace) a landmark set: triangle indices (L,) and barycentric weights (L, 3)."""
+        tri = np.asarray(triangles, np.int64).reshape(-1)
+        b = np.asarray(bary, np.float64).reshape(-1, 3)
+        T = len(self.data.triangles)
+        if len(tri) != len(b) or (tri.size and (tri.min() < 0 or tri.max() >= T)):
+            raise CodeError(f"landmark set '{name}' needs (L,) triangles in [0, {T}) and (L, 3) barycentrics",
+                            "landmarks", "check the landmark definition")
+        self._landmark_sets[name] = (np.asarray(self.data.triangles)[tri].astype(np.int64), b)
+        self._subsets.pop(name, None)
+
     def landmark_subset(self, landmark_set: str = "ibug68") -> tuple[VertexSubset, torch.Tensor, torch.Tensor]:
         """(subset of the corner vertices, corner positions in the subset (L, 3), barycentric (L, 3))."""
         if landmark_set not in self._subsets:

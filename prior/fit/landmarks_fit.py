@@ -58,7 +58,9 @@ class Observations:
     """Probabilistic landmarks of N images: means (N, L, 2) in pixels (synth's convention,
     top-left corner at 0) and sigmas (N, L) in pixels; a non-finite sigma marks a point as
     unused. ``K`` (N, 3, 3) known intrinsics, else None (then ``width``/``height`` are needed
-    and a shared focal length is fitted). ``world_to_camera`` (N, 4, 4) known extrinsics or None."""
+    and a shared focal length is fitted). ``world_to_camera`` (N, 4, 4) known extrinsics or None.
+    The points are the model's landmark set ``landmark_set``, or surface points given as
+    ``landmark_def`` (triangle indices (L,), barycentric weights (L, 3)) under that name."""
 
     mean: np.ndarray
     sigma: np.ndarray
@@ -67,6 +69,7 @@ class Observations:
     K: np.ndarray | None = None
     world_to_camera: np.ndarray | None = None
     landmark_set: str = "ibug68"
+    landmark_def: tuple[np.ndarray, np.ndarray] | None = None  # (triangles, bary) if not a set of the model
 
     def __post_init__(self):
         self.mean = np.asarray(self.mean, np.float64)
@@ -137,6 +140,8 @@ class _Problem:
                  gmm: TorchGMM | None, start: tuple | None = None):
         dt = self.dt = torch.float64
         self.head = head or TorchHeadModel(model, dt)
+        if obs.landmark_def is not None:
+            self.head.define_landmarks(obs.landmark_set, *obs.landmark_def)
         self.gmm = gmm or TorchGMM.from_model(model, dt)
         self.obs, self.opt = obs, opt
         N = self.N = obs.mean.shape[0]
