@@ -120,11 +120,8 @@ def load_correspondence(model) -> dict:
 
 
 def mediapipe_observations(images, model, *, min_sigma_px: float = 1.0) -> tuple[Observations, list[np.ndarray]]:
-    """Observations from RGB photos ((H, W, 3) uint8, sRGB), and their foreground masks.
-
-    Each mapped point's sigma is its correspondence spread (metres, over the derivation
-    renders) at the image's scale, estimated from the detected face width (mediapipe points
-    234 and 454, taken as ``FACE_WIDTH_M``), and at least ``min_sigma_px``."""
+    """Observations from RGB photos ((H, W, 3) uint8, sRGB) by mediapipe's face mesh, and the
+    photos' foreground masks by its selfie segmentation ((H, W) float32 in [0, 1])."""
     mp = require_mediapipe()
     corr = load_correspondence(model)
     sizes = {np.asarray(im).shape for im in images}
@@ -132,7 +129,7 @@ def mediapipe_observations(images, model, *, min_sigma_px: float = 1.0) -> tuple
         raise SynthError(f"images must be RGB of one size, got {sorted(sizes)}", "--landmarks mediapipe",
                          "resize or crop the photos to one size")
     H, W, _ = next(iter(sizes))
-    means, sigmas, masks = [], [], []
+    points, masks = [], []
     with mp.solutions.face_mesh.FaceMesh(static_image_mode=True, max_num_faces=1, refine_landmarks=True) as fm, \
             mp.solutions.selfie_segmentation.SelfieSegmentation(model_selection=0) as seg:
         for i, im in enumerate(images):
@@ -140,11 +137,19 @@ def mediapipe_observations(images, model, *, min_sigma_px: float = 1.0) -> tuple
             r = fm.process(im)
             if not r.multi_face_landmarks:
                 raise SynthError("no face found", f"image {i}", "use photos with one clearly visible face")
-            pts = np.array([[p.x * W, p.y * H] for p in r.multi_face_landmarks[0].landmark])
-            px_per_m = np.linalg.norm(pts[454] - pts[234]) / FACE_WIDTH_M
-            means.append(pts[corr["index"]])
-            sigmas.append(np.maximum(min_sigma_px, corr["spread_m"] * px_per_m))
+            points.append([[p.x * W, p.y * H] for p in r.multi_face_landmarks[0].landmark])
             masks.append(np.asarray(seg.process(im).segmentation_mask, np.float32))
-    obs = Observations(np.stack(means), np.stack(sigmas), W, H, None, landmark_set="mediapipe",
-                       landmark_def=(corr["triangles"], corr["bary"]))
-    return obs, masks
+    return mediapipe_points_observations(np.asarray(points), W, H, corr, min_sigma_px=min_sigma_px), masks
+
+
+def mediapipe_points_observations(points, width: int, height: int, corr: dict, *,
+                                  min_sigma_px: float = 1.0) -> Observations:
+    """Observations from detected face-mesh points (N, 478, 2) in pixels and a correspondence
+    (:func:`load_correspondence`). Each mapped point's sigma is its correspondence spread
+    (metres, over the derivation renders) at the image's scale, estimated from the detected
+    face width (points 234 and 454, taken as ``FACE_WIDTH_M``), and at least ``min_sigma_px``."""
+    pts = np.asarray(points, np.float64)
+    px_per_m = np.linalg.norm(pts[:, 454] - pts[:, 234], axis=-1) / FACE_WIDTH_M  # (N,)
+    sigma = np.maximum(min_sigma_px, corr["spread_m"][None] * px_per_m[:, None])
+    return Observations(pts[:, corr["index"]], sigma, width, height, None, landmark_set="mediapipe",
+                        landmark_def=(corr["triangles"], corr["bary"]))
