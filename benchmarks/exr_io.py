@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from synth.exr import read_frame_exr, write_frame_exr
+from synth.dataset.exr import read_frame_exr, write_frame_exr
 
 
 def fake_frame(size: int, seed: int = 0, noise: float = 0.03):

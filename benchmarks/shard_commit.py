@@ -15,8 +15,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 import fake_frames as ff  # noqa: E402
 
-from synth.shards import open_dataset  # noqa: E402
-from synth.validate import validate_dataset  # noqa: E402
+from synth.dataset.shards import open_dataset  # noqa: E402
+from synth.dataset.validate import validate_dataset  # noqa: E402
 
 
 def main() -> None:

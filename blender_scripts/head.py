@@ -6,7 +6,7 @@ import bpy
 import numpy as np
 
 from blender_scripts.mesh import link_object, new_mesh, set_positions
-from synth.segmentation import CLASSES
+from synth.dataset.segmentation import CLASSES
 
 #: Region -> segmentation class, in priority order (first match wins for a polygon).
 REGION_CLASSES = (("teeth", "teeth"), ("eyes", "eyes"), ("mouth_interior", "mouth_interior"))

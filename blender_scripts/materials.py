@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import bpy
 
-from synth.segmentation import CLASSES
+from synth.dataset.segmentation import CLASSES
 
 
 def _principled(name: str, cls: str):

@@ -107,7 +107,7 @@ def configure_render(settings: dict[str, Any], width: int, height: int) -> dict[
     img = scene.render.image_settings
     img.file_format = "OPEN_EXR_MULTILAYER"
     img.color_depth = "32"
-    img.exr_codec = "NONE"  # intermediate file, repacked by synth.exr
+    img.exr_codec = "NONE"  # intermediate file, repacked by synth.dataset.exr
     return settings_out
 
 

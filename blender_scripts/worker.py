@@ -24,11 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from renderer_jobs.events import Commit, Error, Frame, Rss, Skip, Start, emit
+from synth.assets.classes import RECORD_ORDER
 from synth.errors import SynthError
-
-
-#: Classes listed under "assets" in every frame JSON (null where absent).
-ASSET_CLASSES = ("hair", "beard", "eyebrows", "eyelashes", "garment", "glasses", "headwear", "makeup", "iris", "skin")
 
 
 def rss_mb() -> float:
@@ -51,14 +48,15 @@ def software_versions() -> dict:
 
 
 def _dress(ident: dict, ctx, rigs_out: dict) -> dict:
-    """Build the identity's chosen assets (only those). Returns class -> frame-JSON record."""
+    """Build the identity's chosen assets (only those). Returns class -> frame-JSON record, every
+    registered class in RECORD_ORDER (null where absent)."""
     from blender_scripts import assets as basset
 
-    chosen = {c: ident.get("assets", {}).get(c) for c in ASSET_CLASSES}
+    chosen = {c: ident.get("assets", {}).get(c) for c in RECORD_ORDER}
     rigs = basset.dress(ctx, {c: e for c, e in chosen.items() if e})
     rigs_out.update(rigs)
     record = {}
-    for c in ASSET_CLASSES:
+    for c in RECORD_ORDER:
         e = chosen[c]
         if not e:
             record[c] = None
@@ -94,7 +92,7 @@ class IdentityScene:
         from blender_scripts import camera as bcam
         from blender_scripts import materials as bmat
         from blender_scripts import scene as bscene
-        from synth.skin import skin_albedo
+        from synth.appearance.skin import skin_albedo
 
         self.ident, self.hm, self.render_cfg = ident, hm, render_cfg
         self.run_seed, self.model_info, self.versions, self.shard_id = run_seed, model_info, versions, shard_id
@@ -154,11 +152,10 @@ class IdentityScene:
         from blender_scripts import camera as bcam
         from blender_scripts.passes import render_view
         from synth.conventions import project
-        from synth.exr import CHANNELS
-        from synth.labels import visibility
+        from synth.dataset.frame_json import build_frame_record
+        from synth.dataset.labels import visibility
 
-        hm, x = self.hm, self.expr
-        key = f["frame_id"]
+        x = self.expr
         c = f["camera"]
         K = np.asarray(c["K"], np.float64)
         w2c = np.asarray(c["world_to_camera"], np.float64)
@@ -166,22 +163,13 @@ class IdentityScene:
         out = render_view(tmp, int(f["seed"] if seed is None else seed))
         uv, z = project(K, w2c, x["lm3d"])
         vis = visibility(uv, z, out["depth"], out["rgba"][..., 3])
-        fj = dict(f)
-        fj["shard_id"] = self.shard_id
-        fj["image"] = {"width": self.width, "height": self.height, "file": f"{key}.exr", "layers": list(CHANNELS)}
-        fj["model"] = {**self.model_info, "identity": self.beta.tolist(), "expression": x["psi"].tolist(),
-                       "expression_preset": x["e"].get("preset"), "expression_kind": x["e"].get("kind"),
-                       "joint_rotations": {n: x["rot"][j].tolist() for n, j in hm.joint_index.items()},
-                       "pose": x["e"].get("pose"), "head_pose": x["head_pose"].tolist()}
-        fj["landmarks_3d"] = x["lm3d"].tolist()
-        fj["landmarks_2d"] = uv.tolist()
-        fj["landmarks_visible"] = vis.tolist()
-        fj["assets"] = self.assets_record
-        fj["skin"] = self.skin_record
-        fj["lighting"] = self.env
-        fj["render"] = {"preset": self.render_cfg.get("preset"), "resolution": [self.width, self.height],
-                        "seed": int(f["seed"]), **self.effective}
-        fj["software"] = self.versions
+        fj = build_frame_record(
+            f, shard_id=self.shard_id, width=self.width, height=self.height, model_info=self.model_info,
+            identity_code=self.beta, planned_expression=x["e"], expression_code=x["psi"],
+            joint_rotations={n: x["rot"][j] for n, j in self.hm.joint_index.items()}, head_pose=x["head_pose"],
+            landmarks_3d=x["lm3d"], landmarks_2d=uv, landmarks_visible=vis, assets=self.assets_record,
+            skin=self.skin_record, lighting=self.env, render_preset=self.render_cfg.get("preset"),
+            render_settings=self.effective, software=self.versions)
         return out, fj
 
     def close(self) -> None:
@@ -239,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from synth.model.head import HeadModel
     from synth.plan.io import load_plan
-    from synth.shards import open_dataset
+    from synth.dataset.shards import open_dataset
 
     try:
         plan = load_plan(Path(args.plan))

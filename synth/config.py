@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from synth.assets import classes as asset_classes
 from synth.errors import SynthError
 
 # The render presets live here and nowhere else (the render issue consumes them).
@@ -29,8 +30,6 @@ RENDER_PRESETS: dict[str, dict[str, Any]] = {
     "production": {"resolution": (512, 512), "samples": 256, "denoise": True, "adaptive_sampling": True,
                    "adaptive_threshold": 0.01},
 }
-ASSET_CLASSES = ("skin", "iris", "hair", "eyebrows", "eyelashes", "beard", "makeup", "garment", "glasses",
-                 "headwear")
 
 
 def _f(default, doc: str, range=None, choices=None, ordered=True):  # noqa: A002 - metadata key
@@ -133,7 +132,7 @@ class ExpressionConfig:
 class AssetsConfig:
     manifest_dir: str = _f("", "asset catalogue folder (empty = the repository's assets_manifest/)")
     disabled_classes: tuple[str, ...] = _f((), "asset classes never used (ablations: e.g. hair, glasses)",
-                                           choices=ASSET_CLASSES)
+                                           choices=asset_classes.NAMES)
 
 
 @dataclass(frozen=True)

@@ -234,7 +234,7 @@ def gaze_axis_angle(yaw_deg, pitch_deg) -> np.ndarray:
 
 
 def _compose_zx(z_deg, x_deg) -> np.ndarray:
-    from synth.geometry import axis_angle_to_matrix, matrix_to_axis_angle
+    from synth.geometry.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 
     zr, xr = np.broadcast_arrays(_rad(z_deg), _rad(x_deg))
     o = np.zeros_like(zr)

@@ -19,8 +19,9 @@ Two equivalent entry points:
   over many counters at once (used for cameras, expressions and frame seeds). A test
   checks that both agree bit for bit with numpy's implementation.
 
-Nothing in ``synth/`` may use the global RNGs (stdlib ``random``, ``np.random.<fn>``) or
-wall-clock seeds; ``tests/test_seeds_determinism.py`` enforces it.
+Nothing in ``synth/``, ``blender_scripts/``, ``renderer_jobs/`` or ``prior/`` may use the global
+RNGs (stdlib ``random``, ``np.random.<fn>``) or wall-clock seeds;
+``tests/test_seeds_determinism.py`` enforces it.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Shared fixture code for asset-rig tests: a head scene at hard codes, and evaluated geometry.
 
-Usage (inside a test that did ``pytest.importorskip("bpy")``)::
+Usage (inside a test that did ``pytest.importorskip("bpy")``; ``head_arrays`` needs no bpy)::
 
     ctx, hm, cases = asset_scene.head_context(case="id+3_jaw")
     rig = importlib.import_module("blender_scripts.assets.hair").build(ctx, entry)
@@ -45,25 +45,38 @@ def _ctx_arrays(hm, beta, psi, rot):
             {k: v[0].astype(np.float64) for k, v in ev.landmarks.items()})
 
 
+def head_arrays(hm, case: str = "neutral", resolution: int = 64, identity_index: int = 0, run_seed: int = 0):
+    """A HeadContext without Blender objects (``head`` None, no materials), for the numpy
+    fitting code of ``synth.assets.fit`` (no bpy needed)."""
+    from blender_scripts.assets import HeadContext
+
+    beta, psi, rot = _codes(hm, case)
+    rest, verts, joints, lms = _ctx_arrays(hm, beta, psi, rot)
+    return HeadContext(data=hm.data, head=None, materials={}, rest_vertices=rest, vertices=verts,
+                       joint_transforms=joints, joint_index=dict(hm.joint_index), landmarks=lms,
+                       resolution=resolution, identity_index=identity_index, run_seed=run_seed)
+
+
+def set_case_arrays(ctx, hm, case: str) -> None:
+    """Change identity/expression of the arrays in place (no Blender objects touched)."""
+    beta, psi, rot = _codes(hm, case)
+    ctx.rest_vertices, ctx.vertices, ctx.joint_transforms, ctx.landmarks = _ctx_arrays(hm, beta, psi, rot)
+
+
 def head_context(case: str = "neutral", resolution: int = 64, identity_index: int = 0, run_seed: int = 0):
     """Fresh scene with the default head at ``case``; returns (HeadContext, HeadModel)."""
     from blender_scripts import head as bhead
     from blender_scripts import materials as bmat
     from blender_scripts import scene as bscene
-    from blender_scripts.assets import HeadContext
+    from synth.appearance.skin import skin_albedo
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
-    from synth.skin import skin_albedo
 
     hm = HeadModel(load_default_model())
     bscene.reset()
-    mats = bmat.head_materials({}, skin_albedo(0.1, 0.015))
-    beta, psi, rot = _codes(hm, case)
-    rest, verts, joints, lms = _ctx_arrays(hm, beta, psi, rot)
-    ob = bhead.build_head_object(hm.data, verts, mats)
-    ctx = HeadContext(data=hm.data, head=ob, materials=mats, rest_vertices=rest, vertices=verts,
-                      joint_transforms=joints, joint_index=dict(hm.joint_index), landmarks=lms,
-                      resolution=resolution, identity_index=identity_index, run_seed=run_seed)
+    ctx = head_arrays(hm, case, resolution, identity_index, run_seed)
+    ctx.materials = bmat.head_materials({}, skin_albedo(0.1, 0.015))
+    ctx.head = bhead.build_head_object(hm.data, ctx.vertices, ctx.materials)
     return ctx, hm
 
 
@@ -71,8 +84,7 @@ def set_case(ctx, hm, case: str) -> None:
     """Change identity/expression in place (as the worker does between expressions)."""
     from blender_scripts import head as bhead
 
-    beta, psi, rot = _codes(hm, case)
-    ctx.rest_vertices, ctx.vertices, ctx.joint_transforms, ctx.landmarks = _ctx_arrays(hm, beta, psi, rot)
+    set_case_arrays(ctx, hm, case)
     bhead.set_vertices(ctx.head, ctx.vertices)
 
 

@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from synth.exr import CHANNELS
-from synth.frames import frame_key, parse_frame_key
-
-ASSET_CLASSES = ["hair", "beard", "eyebrows", "eyelashes", "garment", "glasses", "headwear", "makeup", "iris", "skin"]
+from synth.assets.classes import RECORD_ORDER
+from synth.dataset.exr import CHANNELS
+from synth.dataset.layout import frame_key, parse_frame_key, shard_name
 
 
 def camera(size: int, radius: float = 1.0) -> dict:
@@ -31,7 +30,7 @@ def frame_json(key: str, size: int = 16) -> dict:
     pc = lm3 @ cam["world_to_camera"][:3, :3].T + cam["world_to_camera"][:3, 3]
     p = pc @ cam["K"].T
     lm2 = p[:, :2] / p[:, 2:3]
-    assets = {k: None for k in ASSET_CLASSES}
+    assets = {k: None for k in RECORD_ORDER}
     assets["hair"] = {"id": "hair_short_01", "params": {"melanin": 0.4}}
     return {
         "frame_id": key, "identity_index": ident, "expression_index": expr, "view_index": view,
@@ -67,7 +66,7 @@ def pixels(key: str, size: int = 16):
 
 def plan(n_shards: int = 2, n_expr: int = 2, n_views: int = 3, first_identity: int = 0) -> dict[str, list[str]]:
     """shard_{i:06d} -> the keys of identity i (all expressions and views)."""
-    return {f"shard_{i:06d}": [frame_key(i, e, v) for e in range(n_expr) for v in range(n_views)]
+    return {shard_name(i): [frame_key(i, e, v) for e in range(n_expr) for v in range(n_views)]
             for i in range(first_identity, first_identity + n_shards)}
 
 

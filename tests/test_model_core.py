@@ -7,13 +7,14 @@ import zipfile
 
 import numpy as np
 import pytest
+from scipy.special import logsumexp
 from scipy.stats import multivariate_normal
 
 from synth.errors import CodeError, ModelFormatError
-from synth.geometry import axis_angle_to_matrix, matrix_to_axis_angle
+from synth.geometry.rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from synth.model.format import HeadModelData, model_bytes, read_model, validate_model, write_model
 from synth.model.head import HeadModel
-from synth.model.prior import GaussianMixture, fit_gmm
+from synth.model.identity_gmm import GaussianMixture, fit_gmm
 
 JOINTS = ["neck", "head", "jaw", "eye_l", "eye_r"]
 PARENTS = [-1, 0, 1, 1, 1]
@@ -282,8 +283,32 @@ def test_gmm_matches_scipy():
     np.testing.assert_allclose(g.log_likelihood(x), multivariate_normal(g.means[0], cov).logpdf(x), rtol=1e-10)
 
 
+def test_gmm_parameters_give_the_same_density_by_plain_matrix_products(model):
+    """The documented recipe for other frameworks (torch): whitened offsets by matrix products
+    with the precision Cholesky factors, then log-sum-exp; equals log_likelihood and scipy."""
+    rng = np.random.default_rng(12)
+    D = 6
+    A = rng.normal(size=(3, D, D))
+    g = GaussianMixture([0.2, 0.5, 0.3], rng.normal(size=(3, D)), A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(D))
+    for gmm in (g, GaussianMixture.from_model(model)):
+        p = gmm.parameters()
+        U = p["precision_cholesky"]
+        assert np.allclose(np.tril(U, -1), 0.0)  # upper triangular
+        for m in range(len(p["weights"])):
+            np.testing.assert_allclose(U[m] @ U[m].T @ p["covs"][m], np.eye(gmm.dim), atol=1e-9)
+        x = np.concatenate([rng.normal(size=(20, gmm.dim)), 50.0 * rng.normal(size=(5, gmm.dim))])
+        z = np.einsum("nmd,mde->nme", x[:, None, :] - p["means"][None], U)
+        logp = logsumexp(p["log_norm"][None] - 0.5 * np.sum(z * z, axis=2), axis=1)
+        np.testing.assert_allclose(logp, gmm.log_likelihood(x), rtol=1e-10)
+        np.testing.assert_allclose(gmm.nll(x), -logp, rtol=1e-10)
+        np.testing.assert_allclose(np.einsum("mij,mkj->mik", gmm.cholesky, gmm.cholesky), p["covs"], atol=1e-12)
+    x = rng.normal(size=(20, D))
+    want = np.log(sum(w * multivariate_normal(mu, c).pdf(x) for w, mu, c in zip(g.weights, g.means, g.covs)))
+    np.testing.assert_allclose(g.log_likelihood(x), want, rtol=1e-9)
+
+
 def test_gmm_finite_and_monotone_far_away(model):
-    g = GaussianMixture(model.prior_weights, model.prior_means, model.prior_covs)
+    g = GaussianMixture.from_model(model)
     d = np.ones(model.identity_dims) / np.sqrt(model.identity_dims)
     t = np.geomspace(1, 1e6, 40)
     ll = g.log_likelihood(t[:, None] * d[None])

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from synth import pigment as pig
+from synth.appearance import pigment as pig
 
 MANIFEST_COLOURS = ("black", "dark_brown", "brown", "light_brown", "blonde", "red", "grey", "white")
 

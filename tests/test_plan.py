@@ -11,8 +11,11 @@ import numpy as np
 import pytest
 
 from synth.cli.main import main
-from synth.config import ASSET_CLASSES, ExpressionConfig, IdentityConfig, load_config
+from synth.assets.catalogue import load_catalogue
+from synth.assets.classes import NAMES
+from synth.config import ExpressionConfig, IdentityConfig, load_config
 from synth.conventions import project
+from synth.dataset.layout import frame_key
 from synth.errors import SynthError
 from synth.plan import assets, expressions, identities, io, planner
 from synth.plan.cameras import min_pairwise_angle_deg
@@ -29,7 +32,7 @@ def toy(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def plan20(tmp_path_factory, toy):
-    """The issue's check: 20 identities, seed 7, paper defaults (on the toy model)."""
+    """20 identities, seed 7, paper defaults (on the toy model)."""
     out = tmp_path_factory.mktemp("plans") / "p20"
     assert main(["plan", "--identities", "20", "--seed", "7", "--out", str(out), "--model", str(toy), "-q"]) == 0
     return out
@@ -63,7 +66,7 @@ def test_frames_carry_opencv_cameras_that_look_at_the_face(plan20):
     ident = spec["identities"][0]
     for e in ident["expressions"][:3]:
         for f in e["frames"]:
-            assert f["frame_id"] == f"id000003_ex{e['expression_index']:02d}_v{f['view_index']:02d}"
+            assert f["frame_id"] == frame_key(3, e["expression_index"], f["view_index"])
             c = f["camera"]
             jsonschema.validate(c, cam_schema)
             K, w2c, c2w = (np.array(c[k]) for k in ("K", "world_to_camera", "camera_to_world"))
@@ -216,8 +219,8 @@ def test_identity_codes_match_the_prior():
 
 
 def test_catalogue_is_valid_and_complete():
-    cat = assets.load_catalogue()
-    assert set(cat.classes) == set(ASSET_CLASSES)
+    cat = load_catalogue()
+    assert set(cat.classes) == set(NAMES)
     n = {c: len(v["assets"]) for c, v in cat.classes.items()}
     assert n["hair"] >= 8 and n["beard"] >= 5 and n["glasses"] >= 6 and n["eyelashes"] == 2 and n["garment"] >= 7
     assert cat.classes["glasses"]["presence"] < 1 and cat.classes["headwear"]["presence"] < 1
@@ -225,13 +228,13 @@ def test_catalogue_is_valid_and_complete():
 
 
 def test_asset_sampling_respects_rules_weights_and_ranges():
-    cat = assets.load_catalogue()
+    cat = load_catalogue()
     picks = assets.sample_assets_batch(9, np.arange(6000), cat)
     assert picks[123] == assets.sample_assets(9, 123, cat)
     tags = {c: {a["id"]: set(a.get("tags", [])) for a in v["assets"]} for c, v in cat.classes.items()}
     n_headwear = 0
     for p in picks:
-        assert set(p) == set(ASSET_CLASSES) and p["skin"] is not None and p["iris"] is not None
+        assert set(p) == set(NAMES) and p["skin"] is not None and p["iris"] is not None
         if p["headwear"]:
             n_headwear += 1
             assert p["hair"] is None or not (tags["hair"][p["hair"]["id"]] & {"long_hair", "voluminous_hair", "updo"})
@@ -261,13 +264,13 @@ def test_asset_sampling_respects_rules_weights_and_ranges():
 def test_bad_catalogues_are_refused(tmp_path, text, what):
     (tmp_path / "hair.toml").write_text(text)
     with pytest.raises(SynthError) as e:
-        assets.load_catalogue(tmp_path)
+        load_catalogue(tmp_path)
     assert what in str(e.value) and "hair.toml" in str(e.value) and "\n" not in str(e.value)
 
 
 @pytest.mark.slow
 def test_default_model_plan(tmp_path):
-    """The issue's figures on the embedded default model (built and cached on first use)."""
+    """Plan figures on the embedded default model (built and cached on first use)."""
 
     pytest.importorskip("scipy")
     try:

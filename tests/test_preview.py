@@ -11,8 +11,8 @@ import fake_frames as ff
 from synth.cli.main import main
 from synth.dataset.preview import colour_tile, contact_sheet, depth_tile, linear_to_srgb, seg_tile, srgb_to_linear
 from synth.errors import SynthError
-from synth.segmentation import PALETTE
-from synth.shards import open_dataset
+from synth.dataset.segmentation import PALETTE
+from synth.dataset.shards import open_dataset
 
 Image = pytest.importorskip("PIL.Image")
 pytest.importorskip("OpenEXR")

@@ -17,7 +17,7 @@ def rendered(tmp_path_factory):
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world, project
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
-    from synth.skin import skin_albedo
+    from synth.appearance.skin import skin_albedo
 
     m = load_default_model()
     hm = HeadModel(m)
@@ -47,7 +47,7 @@ def rendered(tmp_path_factory):
 
 
 def test_visible_landmarks_match_depth_and_alpha(rendered):
-    from synth.labels import visibility
+    from synth.dataset.labels import visibility
 
     _, views = rendered
     n_checked = 0
@@ -86,7 +86,7 @@ def test_silhouette_centred_where_the_camera_says(rendered):
 
 
 def test_segmentation_and_background(rendered):
-    from synth.segmentation import CLASSES
+    from synth.dataset.segmentation import CLASSES
 
     _, views = rendered
     r = views[0][4]

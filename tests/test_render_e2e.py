@@ -44,20 +44,21 @@ def rendered(tmp_path_factory) -> Path:
 
 
 def test_render_validates_with_expected_layers_and_sizes(rendered):
-    from synth.exr import CHANNELS, read_frame_exr
-    from synth.frames import validate_frame_json
+    from synth.assets.classes import CLASSES, RECORD_ORDER
+    from synth.dataset.exr import CHANNELS, read_frame_exr
+    from synth.dataset.frame_json import validate_frame_json
+    from synth.dataset.layout import frame_key
 
     synth("validate", rendered)
     fr = frames(rendered)
-    assert sorted(fr) == [f"id000000_ex{e:02d}_v{v:02d}" for e in range(2) for v in range(3)]
+    assert sorted(fr) == [frame_key(0, e, v) for e in range(2) for v in range(3)]
     for key, jp in fr.items():
         fj = json.loads(jp.read_text())
         assert validate_frame_json(fj) == [], jp
         assert fj["image"]["layers"] == list(CHANNELS)
         assert (fj["image"]["width"], fj["image"]["height"]) == (64, 64)
         assert fj["render"]["samples"] <= 4 and fj["render"]["preset"] == "ci"
-        assert set(fj["assets"]) >= {"hair", "beard", "eyebrows", "eyelashes", "garment", "glasses", "headwear",
-                                     "makeup", "iris", "skin"}
+        assert list(fj["assets"]) == list(RECORD_ORDER)
         ex = read_frame_exr(jp.with_suffix(".exr"))
         assert ex["rgba"].shape == (64, 64, 4) and ex["rgba"].dtype == np.float16
         assert ex["depth"].dtype == np.float32 and ex["segmentation"].dtype == np.uint32
@@ -69,19 +70,17 @@ def test_render_validates_with_expected_layers_and_sizes(rendered):
         assert (seg[a <= 0.0] == 0).all() and (seg == 1).any()
     # every chosen asset was built (its record is in the JSON) and the large ones are rendered
     # into their own segmentation IDs
-    from synth.segmentation import CLASSES
-
     fj = json.loads(next(iter(fr.values())).read_text())
     seen = set()
     for jp in fr.values():
         seen |= set(np.unique(read_frame_exr(jp.with_suffix(".exr"))["segmentation"]).tolist())
-    seg_of = {"hair": "hair", "beard": "beard", "garment": "clothing", "glasses": "glasses", "headwear": "headwear"}
+    thin = ("eyebrows", "eyelashes")  # may cover no pixel centre at 64 px
     for cls, entry in fj["assets"].items():
         if entry is None:
             continue
         assert isinstance(entry.get("build"), dict) and entry["id"], cls
-        if cls in seg_of:
-            assert CLASSES[seg_of[cls]] in seen, f"{cls} ({entry['id']}) not in the segmentation"
+        if not CLASSES[cls].shader_layer and cls not in thin:
+            assert CLASSES[cls].segmentation_id in seen, f"{cls} ({entry['id']}) not in the segmentation"
     assert fj["assets"]["hair"] is not None and fj["assets"]["garment"] is not None
     synth("preview", rendered, "-o", rendered / "sheet.png")
     assert (rendered / "sheet.png").stat().st_size > 1000
@@ -90,7 +89,7 @@ def test_render_validates_with_expected_layers_and_sizes(rendered):
 def test_camera_truth_from_files(rendered):
     """Landmarks projected with the JSON's K and world_to_camera land within 0.5 px of its 2D
     landmarks; at visible ones the EXR depth matches the landmark's camera z, and alpha > 0.5."""
-    from synth.exr import read_frame_exr
+    from synth.dataset.exr import read_frame_exr
 
     n_visible = 0
     for key, jp in frames(rendered).items():

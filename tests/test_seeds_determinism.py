@@ -1,5 +1,6 @@
-"""Counter-based seeds, the ban on global RNGs and wall-clock seeds in synth/, and plan
-determinism (byte-identical files, independence of order, workers and shard size)."""
+"""Counter-based seeds, the ban on global RNGs and wall-clock seeds (synth/, blender_scripts/,
+renderer_jobs/, prior/), and plan determinism (byte-identical files, independence of order,
+workers and shard size)."""
 
 from __future__ import annotations
 
@@ -64,10 +65,12 @@ def test_the_ban_allows(snippet):
     assert not violations(snippet)
 
 
-def test_no_global_rng_or_wall_clock_seed_in_synth():
-    bad = {str(p.relative_to(SYNTH.parent)): v for p in sorted(SYNTH.rglob("*.py"))
-           if (v := violations(p.read_text(encoding="utf-8")))}
-    assert not bad, f"global RNG / wall-clock seeding in synth/: {bad}"
+@pytest.mark.parametrize("package", ["synth", "blender_scripts", "renderer_jobs", "prior"])
+def test_no_global_rng_or_wall_clock_seed(package):
+    files = sorted((SYNTH.parent / package).rglob("*.py"))
+    assert files, package
+    bad = {str(p.relative_to(SYNTH.parent)): v for p in files if (v := violations(p.read_text(encoding="utf-8")))}
+    assert not bad, f"global RNG / wall-clock seeding in {package}/: {bad}"
 
 
 # --------------------------------------------------------------------------- seeds
@@ -154,7 +157,7 @@ def test_replanning_alone_and_shard_size_change_nothing(tmp_path, toy):
 
 
 def test_a_single_frame_can_be_replanned_alone(tmp_path, toy):
-    from synth.plan.assets import load_catalogue
+    from synth.assets.catalogue import load_catalogue
     from synth.plan.planner import model_record
 
     cfg = load_config(overrides=["dataset.expressions_per_identity=3", "dataset.views_per_expression=4"])

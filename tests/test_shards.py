@@ -16,9 +16,10 @@ import pytest
 
 import fake_frames as ff
 from synth.dataset.index import read_index, rebuild_index
+from synth.dataset.layout import frame_key, shard_name
+from synth.dataset.shards import load_dataset, open_dataset
+from synth.dataset.validate import validate_dataset
 from synth.errors import SynthError
-from synth.shards import load_dataset, open_dataset
-from synth.validate import validate_dataset
 
 pytest.importorskip("OpenEXR")
 
@@ -31,7 +32,7 @@ CHILD = r"""
 import os, signal, sys, time, json
 sys.path.insert(0, os.environ["TESTS_DIR"])
 import fake_frames as ff
-from synth.shards import open_dataset
+from synth.dataset.shards import open_dataset
 
 root, die_at, log = sys.argv[1], int(sys.argv[2]), sys.argv[3]
 plan = json.loads(os.environ["PLAN"])
@@ -107,11 +108,11 @@ def logged(log: Path) -> Counter:
 
 def test_commit_layout_manifest_and_index(tmp_path):
     plan = ff.plan(2)
-    ds = open_dataset(tmp_path / "ds", HASH, plan, meta={"config": {"views": 3}}, plan={"shards": 2})
+    ds = open_dataset(tmp_path / "ds", HASH, plan, meta={"config": {"views": 3}})
     assert ds.pending_shards() == ["shard_000000", "shard_000001"]
     ff.render_dataset(ds)
     root = tmp_path / "ds"
-    assert sorted(os.listdir(root)) == [".lock", ".staging", "dataset.json", "index.json", "plan.json", "shards"]
+    assert sorted(os.listdir(root)) == [".lock", ".staging", "dataset.json", "index.json", "shards"]
     assert os.listdir(root / ".staging") == []  # nothing left behind (no locks either)
     info = json.loads((root / "dataset.json").read_text())
     assert info["plan_hash"] == HASH and info["expected"] == plan and info["meta"]["config"]["views"] == 3
@@ -254,21 +255,6 @@ def test_resume_reuses_finished_frames_and_cleans_leftovers(tmp_path):
     assert validate_dataset(tmp_path).ok
 
 
-def test_add_frame_from_a_written_exr(tmp_path):
-    from synth.exr import write_frame_exr
-
-    plan = ff.plan(1, 1, 1)
-    key = plan["shard_000000"][0]
-    ds = open_dataset(tmp_path / "ds", HASH, plan)
-    src = tmp_path / "render.exr"
-    write_frame_exr(src, *ff.pixels(key))
-    with ds.staging("shard_000000") as st:
-        st.add_frame(key, src, ff.frame_json(key), move=True)
-        assert not src.exists() and st.frames_done() == {key}
-        st.commit()
-    assert validate_dataset(tmp_path / "ds").ok
-
-
 # -- kill -9 -----------------------------------------------------------------------------------
 
 def _kill_at(tmp_path, points, plan):
@@ -339,7 +325,7 @@ def test_kill9_at_random_moments(tmp_path):
 
 
 def test_concurrent_workers_keep_the_index_consistent(tmp_path):
-    plan = {f"shard_{i:06d}": [f"id{i:06d}_ex00_v00"] for i in range(10)}
+    plan = {shard_name(i): [frame_key(i, 0, 0)] for i in range(10)}
     root = tmp_path / "ds"
     open_dataset(root, HASH, plan)
     procs = [run_child(root, plan, tmp_path / f"log{j}", sleep=0.01, wait=False) for j in range(3)]

@@ -14,9 +14,9 @@ import pytest
 import fake_frames as ff
 from synth.cli.main import main
 from synth.dataset.index import rebuild_index
-from synth.exr import read_frame_exr
-from synth.shards import open_dataset
-from synth.validate import validate_dataset
+from synth.dataset.exr import read_frame_exr
+from synth.dataset.shards import open_dataset
+from synth.dataset.validate import validate_dataset
 
 OpenEXR = pytest.importorskip("OpenEXR")
 HASH = "a" * 64

@@ -1,19 +1,22 @@
 """Asset rigs: one module per class, one small shared interface.
 
-A rig module ``blender_scripts.assets.<module>`` exposes::
+The classes, their rig modules, segmentation ids and build order are the registry's
+(:mod:`synth.assets.classes`); nothing here lists them. A rig module
+``blender_scripts.assets.<CLASSES[cls].rig>`` exposes::
 
     def build(ctx: HeadContext, entry: dict) -> Rig
 
 ``entry`` is the plan's choice for the class: ``{"id", "generator", "params", ...}`` (see the
 shard spec, docs/plan-format.md). ``build`` creates only what that asset needs, links its
-objects into the scene, gives every material ``pass_index = CLASSES[segmentation class]``,
+objects into the scene, gives every material ``pass_index = CLASSES[cls].segmentation_id``,
 and returns a :class:`Rig`. After an expression change the worker updates the head mesh in
 place and calls ``rig.update(ctx)``; rigs attached to the surface (hair curves with
-Deform Curves on Surface) may have nothing to do there. Shader-layer classes (makeup, iris,
-skin) edit ``ctx.materials`` instead of creating objects.
+Deform Curves on Surface) may have nothing to do there. Shader-layer classes
+(``CLASSES[cls].shader_layer``: makeup, iris, skin) edit ``ctx.materials`` instead of creating objects.
 
 Randomness inside a rig (strand roots, jitter) comes only from ``ctx.rng(cls)``, a
-generator derived from (run seed, identity index, class): never from a global RNG.
+generator derived from (run seed, identity index, class slot; ``synth.assets.classes.rig_rng``):
+never from a global RNG. The numpy geometry of the rigs lives in :mod:`synth.assets.fit`.
 """
 
 from __future__ import annotations
@@ -24,22 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from synth import seeds
-from synth.config import ASSET_CLASSES
-
-#: asset class -> segmentation class name (synth.segmentation.CLASSES)
-SEGMENTATION_CLASS = {"hair": "hair", "beard": "beard", "eyebrows": "eyebrows", "eyelashes": "eyelashes",
-                      "garment": "clothing", "glasses": "glasses", "headwear": "headwear",
-                      "makeup": "skin", "iris": "eyes", "skin": "skin"}
-
-#: asset class -> rig module (relative to this package)
-MODULES = {"hair": "hair", "beard": "beard", "eyebrows": "eyebrows", "eyelashes": "eyelashes",
-           "garment": "garment", "glasses": "glasses", "headwear": "headwear", "makeup": "makeup",
-           "iris": "iris", "skin": "skin_detail"}
-
-#: build order: shader layers first (they edit head materials), then geometry.
-BUILD_ORDER = ("skin", "iris", "makeup", "eyelashes", "eyebrows", "beard", "hair", "garment", "headwear",
-               "glasses")
+from synth.assets.classes import BUILD_ORDER, CLASSES, rig_rng
 
 
 @dataclass
@@ -60,8 +48,7 @@ class HeadContext:
     assets: dict[str, Any] = field(default_factory=dict)  # the identity's full asset choice (class -> entry)
 
     def rng(self, cls: str) -> np.random.Generator:
-        return seeds.generator(self.run_seed, seeds.Stream.ASSET_GEOMETRY, self.identity_index,
-                               expression=ASSET_CLASSES.index(cls))
+        return rig_rng(self.run_seed, self.identity_index, cls)
 
 
 class Rig:
@@ -86,7 +73,7 @@ def rig_module(cls: str, entry: dict):
     gen = str(entry.get("generator", ""))
     if gen.endswith(".blend") or gen.startswith("blend:"):
         return importlib.import_module(f"{__name__}.external")
-    return importlib.import_module(f"{__name__}.{MODULES[cls]}")
+    return importlib.import_module(f"{__name__}.{CLASSES[cls].rig}")
 
 
 def dress(ctx: HeadContext, assets: dict[str, Any]) -> dict[str, Rig]:

@@ -2,7 +2,7 @@
 
 Used for every plan entry whose generator is ``blend:PATH.blend`` (see
 ``blender_scripts.assets.rig_module`` and docs/assets.md). The entry carries the ``pack``
-record the planner wrote (synth.assets_validate.pack_record): file (relative to the asset
+record the planner wrote (synth.assets.packs.pack_record): file (relative to the asset
 root), asset_root, object, sha256, anchor, reference_width_m, class.
 
 What ``build`` does:
@@ -39,10 +39,10 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from blender_scripts.assets import SEGMENTATION_CLASS, HeadContext, Rig
-from synth.assets_validate import PACK_ANCHORS, REFERENCE_SKULL_WIDTH_M, verify_pack
+from blender_scripts.assets import HeadContext, Rig
+from synth.assets.classes import CLASSES, PACK_ANCHORS
+from synth.assets.packs import REFERENCE_SKULL_WIDTH_M, verify_pack
 from synth.errors import SynthError
-from synth.segmentation import CLASSES
 
 #: object types that render and carry material slots (lights, cameras, empties... are skipped)
 RENDERABLE = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD", "VOLUME"}
@@ -53,7 +53,7 @@ def _class_of(ctx: HeadContext, entry: dict, pack: dict) -> str:
     cls = pack.get("class") or entry.get("class")
     if not cls:
         cls = next((c for c, e in (ctx.assets or {}).items() if e is entry), None)
-    if cls not in SEGMENTATION_CLASS:
+    if cls not in CLASSES:
         raise SynthError(f"external asset '{entry.get('id')}' has no known class ({cls!r})",
                          str(entry.get("generator")), "re-plan with the current synth")
     return cls
@@ -157,7 +157,7 @@ def build(ctx: HeadContext, entry: dict) -> Rig:
     path = verify_pack(pack.get("file", ""), pack.get("asset_root", ""), pack.get("sha256"), where)
     linked = _link(path, str(pack.get("object")), where)
 
-    seg = CLASSES[SEGMENTATION_CLASS[cls]]
+    seg = CLASSES[cls].segmentation_id
     coll = bpy.data.collections.new(f"asset_{cls}")
     bpy.context.scene.collection.children.link(coll)
     local_mats: dict = {}

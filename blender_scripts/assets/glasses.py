@@ -1,6 +1,6 @@
 """Eye-glasses rig: parametric frames posed by contact on the nose bridge and the ears.
 
-Geometry and the pose solve live in :mod:`blender_scripts.assets.glasses_fit` (plain numpy,
+Geometry and the pose solve live in :mod:`synth.assets.fit.glasses` (plain numpy,
 tested without Blender); this module builds the Blender side: one mesh object for the frame
 (rims, bridge, end pieces, hinges, pad arms, temples, temple tips, nose pads; one material
 slot per finish) and one for the two lenses (glass: Principled transmission tinted by
@@ -17,11 +17,12 @@ import bpy
 import numpy as np
 
 from blender_scripts.assets import Rig
-from blender_scripts.assets import glasses_fit as gf
-from synth.segmentation import CLASSES
+from synth.assets.classes import CLASSES
+from synth.assets.fit.glasses.front import build_front
+from synth.assets.fit.glasses.solve import FRAME_PARTS, GlassesFit, fit_glasses
+from synth.assets.fit.glasses.spec import COLOURS, METALLIC_COLOURS, FrameSpec, frame_spec
 
-PASS = CLASSES["glasses"]
-FRAME_SLOTS = ("frame", "metal", "temple", "tip", "pad")
+PASS = CLASSES["glasses"].segmentation_id
 TINTS = {"aviator": (0.30, 0.26, 0.16), "default": (0.35, 0.33, 0.30)}  # tint colour at full strength
 
 
@@ -35,9 +36,9 @@ def _principled(name: str):
 def _finish(name: str, colour: str, kind: str, seed: float = 0.0):
     """kind: acetate | metal | tip | pad."""
     mat, b = _principled(name)
-    rgb = gf.COLOURS.get(colour, gf.COLOURS["black"])
+    rgb = COLOURS.get(colour, COLOURS["black"])
     b.inputs["Base Color"].default_value = (*rgb, 1.0)
-    if kind == "metal" or (kind == "tip" and colour in gf.METALLIC_COLOURS):
+    if kind == "metal" or (kind == "tip" and colour in METALLIC_COLOURS):
         if kind == "tip":  # metal temples get acetate/silicone tips
             b.inputs["Base Color"].default_value = (0.03, 0.03, 0.03, 1.0)
             b.inputs["Roughness"].default_value = 0.35
@@ -97,19 +98,19 @@ def mesh_from_arrays(name: str, parts: list[tuple[np.ndarray, np.ndarray, int]])
 
 
 class GlassesRig(Rig):
-    def __init__(self, spec: gf.FrameSpec, frame_ob, lens_ob, materials: dict, info: dict):
+    def __init__(self, spec: FrameSpec, frame_ob, lens_ob, materials: dict, info: dict):
         super().__init__("glasses", [frame_ob, lens_ob], info)
         self.spec = spec
-        self.front = gf.build_front(spec)
+        self.front = build_front(spec)
         self.materials = materials
 
-    def _fit(self, ctx) -> gf.GlassesFit:
-        return gf.fit_glasses(ctx.vertices, ctx.data.triangles, ctx.data.regions, ctx.landmarks, self.spec,
+    def _fit(self, ctx) -> GlassesFit:
+        return fit_glasses(ctx.vertices, ctx.data.triangles, ctx.data.regions, ctx.landmarks, self.spec,
                               front=self.front)
 
-    def _apply(self, fit: gf.GlassesFit) -> None:
+    def _apply(self, fit: GlassesFit) -> None:
         frame_ob, lens_ob = self.objects
-        slots = [(fit.parts[k][0], fit.parts[k][1], i) for i, k in enumerate(FRAME_SLOTS)
+        slots = [(fit.parts[k][0], fit.parts[k][1], i) for i, k in enumerate(FRAME_PARTS)
                  if k in fit.parts and len(fit.parts[k][0])]
         for ob, me in ((frame_ob, mesh_from_arrays("glasses_frame", slots)),
                        (lens_ob, mesh_from_arrays("glasses_lenses", [(*fit.parts["lens"], 0)]))):
@@ -127,10 +128,10 @@ class GlassesRig(Rig):
 def build(ctx, entry: dict) -> GlassesRig:
     style = str(entry["id"])
     rng = ctx.rng("glasses")
-    spec = gf.frame_spec(style, dict(entry.get("params") or {}), rng)
+    spec = frame_spec(style, dict(entry.get("params") or {}), rng)
     seed = float(rng.uniform(0, 100))
-    metal_col = spec.temple_colour if spec.temple_colour in gf.METALLIC_COLOURS else (
-        spec.colour if spec.colour in gf.METALLIC_COLOURS else "silver")
+    metal_col = spec.temple_colour if spec.temple_colour in METALLIC_COLOURS else (
+        spec.colour if spec.colour in METALLIC_COLOURS else "silver")
     frame_kind = "metal" if spec.material == "metal" else "acetate"
     mats = {
         "frame": _finish("glasses_frame", spec.colour, frame_kind, seed),
@@ -143,7 +144,7 @@ def build(ctx, entry: dict) -> GlassesRig:
     }
     frame_me = bpy.data.meshes.new("glasses_frame")
     lens_me = bpy.data.meshes.new("glasses_lenses")
-    for k in FRAME_SLOTS:
+    for k in FRAME_PARTS:
         frame_me.materials.append(mats[k])
     lens_me.materials.append(mats["lens"])
     frame_ob = bpy.data.objects.new("glasses_frame", frame_me)

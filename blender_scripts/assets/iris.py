@@ -8,7 +8,7 @@ phi, rho)`` where ``rho`` is the angle from the forward axis divided by the limb
 the left eye so nasal/temporal match). Being attached to vertices, the coordinates follow
 the eyeball when the eye joints rotate (gaze), for both eyes.
 
-The shader (``synth.iris`` palette from melanin + stroma scattering): radial fibres (noise
+The shader (``synth.appearance.iris`` palette from melanin + stroma scattering): radial fibres (noise
 stretched along rho), crypts (Voronoi), a collarette / central-heterochromia inner zone,
 the limbal ring and the pupil (radius from ``pupil_dilation``), mixed over the sclera.
 """
@@ -19,8 +19,8 @@ import numpy as np
 
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
-from synth import iris as siris
-from synth.segmentation import CLASSES
+from synth.appearance.iris import iris_palette, pupil_ratio
+from synth.dataset.segmentation import CLASSES
 
 
 def _sphere_centre(P):
@@ -70,8 +70,8 @@ def build(ctx, entry: dict) -> Rig:
     p = dict(entry.get("params") or {})
     rng = ctx.rng("iris")
     seed = float(rng.uniform(0, 100))
-    pal = siris.iris_palette(p)
-    pupil = siris.pupil_ratio(float(p.get("pupil_dilation", 0.45)))
+    pal = iris_palette(p)
+    pupil = pupil_ratio(float(p.get("pupil_dilation", 0.45)))
     coords, info = eye_coordinates(ctx.data, ctx.rest_vertices)
     bmat.write_point_vector(ctx.head.data, "iris_coord", coords)
     mat = ctx.materials[CLASSES["eyes"]]

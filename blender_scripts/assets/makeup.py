@@ -14,8 +14,8 @@ import numpy as np
 
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
-from blender_scripts.assets._masks import distance_to, feather, region_mask, segment_distance, skin_only
-from synth.segmentation import CLASSES
+from synth.assets.fit.masks import distance_to, feather, region_mask, segment_distance, skin_only
+from synth.dataset.segmentation import CLASSES
 
 LIP_COLOURS = {"red": (0.42, 0.02, 0.03), "nude": (0.42, 0.2, 0.15), "pink": (0.6, 0.16, 0.25),
                "berry": (0.2, 0.015, 0.06), "coral": (0.7, 0.18, 0.1), "brown": (0.18, 0.06, 0.035)}
@@ -65,7 +65,7 @@ def compute_masks(data, V: np.ndarray, lm: np.ndarray, extent: float = 0.6, line
     shadow *= skin * (1 - lips)
     eyeliner = np.maximum(eyeliner, wingm) * skin
     blush *= skin * (1 - lips)
-    face = region_mask(data, ("face",), n).astype(float)
+    face = region_mask(data.regions, ("face",), n).astype(float)
     face = np.maximum(face, feather(distance_to(V, V[face > 0]), 0.0, 0.01)) if face.any() else np.ones(n)
     m1 = np.stack([lips, shadow, eyeliner, blush], 1)
     m2 = np.stack([face * skin, wingm, np.zeros(n), np.zeros(n)], 1)

@@ -21,8 +21,8 @@ import numpy as np
 
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
-from blender_scripts.assets._masks import feather, region_mask, skin_only
-from synth.segmentation import CLASSES
+from synth.assets.fit.masks import feather, region_mask, skin_only
+from synth.dataset.segmentation import CLASSES
 
 
 def compute_mask(data, V, lm) -> np.ndarray:
@@ -38,7 +38,7 @@ def compute_mask(data, V, lm) -> np.ndarray:
     crows = np.maximum(feather(np.linalg.norm(V - (lm[45] + [0.01, 0.004, 0]), axis=1), 0.002, 0.012),
                        feather(np.linalg.norm(V - (lm[36] + [-0.01, 0.004, 0]), axis=1), 0.002, 0.012))
     wr = np.maximum(forehead, crows)
-    beard = region_mask(data, ("beard",), n).astype(float)
+    beard = region_mask(data.regions, ("beard",), n).astype(float)
     m = np.stack([cheeks, tz, wr, beard], 1) * skin[:, None]
     return np.clip(m, 0, 1)
 

@@ -51,14 +51,14 @@ def list_cmd(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """List the catalogue's assets: class, id, generator, weight, tags, parameters, licence."""
-    from synth.config import ASSET_CLASSES
+    from synth.assets.catalogue import load_catalogue
+    from synth.assets.classes import NAMES
     from synth.errors import SynthError
-    from synth.plan.assets import load_catalogue
 
-    if cls is not None and cls not in ASSET_CLASSES:
-        raise SynthError(f"unknown asset class '{cls}'", "--class", f"use one of: {', '.join(ASSET_CLASSES)}")
+    if cls is not None and cls not in NAMES:
+        raise SynthError(f"unknown asset class '{cls}'", "--class", f"use one of: {', '.join(NAMES)}")
     cat = load_catalogue(manifest_dir)
-    classes = [c for c in ASSET_CLASSES if c in cat.classes and (cls is None or c == cls)]
+    classes = [c for c in NAMES if c in cat.classes and (cls is None or c == cls)]
     if as_json:
         out = {"manifest_dir": cat.path, "catalogue_sha256": cat.digest,
                "presence": {c: cat.classes[c]["presence"] for c in classes},
@@ -95,7 +95,7 @@ def validate_cmd(
     """Check every entry: schema, unique ids, all classes present, rule tags, ranges, choices,
     generators (rig modules present), external packs (file, sha256, confinement, licence).
     Exit 0 when clean, 1 with one line per defect (what, where, what to do)."""
-    from synth.assets_validate import report_json, validate_manifest
+    from synth.assets.validate import report_json, validate_manifest
 
     rep = validate_manifest(manifest_dir)
     if as_json:

@@ -23,7 +23,7 @@ def validate_cmd(
 
     Exit code 0 when clean, 1 when defects were found, 2 for usage errors.
     """
-    from synth.validate import validate_dataset
+    from synth.dataset.validate import validate_dataset
 
     if not directory.exists():
         raise SynthError("dataset directory not found", str(directory), "pass the --out directory of `synth render`")
@@ -60,7 +60,7 @@ def validate_cmd(
 
 def _finish(rep) -> None:
     """Exit code 1 when defects were found (raised as an error so every entry point sees it)."""
-    from synth.validate import DefectsFound
+    from synth.dataset.validate import DefectsFound
 
     if not rep.ok:
         raise DefectsFound(f"{len(rep.defects)} defect(s) found", rep.root,

@@ -84,7 +84,7 @@ def sample(n: int = typer.Option(4, "--n", min=1, max=100000, help="Number of me
     import numpy as np
 
     from synth.model.head import HeadModel
-    from synth.model.prior import GaussianMixture
+    from synth.model.identity_gmm import GaussianMixture
 
     if fmt not in ("obj", "ply"):
         raise SynthError(f"unknown mesh format '{fmt}'", "--format", "use obj or ply")
@@ -92,7 +92,7 @@ def sample(n: int = typer.Option(4, "--n", min=1, max=100000, help="Number of me
         raise SynthError("output directory exists and is not empty", str(out), "choose a new --out")
     data, path = _load(model)
     hm = HeadModel(data)
-    gmm = GaussianMixture(data.prior_weights, data.prior_means, data.prior_covs)
+    gmm = GaussianMixture.from_model(data)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=".synth-sample-", dir=out.parent))  # same filesystem: atomic rename
     try:

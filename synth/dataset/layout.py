@@ -4,9 +4,9 @@
 
     DIR/
       dataset.json          plan hash, expected shards -> frame keys, meta, created, versions
-      plan.json             copy of the plan (when the render command passes one)
       index.json            committed shards (derived from the manifests; rebuildable)
       .lock                 flock for dataset-wide updates (dataset.json creation, index)
+      plan/                 the plan ``synth render`` made (docs/plan-format.md)
       shards/<shard>/       committed, read-only: KEY.exr, KEY.json, manifest.json
       .staging/<shard>/     in progress (same files, no manifest yet)
       .staging/<shard>.lock flock held by the process rendering that shard
@@ -28,7 +28,6 @@ SHARD_FORMAT = "synth-shard/1"
 INDEX_FORMAT = "synth-index/1"
 
 DATASET_FILE = "dataset.json"
-PLAN_FILE = "plan.json"
 INDEX_FILE = "index.json"
 LOCK_FILE = ".lock"
 SHARDS_DIR = "shards"
@@ -36,6 +35,7 @@ STAGING_DIR = ".staging"
 MANIFEST_FILE = "manifest.json"
 
 SHARD_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,127}$")
+FRAME_KEY_RE = re.compile(r"^id(\d{6})_ex(\d{2})_v(\d{2})$")
 
 
 def utc_now() -> str:
@@ -43,8 +43,26 @@ def utc_now() -> str:
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
 
 
+def frame_key(identity: int, expression: int, view: int) -> str:
+    """``id{identity:06d}_ex{expression:02d}_v{view:02d}`` (sortable, zero-padded)."""
+    if not (0 <= identity <= 999999 and 0 <= expression <= 99 and 0 <= view <= 99):
+        raise SynthError(f"frame indices out of range (identity {identity}, expression {expression}, view {view})",
+                         None, "identity must be < 1e6, expression and view < 100")
+    return f"id{identity:06d}_ex{expression:02d}_v{view:02d}"
+
+
+def parse_frame_key(key: str) -> tuple[int, int, int]:
+    """(identity, expression, view) of a frame key; :class:`SynthError` for anything else."""
+    m = FRAME_KEY_RE.match(key) if isinstance(key, str) else None
+    if not m:
+        raise SynthError(f"bad frame key {key!r}", None, "keys look like id000042_ex07_v13")
+    return int(m[1]), int(m[2]), int(m[3])
+
+
 def shard_name(index: int) -> str:
-    """The recommended shard id: ``shard_{index:06d}``."""
+    """The shard id of shard ``index``: ``shard_{index:06d}``."""
+    if not 0 <= index <= 999999:
+        raise SynthError(f"shard index {index} out of range", None, "shard indices are below 1e6")
     return f"shard_{index:06d}"
 
 
@@ -56,7 +74,18 @@ def check_shard_id(shard_id: str) -> str:
 
 
 def frame_files(key: str) -> tuple[str, str]:
+    """The two files of a frame: ``(KEY.exr, KEY.json)``."""
     return f"{key}.exr", f"{key}.json"
+
+
+def shard_dir(root: Path, shard_id: str) -> Path:
+    """``DIR/shards/<shard>`` (committed)."""
+    return Path(root) / SHARDS_DIR / check_shard_id(shard_id)
+
+
+def staging_dir(root: Path, shard_id: str) -> Path:
+    """``DIR/.staging/<shard>`` (in progress)."""
+    return Path(root) / STAGING_DIR / check_shard_id(shard_id)
 
 
 @contextmanager

@@ -1,7 +1,7 @@
 """``synth preview DIR``: a contact sheet of one shard (rows: expressions, columns: views).
 
 Each cell shows three tiles side by side: colour (scene-linear -> sRGB, alpha composited over
-mid grey), segmentation (palette of :mod:`synth.segmentation`) and depth (normalised over the
+mid grey), segmentation (palette of :mod:`synth.dataset.segmentation`) and depth (normalised over the
 head: near = bright, far = dark, background black). An unreadable frame gets a red tile.
 """
 
@@ -12,8 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
+from synth.dataset.exr import read_frame_exr
+from synth.dataset.fsio import atomic_write_bytes
+from synth.dataset.layout import frame_files, parse_frame_key
+from synth.dataset.segmentation import PALETTE
+from synth.dataset.shards import load_dataset
 from synth.errors import SynthError
-from synth.segmentation import PALETTE
 
 GREY_SRGB = 0.5
 BG = (24, 24, 24)
@@ -58,10 +62,8 @@ def depth_tile(depth: np.ndarray, alpha: np.ndarray) -> np.ndarray:
 def _frame_tiles(path: Path, tile: int):
     from PIL import Image
 
-    from synth.exr import read_frame_exr
-
     try:
-        px = read_frame_exr(path, quiet=True)
+        px = read_frame_exr(path, verify=True)
     except SynthError:
         bad = np.zeros((tile, tile, 3), np.uint8)
         bad[..., 0] = 160
@@ -85,9 +87,6 @@ def contact_sheet(root, shard_id: str | None = None, out=None, *, max_views: int
         from PIL import Image, ImageDraw, ImageFont
     except ImportError as e:  # pragma: no cover
         raise SynthError("pillow is not installed", None, "install it: .venv/bin/pip install pillow") from e
-    from synth.dataset.shards import load_dataset
-    from synth.frames import parse_frame_key
-
     ds = load_dataset(root)
     committed = sorted(ds.committed_shards())
     if shard_id is None:
@@ -113,7 +112,7 @@ def contact_sheet(root, shard_id: str | None = None, out=None, *, max_views: int
     cells: dict[tuple[int, int], list] = {}
     for k, (_, e, v) in parsed.items():
         if v in views:
-            cells[(e, v)] = _frame_tiles(sd / f"{k}.exr", tile)
+            cells[(e, v)] = _frame_tiles(sd / frame_files(k)[0], tile)
     tw = max((t[0].size[0] for t in cells.values()), default=tile)
     gap, pad, label_w, label_h = 2, 8, 44, 16
     cell_w = 3 * tw + 2 * gap
@@ -145,9 +144,6 @@ def overview_sheet(root, out=None, *, views: int = 3, max_shards: int | None = N
     laid out in ``columns`` columns. Default output: ``DIR/overview.png``."""
     from PIL import Image, ImageDraw, ImageFont
 
-    from synth.dataset.shards import load_dataset
-    from synth.frames import parse_frame_key
-
     ds = load_dataset(root)
     committed = sorted(ds.committed_shards())
     if not committed:
@@ -162,7 +158,7 @@ def overview_sheet(root, out=None, *, views: int = 3, max_shards: int | None = N
         i0 = min(p[0] for _, p in parsed)
         e0 = min(p[1] for _, p in parsed if p[0] == i0)
         sel = [k for k, p in parsed if p[0] == i0 and p[1] == e0][:views]
-        rows.append((sid, i0, [_frame_tiles(ds.shard_dir(sid) / f"{k}.exr", tile)[:2] for k in sel]))
+        rows.append((sid, i0, [_frame_tiles(ds.shard_dir(sid) / frame_files(k)[0], tile)[:2] for k in sel]))
     tw = max(t[0].size[0] for _, _, r in rows for t in r)
     gap, pad, label_h = 2, 8, 14
     block_w = views * (2 * tw + gap + pad)
@@ -185,8 +181,6 @@ def overview_sheet(root, out=None, *, views: int = 3, max_shards: int | None = N
 
 
 def _save_png(sheet, out: Path) -> Path:
-    from synth.dataset.fsio import atomic_write_bytes
-
     buf = io.BytesIO()
     sheet.save(buf, format="PNG")
     try:

@@ -28,7 +28,6 @@ is at (i + 0.5, j + 0.5)). :func:`rays` shoots through pixel centres.
 
 from __future__ import annotations
 
-import io
 import os
 import tarfile
 from collections.abc import Iterable, Iterator
@@ -39,33 +38,14 @@ from typing import IO, NamedTuple
 
 import numpy as np
 
+from synth.dataset.exr import decode_frame_exr
+from synth.dataset.frame_json import check_frame_json
 from synth.dataset.fsio import loads_json
 from synth.dataset.layout import MANIFEST_FILE, SHARDS_DIR, SHARD_ID_RE
 from synth.errors import SynthError
 
 #: Largest frame member read from a tar stream (bytes); a larger one is refused, not read.
 MAX_MEMBER_BYTES = 1 << 30
-
-_RGBA = ("R", "G", "B", "A")
-_NORMALS = ("normal.X", "normal.Y", "normal.Z")
-_DEPTH = "depth.Z"
-_SEG = "segmentation.id"
-
-
-def _decode_exr(data: bytes, where: str) -> dict[str, np.ndarray]:
-    """The channels of a frame EXR held in memory, as stored (no process-wide side effects)."""
-    import OpenEXR
-
-    try:
-        chans = OpenEXR.File(io.BytesIO(data), separate_channels=True).channels()
-        px = {name: chans[name].pixels for name in (*_RGBA, _DEPTH, *_NORMALS, _SEG)}
-    except KeyError as e:
-        raise SynthError(f"frame EXR lacks channel {e.args[0]}", where, "re-render the frame") from None
-    except Exception as e:  # the binding raises RuntimeError/ValueError with C-level text
-        msg = (str(e).splitlines() or [type(e).__name__])[0]
-        raise SynthError(f"cannot decode frame EXR: {msg}", where, "the file is corrupt or truncated; re-render it") \
-            from None
-    return px
 
 
 @dataclass(eq=False)
@@ -168,18 +148,16 @@ def decode_frame(json_bytes: bytes, exr_bytes: bytes, *, key: str | None = None,
     if not isinstance(meta, dict):
         raise SynthError("frame JSON is not an object", where, "the file is corrupt; re-render it")
     if validate:
-        from synth.frames import check_frame_json
-
         check_frame_json(meta, where)
     key = key or meta.get("frame_id")
     if key is not None and meta.get("frame_id") != key:
         raise SynthError(f"frame JSON names frame {meta.get('frame_id')!r}, not {key!r}", where,
                          "the JSON and EXR do not belong together")
-    px = _decode_exr(exr_bytes, where)
-    rgba = np.stack([px[c] for c in _RGBA], axis=-1).astype(np.float32)
-    normals = np.stack([px[c] for c in _NORMALS], axis=-1).astype(np.float32)
-    depth = np.asarray(px[_DEPTH], np.float32)
-    seg = np.asarray(px[_SEG], np.uint32)
+    px = decode_frame_exr(exr_bytes, where)
+    rgba = px["rgba"].astype(np.float32)
+    normals = px["normals"].astype(np.float32)
+    depth = np.asarray(px["depth"], np.float32)
+    seg = np.asarray(px["segmentation"], np.uint32)
     if validate:
         img = meta.get("image") or {}
         if (img.get("width"), img.get("height")) != (rgba.shape[1], rgba.shape[0]):

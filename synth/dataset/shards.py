@@ -32,11 +32,11 @@ from pathlib import Path
 import synth
 from synth.dataset.fsio import atomic_write_json, is_temp_name, loads_json
 from synth.dataset.index import ManifestError, parse_manifest, read_index, update_index
-from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, LOCK_FILE, MANIFEST_FILE, PLAN_FILE, SHARDS_DIR,
-                                  STAGING_DIR, check_shard_id, flock, utc_now)
+from synth.dataset.frame_json import jsonable
+from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, LOCK_FILE, MANIFEST_FILE, SHARDS_DIR,
+                                  STAGING_DIR, check_shard_id, flock, shard_dir, staging_dir, utc_now)
 from synth.dataset.staging import ShardBusy, ShardCommitted, StagingShard
 from synth.errors import SynthError
-from synth.frames import FRAME_KEY_RE, jsonable
 
 
 #: ``synth render`` keeps the plan directory it renders next to the shards (DIR/plan/).
@@ -89,10 +89,10 @@ class Dataset:
 
     # -- paths -------------------------------------------------------------------------------
     def shard_dir(self, shard_id: str) -> Path:
-        return self.root / SHARDS_DIR / check_shard_id(shard_id)
+        return shard_dir(self.root, shard_id)
 
     def staging_dir(self, shard_id: str) -> Path:
-        return self.root / STAGING_DIR / check_shard_id(shard_id)
+        return staging_dir(self.root, shard_id)
 
     # -- state (always read from the files) --------------------------------------------------
     def committed_shards(self) -> set[str]:
@@ -161,7 +161,7 @@ class Dataset:
         if shard_id not in self.expected:
             raise SynthError(f"shard {shard_id} is not in this dataset's plan", str(self.root),
                              "use a shard id from the plan")
-        st = StagingShard(self, shard_id)
+        st = StagingShard(self.root, self.plan_hash, shard_id, self.expected[shard_id])
         st._open()
         return st
 
@@ -185,14 +185,12 @@ class Dataset:
         return f"Dataset({str(self.root)!r}, plan_hash={self.plan_hash[:12]}..., shards={len(self.expected)})"
 
 
-def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], meta: dict | None = None, *,
-                 plan: dict | None = None) -> Dataset:
+def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], meta: dict | None = None) -> Dataset:
     """Create the dataset directory for a plan, or reopen it to resume.
 
-    - ``plan_hash``: a stable hash of the plan (the lead's plan module computes it).
+    - ``plan_hash``: a stable hash of the plan (``synth plan`` records it in its plan.json).
     - ``expected``: shard id -> the frame keys planned for that shard.
     - ``meta``: JSON-able facts recorded once in dataset.json (plan path, config, versions).
-    - ``plan``: a JSON-able copy of the plan, written to ``DIR/plan.json``.
 
     Refuses (:class:`SynthError`) a directory that holds a dataset from another plan, and a
     non-empty directory that is not a dataset. Safe when several workers open it at once.
@@ -218,8 +216,6 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
             if info["expected"] != exp:
                 raise SynthError("dataset.json's expected shards differ from this plan's although the hashes match",
                                  str(root / DATASET_FILE), "the plan hash must cover the shard layout; use a new --out")
-            if plan is not None and not (root / PLAN_FILE).exists():
-                atomic_write_json(root / PLAN_FILE, jsonable(plan))
         else:
             leftovers = [n for n in os.listdir(root) if is_temp_name(n)]  # a creation killed half-way
             others = sorted(n for n in os.listdir(root)
@@ -244,8 +240,6 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
                 atomic_write_json(root / DATASET_FILE, info)
             except (TypeError, ValueError) as e:
                 raise SynthError(f"meta is not JSON-serialisable: {e}", str(root), "pass plain data") from None
-            if plan is not None:  # after dataset.json: a reopen writes it if this one was interrupted
-                atomic_write_json(root / PLAN_FILE, jsonable(plan))
         (root / SHARDS_DIR).mkdir(exist_ok=True)
         (root / STAGING_DIR).mkdir(exist_ok=True)
     ds = Dataset(root, info, writable=True)

@@ -6,28 +6,24 @@ crash-safety argument.
 
 from __future__ import annotations
 
-import errno
 import fcntl
 import hashlib
 import os
-import shutil
 import platform
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 import synth
-from synth.dataset.fsio import (atomic_place, atomic_write_bytes, atomic_write_json, dumps_json, fsync_dir,
-                                is_temp_name, loads_json, sha256_bytes)
+from synth.dataset.exr import encode_frame_exr, read_frame_exr_header
+from synth.dataset.frame_json import check_frame_json, jsonable
+from synth.dataset.fsio import (atomic_write_bytes, atomic_write_json, dumps_json, fsync_dir, is_temp_name,
+                                loads_json, sha256_bytes)
 from synth.dataset.index import update_index
-from synth.dataset.layout import MANIFEST_FILE, SHARD_FORMAT, frame_files, utc_now
+from synth.dataset.layout import MANIFEST_FILE, SHARD_FORMAT, frame_files, shard_dir, staging_dir, utc_now
 from synth.errors import SynthError
-from synth.frames import check_frame_json, jsonable
 
-if TYPE_CHECKING:
-    from synth.dataset.shards import Dataset
 
 class ShardBusy(SynthError):
     """Another process holds the shard's lock (it is rendering that shard)."""
@@ -52,13 +48,18 @@ def _writer_versions() -> dict:
 
 
 class StagingShard:
-    """One shard being rendered: ``.staging/<id>/`` plus the lock ``.staging/<id>.lock``."""
+    """One shard being rendered: ``.staging/<id>/`` plus the lock ``.staging/<id>.lock``.
 
-    def __init__(self, ds: Dataset, shard_id: str):
-        self.dataset = ds
+    Made by ``Dataset.staging`` (the dataset root, its plan hash and the shard's planned keys).
+    """
+
+    def __init__(self, root: Path, plan_hash: str, shard_id: str, expected_keys: Sequence[str]):
+        self.root = Path(root)
+        self.plan_hash = plan_hash
         self.shard_id = shard_id
-        self.dir = ds.staging_dir(shard_id)
-        self.expected_keys: list[str] = ds.expected[shard_id]
+        self.dir = staging_dir(self.root, shard_id)
+        self.target = shard_dir(self.root, shard_id)
+        self.expected_keys: list[str] = list(expected_keys)
         self._expected_set = set(self.expected_keys)
         self._lock_path = self.dir.with_name(f"{shard_id}.lock")
         self._lock_fd: int | None = None
@@ -78,9 +79,8 @@ class StagingShard:
                             "wait for it, or stop it first") from None
         self._lock_fd = fd
         try:
-            target = self.dataset.shard_dir(self.shard_id)
-            if target.exists():
-                raise ShardCommitted(f"shard {self.shard_id} is already committed", str(target),
+            if self.target.exists():
+                raise ShardCommitted(f"shard {self.shard_id} is already committed", str(self.target),
                                      "committed shards are never modified; skip it")
             self.dir.mkdir(exist_ok=True)
             self._clean()
@@ -104,7 +104,7 @@ class StagingShard:
     def _need_lock(self) -> None:
         if self._committed:
             raise ShardCommitted(f"shard {self.shard_id} is already committed",
-                                 str(self.dataset.shard_dir(self.shard_id)), "committed shards are never modified")
+                                 str(self.target), "committed shards are never modified")
         if self._lock_fd is None:
             raise SynthError(f"staging area of {self.shard_id} is closed", str(self.dir),
                              "call dataset.staging() again")
@@ -130,8 +130,6 @@ class StagingShard:
         return self._frames_done(cleanup=False)
 
     def _frames_done(self, cleanup: bool) -> set[str]:
-        from synth.exr import read_frame_exr_header
-
         names = set(os.listdir(self.dir))
         done = set()
         for n in sorted(names):
@@ -167,13 +165,11 @@ class StagingShard:
 
     def write_frame(self, key: str, rgba, depth, normals, segmentation, frame_json: dict, *,
                     exr_header: dict | None = None, durable: bool = True) -> None:
-        """Write one frame (EXR, then JSON; both atomic). See :func:`synth.exr.write_frame_exr`.
+        """Write one frame (EXR, then JSON; both atomic). See :func:`synth.dataset.exr.write_frame_exr`.
 
         ``frame_json`` is validated against the schema first (numpy values are converted), and
         must agree with ``key`` and the image size. Rewriting a done frame is allowed.
         """
-        from synth.exr import encode_frame_exr
-
         self._need_lock()
         fj = self._check_frame(key, frame_json)
         exr, js = frame_files(key)
@@ -192,48 +188,6 @@ class StagingShard:
         atomic_write_bytes(self.dir / exr, data, durable=durable)
         atomic_write_json(self.dir / js, fj, durable=durable, indent=None)
 
-    def add_frame(self, key: str, exr_path, frame_json: dict, *, move: bool = False, durable: bool = True) -> None:
-        """Add a frame whose EXR was already written (e.g. to a temp file by the worker).
-
-        The EXR is checked (channels, size, no NaN) and copied (or moved, when on the same
-        filesystem and ``move``) into the staging area; then the JSON is written.
-        """
-        from synth.exr import pixel_defects, read_frame_exr
-
-        self._need_lock()
-        fj = self._check_frame(key, frame_json)
-        src = Path(exr_path)
-        px = read_frame_exr(src)
-        if (px["width"], px["height"]) != (fj["image"]["width"], fj["image"]["height"]):
-            raise SynthError(f"frame {key}: EXR is {px['width']}x{px['height']}, the JSON says otherwise", str(src),
-                             "write the JSON's image size")
-        bad = pixel_defects(px)
-        if bad:
-            raise SynthError(f"frame {key}: {bad[0]}", str(src), "fix the render before adding it")
-        exr, js = frame_files(key)
-        try:
-            os.unlink(self.dir / js)
-        except FileNotFoundError:
-            pass
-        moved = False
-
-        def fill(tmp: Path) -> None:
-            nonlocal moved
-            if move:
-                try:
-                    os.replace(src, tmp)
-                    moved = True
-                except OSError as e:
-                    if e.errno != errno.EXDEV:  # another filesystem: copy instead
-                        raise
-            if not moved:
-                shutil.copyfile(src, tmp)
-
-        atomic_place(self.dir / exr, fill, durable=durable)
-        atomic_write_json(self.dir / js, fj, durable=durable, indent=None)
-        if move and not moved:
-            os.unlink(src)
-
     def _check_frame(self, key: str, frame_json: dict) -> dict:
         if key not in self._expected_set:
             raise SynthError(f"frame {key} is not planned for shard {self.shard_id}", str(self.dir),
@@ -242,7 +196,7 @@ class StagingShard:
         if not isinstance(fj, dict) or fj.get("frame_id") != key:
             raise SynthError(f"frame JSON's frame_id {fj.get('frame_id') if isinstance(fj, dict) else None!r} "
                              f"is not {key!r}", str(self.dir), "set frame_id to the frame key")
-        check_frame_json(fj, str(self.dir / f"{key}.json"))
+        check_frame_json(fj, str(self.dir / frame_files(key)[1]))
         return fj
 
     # -- commit ------------------------------------------------------------------------------
@@ -257,7 +211,6 @@ class StagingShard:
         anything is missing.
         """
         self._need_lock()
-        ds = self.dataset
         where = str(self.dir)
         if expected_keys is not None and sorted(expected_keys) != self.expected_keys:
             raise SynthError(f"shard {self.shard_id}: the keys to commit differ from the plan's", where,
@@ -282,7 +235,7 @@ class StagingShard:
         manifest = {
             "format": SHARD_FORMAT,
             "shard_id": self.shard_id,
-            "plan_hash": ds.plan_hash,
+            "plan_hash": self.plan_hash,
             "frames": list(self.expected_keys),
             "files": files,
             "created": utc_now(),
@@ -299,7 +252,7 @@ class StagingShard:
             os.chmod(self.dir / name, 0o444)  # read-only by convention (and by mode)
         if durable:
             fsync_dir(self.dir)
-        target = ds.shard_dir(self.shard_id)
+        target = self.target
         target.parent.mkdir(exist_ok=True)
         if target.exists():
             raise ShardCommitted(f"shard {self.shard_id} is already committed", str(target),
@@ -309,7 +262,7 @@ class StagingShard:
         if durable:
             fsync_dir(target.parent)
             fsync_dir(self.dir.parent)
-        update_index(ds.root, ds.plan_hash, durable=durable)
+        update_index(self.root, self.plan_hash, durable=durable)
         try:  # nobody can use the lock any more: anyone who takes it sees the committed shard
             os.unlink(self._lock_path)
         except FileNotFoundError:

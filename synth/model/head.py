@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from synth.errors import CodeError
-from synth.geometry import axis_angle_to_matrix
+from synth.geometry.rotations import axis_angle_to_matrix
 from synth.model.format import HeadModelData
 
 

@@ -1,5 +1,6 @@
-"""General mesh utilities (numpy/scipy, no Blender): sphere fit, rigid fit, farthest-point
-sampling, connectivity, boundaries, vertex-to-triangle landmarks.
+"""General mesh utilities (numpy/scipy, no Blender): sphere fit, farthest-point sampling,
+connectivity, boundaries, vertex-to-triangle landmarks, 2-D polygons. Rotations and rigid
+fits, normals and ray casting live in :mod:`synth.geometry`.
 
 Every function is deterministic (no random numbers) and works on plain arrays:
 ``vertices`` (V, 3) float, ``triangles`` (T, 3) int. Nothing here knows about a specific
@@ -53,40 +54,6 @@ def fit_sphere_robust(points: np.ndarray, trim_sigma: float = 2.0,
         keep = new
         c, r = fit_sphere(p[keep])
     return c, r, keep
-
-
-def fit_rigid(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Kabsch/Umeyama without scale: (R (3,3), t (3,)) minimising sum w |R src + t - dst|^2."""
-    P = np.asarray(src, np.float64)
-    Q = np.asarray(dst, np.float64)
-    w = np.ones(len(P)) if weights is None else np.asarray(weights, np.float64)
-    w = w / w.sum()
-    pc, qc = w @ P, w @ Q
-    H = ((P - pc) * w[:, None]).T @ (Q - qc)
-    U, _, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
-    R = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
-    return R, qc - R @ pc
-
-
-def rotation_pivot(R: np.ndarray, t: np.ndarray, axis_point_coord: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
-    """For a rigid motion x -> R x + t, the screw axis: (point on the axis, unit axis, slide).
-
-    The point is the one whose coordinate ``axis_point_coord`` is 0 (e.g. 0 = the point on
-    the midsagittal plane x = 0) when the axis is not parallel to that plane; ``slide`` is
-    the translation along the axis (0 for a pure rotation)."""
-    from synth.geometry import matrix_to_axis_angle
-
-    aa = matrix_to_axis_angle(np.asarray(R, np.float64))
-    ang = float(np.linalg.norm(aa))
-    if ang < 1e-9:
-        raise ValueError("rotation_pivot: the motion has no rotation")
-    n = aa / ang
-    slide = float(t @ n)
-    c, *_ = np.linalg.lstsq(np.eye(3) - R, t - slide * n, rcond=None)
-    if abs(n[axis_point_coord]) > 1e-6:
-        c = c - (c[axis_point_coord] / n[axis_point_coord]) * n
-    return c, n, slide
 
 
 # --------------------------------------------------------------------------- sampling
@@ -205,44 +172,6 @@ def vertex_landmarks(triangles: np.ndarray, vertex_ids: np.ndarray) -> tuple[np.
 def barycentric_points(vertices: np.ndarray, triangles: np.ndarray, tri: np.ndarray, bary: np.ndarray) -> np.ndarray:
     """(L, 3) positions of barycentric landmarks."""
     return np.einsum("lkc,lk->lc", np.asarray(vertices)[np.asarray(triangles)[tri]], bary)
-
-
-def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """(V, 3) area-weighted unit vertex normals (zero for unused vertices)."""
-    v = np.asarray(vertices, np.float64)
-    t = np.asarray(triangles, np.int64)
-    fn = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
-    n = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(n, t[:, k], fn)
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-
-
-def ray_hit_counts(origins: np.ndarray, directions: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
-                   t_min: float = 1e-4, t_max: float = np.inf, chunk: int = 2_000_000) -> np.ndarray:
-    """(N,) number of triangles each ray o + t d (t_min < t < t_max) crosses (Moller-Trumbore,
-    brute force over all triangles in chunks: meant for a few thousand rays and triangles)."""
-    o = np.asarray(origins, np.float64)
-    d = np.asarray(directions, np.float64)
-    v = np.asarray(vertices, np.float64)
-    t = np.asarray(triangles, np.int64)
-    a, e1, e2 = v[t[:, 0]], v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]]
-    counts = np.zeros(len(o), np.int64)
-    rows = max(1, chunk // max(len(t), 1))
-    for s in range(0, len(o), rows):
-        oo, dd = o[s:s + rows, None, :], d[s:s + rows, None, :]
-        p = np.cross(dd, e2[None])
-        det = np.einsum("nti,ti->nt", p, e1)
-        ok = np.abs(det) > 1e-15
-        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-        tv = oo - a[None]
-        u = np.einsum("nti,nti->nt", tv, p) * inv
-        q = np.cross(tv, e1[None])
-        w = np.einsum("nti,nti->nt", np.broadcast_to(dd, q.shape), q) * inv
-        tt = np.einsum("ti,nti->nt", e2, q) * inv
-        hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1) & (tt > t_min) & (tt < t_max)
-        counts[s:s + rows] = hit.sum(1)
-    return counts
 
 
 def point_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:

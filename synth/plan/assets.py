@@ -1,142 +1,23 @@
-"""The asset catalogue (``assets_manifest/``): reading, validation and per-identity sampling.
+"""Sampling the assets of each identity from the catalogue (:mod:`synth.assets.catalogue`).
 
-One TOML file per class (``hair.toml``, ``glasses.toml``, ...) holds the class's
-``presence`` probability and its ``[[assets]]``; ``rules.toml`` holds compatibility rules
-(``[[exclude]]``: an asset tagged ``if_tag`` never appears with one tagged in
-``excludes_tags``, in either order). Files are checked against
-``synth/schemas/asset.schema.json``. The format is documented in docs/plan-format.md.
-
-Sampling, per identity i and class c (in ASSET_CLASSES order), from the uniforms
-``seeds.uniforms(seed, ASSETS, i, expression=c's position)``: presence, then an asset by
-weight among those compatible with the classes already chosen, then its parameters from
-their ranges. Classes use independent counters, so editing one class never changes the
-uniforms of another.
-
-External packs (``generator = "blend:PATH.blend"``, docs/assets.md) are checked here at plan
-time (file inside the file's ``asset_root``, sha256 as declared) and their picks carry a
-``pack`` record for the rig. ``synth assets validate`` (synth/assets_validate.py) reports every
-defect of a folder at once; this loader stops at the first.
+Sampling, per identity i and class c (in plan order, :data:`synth.assets.classes.NAMES`),
+from the uniforms ``seeds.uniforms(seed, ASSETS, i, expression=c's slot)``: presence, then
+an asset by weight among those compatible with the classes already chosen, then its
+parameters from their ranges. Classes use independent counters, so editing one class never
+changes the uniforms of another. Picks of external packs carry the catalogue's ``pack``
+record for the rig.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
-import tomllib
-from dataclasses import dataclass, field
-from functools import lru_cache
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from synth import seeds
-from synth.config import ASSET_CLASSES
-from synth.errors import SynthError
+from synth.assets.catalogue import MAX_PARAMETERS, Catalogue
+from synth.assets.classes import CLASSES, NAMES
 
-SCHEMA_PATH = Path(__file__).resolve().parents[1] / "schemas" / "asset.schema.json"
-
-
-def default_manifest_dir() -> Path:
-    return Path(__file__).resolve().parents[2] / "assets_manifest"
-
-
-@lru_cache(maxsize=1)
-def _schema() -> dict:
-    return json.loads(SCHEMA_PATH.read_text())
-
-
-@lru_cache(maxsize=4)
-def _validator(kind: str):
-    import jsonschema
-
-    return jsonschema.Draft202012Validator({**_schema(), "$ref": f"#/$defs/{kind}"})
-
-
-@dataclass
-class Catalogue:
-    classes: dict[str, dict[str, Any]]  # class -> {"presence": p, "assets": [...]}
-    rules: list[dict[str, Any]]
-    digest: str  # sha256 of the canonical JSON of everything above
-    path: str
-    #: "class/id" -> pack record (synth.assets_validate.pack_record) of each external asset;
-    #: not part of the digest (its asset_root is an absolute, machine-dependent path; the
-    #: file's sha256 is in the digest through the entry itself)
-    packs: dict[str, dict[str, Any]] = field(default_factory=dict)
-
-
-def _read(path: Path) -> dict:
-    try:
-        with path.open("rb") as f:
-            return tomllib.load(f)
-    except tomllib.TOMLDecodeError as e:
-        raise SynthError(f"asset manifest is not valid TOML: {e}", str(path), "fix the syntax") from None
-
-
-def _validate(doc: dict, path: Path, kind: str = "class_file") -> None:
-    import jsonschema
-
-    try:
-        _validator(kind).validate(doc)
-    except jsonschema.ValidationError as e:
-        loc = "/".join(str(p) for p in e.absolute_path) or "top level"
-        raise SynthError(f"asset manifest invalid at {loc}: {e.message}", str(path),
-                         "see docs/assets.md; 'synth assets validate' lists every defect") from None
-
-
-def load_catalogue(manifest_dir: str | Path | None = None) -> Catalogue:
-    """Read and validate every ``<class>.toml`` and ``rules.toml`` of the folder."""
-    d = Path(manifest_dir) if manifest_dir else default_manifest_dir()
-    if not d.is_dir():
-        raise SynthError("asset manifest folder not found", str(d), "set assets.manifest_dir")
-    from synth import assets_validate as av
-
-    classes: dict[str, dict[str, Any]] = {}
-    packs: dict[str, dict[str, Any]] = {}
-    for cls in ASSET_CLASSES:
-        p = d / f"{cls}.toml"
-        if not p.is_file():
-            continue
-        doc = _read(p)
-        _validate(doc, p)
-        if doc["class"] != cls:
-            raise SynthError(f"file declares class '{doc['class']}'", str(p), f"a {cls}.toml file holds class {cls}")
-        ids = [a["id"] for a in doc["assets"]]
-        if len(set(ids)) != len(ids):
-            raise SynthError("duplicate asset id", str(p), "give every asset a unique id")
-        for a in doc["assets"]:
-            if a["class"] != cls:
-                raise SynthError(f"asset '{a['id']}' has class '{a['class']}'", str(p), f"use class = '{cls}'")
-            _check_params(a, p)
-            if av.is_external(a["generator"]):
-                root = av.asset_root_of(doc, p)
-                where = f"{p} asset {a['id']}"
-                for what, fix in av.pack_defects(cls, a, root, where):
-                    raise SynthError(what, where, fix)
-                packs[f"{cls}/{a['id']}"] = av.pack_record(cls, a, root)
-        classes[cls] = {"presence": float(doc.get("presence", 1.0)), "assets": doc["assets"]}
-    for p in sorted(d.glob("*.toml")):
-        if p.stem not in ASSET_CLASSES and p.stem != "rules":
-            raise SynthError(f"unknown asset class file '{p.name}'", str(p), f"classes: {', '.join(ASSET_CLASSES)}")
-    rules: list[dict[str, Any]] = []
-    rp = d / "rules.toml"
-    if rp.is_file():
-        doc = _read(rp)
-        _validate(doc, rp, "rules_file")
-        rules = list(doc.get("exclude", []))
-    canon = json.dumps({"classes": classes, "rules": rules}, sort_keys=True, separators=(",", ":"))
-    return Catalogue(classes, rules, hashlib.sha256(canon.encode()).hexdigest(), str(d), packs)
-
-
-def _check_params(asset: dict, path: Path) -> None:
-    from synth.assets_validate import parameter_defects
-
-    for what, name, fix in parameter_defects(asset, MAX_PARAMETERS):
-        where = f"{path} asset {asset['id']} parameter {name}" if name else str(path)
-        raise SynthError(what, where, fix)
-
-
-MAX_PARAMETERS = 14  # uniform slots per asset: presence, pick, then one per parameter
 _SLOTS = 2 + MAX_PARAMETERS
 
 
@@ -166,7 +47,7 @@ def _draw_param(spec: dict, u: float, chosen: dict[str, dict]) -> Any:
 def _prepared(cat: Catalogue) -> list[tuple[str, float, list[dict], np.ndarray, list[frozenset], list[frozenset]]]:
     """Per class: presence, assets, cumulative weights, tag sets and the tags each asset excludes."""
     out = []
-    for cls in ASSET_CLASSES:
+    for cls in NAMES:
         c = cat.classes.get(cls)
         if c is None:
             out.append((cls, 0.0, [], np.zeros(0), [], []))
@@ -181,10 +62,11 @@ def _prepared(cat: Catalogue) -> list[tuple[str, float, list[dict], np.ndarray, 
 def sample_assets_batch(seed: int, identities, cat: Catalogue, disabled: tuple[str, ...] = ()) -> list[dict]:
     """Assets of each identity: ``{class: {"id", "generator", "params"} | None}`` (the frame
     JSON's asset_choice). Class c of identity i uses the uniforms
-    ``seeds.uniforms(seed, ASSETS, i, expression=c's position in ASSET_CLASSES)``: slot 0 =
+    ``seeds.uniforms(seed, ASSETS, i, expression=c's slot)`` (classes.py): slot 0 =
     presence, 1 = pick, 2 + k = the k-th parameter in name order."""
     ids = np.asarray(identities, np.int64).reshape(-1)
-    u = seeds.uniforms(seed, seeds.Stream.ASSETS, ids[:, None], np.arange(len(ASSET_CLASSES))[None, :], None,
+    slots = np.array([CLASSES[c].slot for c in NAMES], np.int64)
+    u = seeds.uniforms(seed, seeds.Stream.ASSETS, ids[:, None], slots[None, :], None,
                        n=_SLOTS).tolist()
     prep = _prepared(cat)
     result = []

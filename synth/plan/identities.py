@@ -12,14 +12,14 @@ import numpy as np
 from synth import seeds
 from synth.errors import SynthError
 from synth.model.format import HeadModelData
-from synth.model.prior import GaussianMixture
+from synth.model.identity_gmm import GaussianMixture
 
 #: ibug68 indices (0-based) of the outer and inner corners of both eyes.
 EYE_CORNERS = (36, 39, 42, 45)
 
 
 def prior_of(model: HeadModelData) -> GaussianMixture:
-    return GaussianMixture(model.prior_weights, model.prior_means, model.prior_covs)
+    return GaussianMixture.from_model(model)
 
 
 def truncation_radius(dims: int, cfg) -> float | None:

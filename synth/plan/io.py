@@ -26,6 +26,7 @@ from typing import Any, Callable, Iterable
 
 import orjson
 
+from synth.dataset.layout import frame_key
 from synth.errors import SynthError
 
 PLAN_FORMAT = "synth-plan"
@@ -218,7 +219,7 @@ class Plan:
         a, b = self._shards[shard_id]["identities"]
         E = self.config["dataset"]["expressions_per_identity"]
         V = self.config["dataset"]["views_per_expression"]
-        return [f"id{i:06d}_ex{e:02d}_v{v:02d}" for i in range(a, b) for e in range(E) for v in range(V)]
+        return [frame_key(i, e, v) for i in range(a, b) for e in range(E) for v in range(V)]
 
     def expected(self) -> dict[str, list[str]]:
         """shard id -> frame keys (what a dataset directory expects)."""

@@ -15,20 +15,14 @@ from typing import Any
 import numpy as np
 
 from synth import seeds
+from synth.assets.catalogue import Catalogue, load_catalogue
 from synth.config import Config
 from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
+from synth.dataset.layout import frame_key, shard_name
 from synth.errors import SynthError
 from synth.model.format import HeadModelData
 from synth.plan import assets as assets_mod
 from synth.plan import cameras, expressions, identities, parallel
-
-
-def frame_key(identity: int, expression: int, view: int) -> str:
-    return f"id{identity:06d}_ex{expression:02d}_v{view:02d}"
-
-
-def shard_key(index: int) -> str:
-    return f"shard_{index:06d}"
 
 
 def check_counts(cfg: Config, first_identity: int, n_identities: int) -> None:
@@ -67,7 +61,7 @@ class PlanArrays:
     height: int
 
 
-def sample_plan(cfg: Config, model: HeadModelData, catalogue: assets_mod.Catalogue, seed: int,
+def sample_plan(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: int,
                 first_identity: int, n_identities: int) -> PlanArrays:
     """Sample identities [first_identity, first_identity + n_identities) (vectorised)."""
     cfg = cfg.resolved()
@@ -156,7 +150,7 @@ class ShardSpecs:
                     Kp, w2cp, c2wp = self.K[p], self.w2c[p], self.c2w[p]
                     azp, elp, radp, sp = self.az[p], self.el[p], self.rad[p], self.fseeds[p]
                     frames = [{
-                        "frame_id": f"id{i:06d}_ex{e:02d}_v{v:02d}", "identity_index": i, "expression_index": e,
+                        "frame_id": frame_key(i, e, v), "identity_index": i, "expression_index": e,
                         "view_index": v, "seed": sp[v],
                         "camera": {"K": Kp[v], "world_to_camera": w2cp[v], "camera_to_world": c2wp[v],
                                    "width": W, "height": H, "near": near, "far": far, "azimuth_deg": azp[v],
@@ -172,17 +166,12 @@ class ShardSpecs:
                 idents.append({"identity_index": i, "identity_code": self.id_codes[n], "target": tgt,
                                "assets": asset, "skin": dict(asset["skin"]["params"]) if asset.get("skin") else None,
                                "lighting": arr.lighting[n], "expressions": exprs})
-            sid = shard_key(int(arr.identity[s0]) // S)
+            sid = shard_name(int(arr.identity[s0]) // S)
             yield sid, {"format": "synth-plan-shard", "format_version": 1, "shard_id": sid, "run_seed": self.seed,
                         "identities": idents}
 
 
-def shard_specs(cfg: Config, arr: PlanArrays, seed: int):
-    """All (shard_id, spec) pairs of a plan, in order (matrices as numpy arrays)."""
-    return ShardSpecs(cfg, arr, seed).specs()
-
-
-def replan_frame(cfg: Config, model: HeadModelData, catalogue: assets_mod.Catalogue, seed: int, identity: int,
+def replan_frame(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: int, identity: int,
                  expression: int, view: int) -> dict[str, Any]:
     """Re-plan one frame alone (as plain JSON data): the same object as in any plan with this
     seed, config, model and catalogue that contains the frame."""
@@ -234,7 +223,7 @@ def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first
     cameras.check_feasible(cfg.camera, cfg.dataset.views_per_expression)
     io.check_out_dir(Path(out))  # fail fast, before the sampling
     model, model_rec = model_record(model_path)
-    cat = assets_mod.load_catalogue(cfg.assets.manifest_dir or None)
+    cat = load_catalogue(cfg.assets.manifest_dir or None)
     d = cfg.dataset
     S = d.identities_per_shard
     n_shards = -(-n_identities // S)

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from synth.errors import ModelFormatError, SynthError
-from synth.geometry import normalize
+from synth.geometry.normals import normalize
 from synth.model import meshutil as mu
 from synth.model.format import HeadModelData
 from synth.model.importers import regions as rg

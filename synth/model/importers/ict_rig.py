@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from synth.geometry.rotations import fit_rigid, rotation_pivot
 from synth.model import meshutil as mu
 from synth.model.importers import regions as rg
 
@@ -127,9 +128,9 @@ def jaw_pivot(v: np.ndarray, jaw_open: np.ndarray | None,
     angle (radians about +X) and the motion (R, t); an anatomical estimate without jawOpen."""
     if jaw_open is not None:
         low = rng(TEETH_LOWER)
-        R, t = mu.fit_rigid(v[low], jaw_open[low])
+        R, t = fit_rigid(v[low], jaw_open[low])
         try:
-            c, n, _ = mu.rotation_pivot(R, t, 0)
+            c, n, _ = rotation_pivot(R, t, 0)
             ang = float(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))) * float(np.sign(n[0]) or 1.0)
             return c, ang, np.c_[R, t]
         except ValueError:

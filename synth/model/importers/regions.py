@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from synth.geometry.raycast import ray_hit_counts
 from synth.model import meshutil as mu
 
 #: Names of the 68 iBUG / Multi-PIE points ("r"/"l" = the subject's right/left).
@@ -178,13 +179,13 @@ def ear_flaps(vertices: np.ndarray, triangles: np.ndarray, skin: np.ndarray, lm:
         tw = ts[in_win[ts].all(1)]
         d = np.zeros((len(cand), 3))
         d[:, 0] = -side
-        flap = mu.ray_hit_counts(v[cand], d, v, tw) >= 1
+        flap = ray_hit_counts(v[cand], d, v, tw) >= 1
         if flap.sum() < 8:
             continue
         hull = mu.convex_hull_2d(v[cand[flap]][:, 1:])
         inside = mu.point_in_polygon(v[cand][:, 1:], hull) & ~flap
         free = np.zeros(len(cand), bool)
-        free[inside] = mu.ray_hit_counts(v[cand[inside]], -d[inside], v, tw) == 0
+        free[inside] = ray_hit_counts(v[cand[inside]], -d[inside], v, tw) == 0
         out.append(cand[flap | free])
     return np.sort(np.concatenate(out)) if out else np.zeros(0, np.int64)
 

@@ -1,45 +1,32 @@
-"""The frame JSON (docs/frame-format.md): keys, schema validation, reading and writing.
+"""The frame JSON (docs/frame-format.md): the record builder, schema validation, reading and writing.
 
 The schema lives in ``synth/schemas/frame.schema.json`` (JSON Schema draft 2020-12).
 :func:`validate_frame_json` adds the checks a schema cannot express (the key agrees with the
 indices, the two camera matrices are inverse rigid transforms, landmarks_2d is the projection
-of landmarks_3d, ...). The reader and ``synth validate`` both use it.
+of landmarks_3d, ...). The writer, the reader and ``synth validate`` all use it.
+:func:`build_frame_record` assembles a frame's record from what the worker planned and rendered.
 """
 
 from __future__ import annotations
 
 import functools
 import json
-import re
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
+from synth.dataset.exr import CHANNELS
 from synth.dataset.fsio import atomic_write_json, loads_json
+from synth.dataset.layout import frame_files, parse_frame_key
 from synth.errors import SynthError
 
-FRAME_KEY_RE = re.compile(r"^id(\d{6})_ex(\d{2})_v(\d{2})$")
 NUM_LANDMARKS = 68
-SCHEMA_PATH = Path(__file__).parent / "schemas" / "frame.schema.json"
+SCHEMA_PATH = Path(__file__).parent.parent / "schemas" / "frame.schema.json"
 #: Largest allowed distance (pixels) between landmarks_2d and the projection of landmarks_3d.
 PROJECTION_TOL_PX = 0.01
 #: Tolerance on world_to_camera @ camera_to_world == I and on the rotation being orthonormal.
 MATRIX_TOL = 1e-5
-
-
-def frame_key(identity: int, expression: int, view: int) -> str:
-    """``id{identity:06d}_ex{expression:02d}_v{view:02d}`` (sortable, zero-padded)."""
-    if not (0 <= identity <= 999999 and 0 <= expression <= 99 and 0 <= view <= 99):
-        raise SynthError(f"frame indices out of range (identity {identity}, expression {expression}, view {view})",
-                         None, "identity must be < 1e6, expression and view < 100")
-    return f"id{identity:06d}_ex{expression:02d}_v{view:02d}"
-
-
-def parse_frame_key(key: str) -> tuple[int, int, int]:
-    m = FRAME_KEY_RE.match(key)
-    if not m:
-        raise SynthError(f"bad frame key {key!r}", None, "keys look like id000042_ex07_v13")
-    return int(m[1]), int(m[2]), int(m[3])
 
 
 @functools.lru_cache(maxsize=1)
@@ -76,6 +63,54 @@ def jsonable(obj):
     return obj
 
 
+def _floats(a) -> list:
+    return np.asarray(a, dtype=np.float64).tolist()
+
+
+def build_frame_record(planned_frame: Mapping, *, shard_id: str, width: int, height: int, model_info: Mapping,
+                       identity_code, planned_expression: Mapping, expression_code, joint_rotations: Mapping,
+                       head_pose, landmarks_3d, landmarks_2d, landmarks_visible, assets: Mapping,
+                       skin: Mapping, lighting: Mapping, render_preset: str | None,
+                       render_settings: Mapping, software: Mapping) -> dict:
+    """The frame JSON of one rendered view, in the documented key order (docs/frame-format.md).
+
+    - ``planned_frame``: the plan's frame (``frame_id``, the three indices, ``seed``, ``camera``),
+      copied first and unchanged;
+    - ``model_info``: the model's ``name`` and ``sha256``; ``identity_code`` and
+      ``expression_code``: the codes the head was evaluated with; ``planned_expression``: the
+      plan's expression (its ``preset``, ``kind`` and ``pose`` are recorded);
+      ``joint_rotations``: joint name -> axis-angle (3,), in the model's joint order;
+      ``head_pose``: the head joint's 4x4 world transform;
+    - ``landmarks_3d`` (68, 3) world metres, ``landmarks_2d`` (68, 2) pixels,
+      ``landmarks_visible`` (68,) booleans;
+    - ``assets``, ``skin``, ``lighting``: the records of the identity's scene;
+    - ``render_preset`` and ``render_settings`` (the effective engine settings) with the image
+      size and the planned seed make ``render``; ``software`` the versions.
+
+    Arrays become plain lists (float64 values, bit for bit); nothing is validated here
+    (:func:`write_frame_json` and ``StagingShard.write_frame`` do that).
+    """
+    record = dict(planned_frame)
+    record["shard_id"] = shard_id
+    record["image"] = {"width": width, "height": height, "file": frame_files(planned_frame["frame_id"])[0],
+                       "layers": list(CHANNELS)}
+    record["model"] = {**model_info, "identity": _floats(identity_code), "expression": _floats(expression_code),
+                       "expression_preset": planned_expression.get("preset"),
+                       "expression_kind": planned_expression.get("kind"),
+                       "joint_rotations": {name: _floats(r) for name, r in joint_rotations.items()},
+                       "pose": planned_expression.get("pose"), "head_pose": _floats(head_pose)}
+    record["landmarks_3d"] = _floats(landmarks_3d)
+    record["landmarks_2d"] = _floats(landmarks_2d)
+    record["landmarks_visible"] = np.asarray(landmarks_visible, dtype=bool).tolist()
+    record["assets"] = assets
+    record["skin"] = skin
+    record["lighting"] = lighting
+    record["render"] = {"preset": render_preset, "resolution": [width, height], "seed": int(planned_frame["seed"]),
+                        **render_settings}
+    record["software"] = software
+    return record
+
+
 def validate_frame_json(obj) -> list[str]:
     """All problems with a frame object, as ``"json/path: message"`` strings; ``[]`` when valid."""
     errors = sorted(_validator().iter_errors(obj), key=lambda e: (list(map(str, e.absolute_path)), e.message))
@@ -88,16 +123,15 @@ def validate_frame_json(obj) -> list[str]:
 def _semantic_errors(f: dict) -> list[str]:
     out: list[str] = []
     key = f["frame_id"]
-    expect = f"id{f['identity_index']:06d}_ex{f['expression_index']:02d}_v{f['view_index']:02d}"
-    if key != expect:
-        out.append(f"frame_id: {key!r} disagrees with the indices (expected {expect!r})")
+    indices = (f["identity_index"], f["expression_index"], f["view_index"])
+    if parse_frame_key(key) != indices:
+        out.append(f"frame_id: {key!r} disagrees with the indices (identity, expression, view) = {indices}")
     img, cam = f["image"], f["camera"]
-    if img["file"] != f"{key}.exr":
-        out.append(f"image/file: {img['file']!r}, expected {key + '.exr'!r}")
+    exr_file = frame_files(key)[0]
+    if img["file"] != exr_file:
+        out.append(f"image/file: {img['file']!r}, expected {exr_file!r}")
     if (cam["width"], cam["height"]) != (img["width"], img["height"]):
         out.append(f"camera: size {cam['width']}x{cam['height']} differs from image {img['width']}x{img['height']}")
-    from synth.exr import CHANNELS
-
     if sorted(img["layers"]) != sorted(CHANNELS):
         out.append(f"image/layers: {img['layers']} differs from the EXR channels {list(CHANNELS)}")
     if not cam["near"] < cam["far"]:
@@ -132,29 +166,6 @@ def _semantic_errors(f: dict) -> list[str]:
     if (vis & ~front).any():
         out.append("landmarks_visible: a landmark behind the camera is marked visible")
     return out
-
-
-def landmark_visibility(landmarks_2d, landmarks_z, depth, *, tol_m: float = 0.01) -> np.ndarray:
-    """Per-landmark visibility from the rendered depth (``depth.Z`` of the frame EXR).
-
-    ``landmarks_2d``: (N, 2) pixels (top-left corner at (0, 0), pixel centres at +0.5, as in
-    :mod:`synth.conventions`); ``landmarks_z``: (N,) camera-space z of the landmarks (metres);
-    ``depth``: (H, W) camera-space z, 0 = background. A landmark is visible when it is in front
-    of the camera, inside the image, and no surface at its pixel is closer than ``z - tol_m``
-    (a background pixel at a silhouette edge does not occlude it).
-    """
-    xy = np.asarray(landmarks_2d, np.float64)
-    z = np.asarray(landmarks_z, np.float64)
-    depth = np.asarray(depth)
-    h, w = depth.shape
-    ok = np.isfinite(xy).all(axis=1) & np.isfinite(z) & (z > 0)
-    col = np.floor(np.where(ok, xy[:, 0], -1)).astype(np.int64)
-    row = np.floor(np.where(ok, xy[:, 1], -1)).astype(np.int64)
-    ok &= (col >= 0) & (col < w) & (row >= 0) & (row < h)
-    d = np.zeros(len(z))
-    d[ok] = depth[row[ok], col[ok]]
-    occluded = (d > 0) & (d < z - tol_m)
-    return ok & ~occluded
 
 
 def check_frame_json(obj, where: str) -> None:

@@ -9,7 +9,7 @@ Channels (one single-part scanline file, sorted by name as OpenEXR stores them):
                            depth, not ray length); ``0.0`` = no surface (background)
 ``normal.X/Y/Z``   HALF    unit surface normal in world space (Blender world: Z up,
                            metres); ``(0, 0, 0)`` = background
-``segmentation.id`` UINT   class ID from :mod:`synth.segmentation` (0 = background)
+``segmentation.id`` UINT   class ID from :mod:`synth.dataset.segmentation` (0 = background)
 =================  ======  ==========================================================
 
 The header carries ``chromaticities`` (Rec.709 primaries, D65 white) and
@@ -19,22 +19,22 @@ attributes the caller passes (e.g. the frame key). Compression is ZIP (lossless,
 every OpenEXR >= 1.x reader; see docs/frame-format.md for the size/speed comparison).
 
 Writes are atomic (temp file, fsync, rename): a reader sees the complete file or none.
+Reads take a path or the bytes (:func:`decode_frame_exr`) and are safe in threads: the bytes
+are checked by :mod:`synth.dataset.exr_check` before OpenEXR decodes them.
 """
 
 from __future__ import annotations
 
-import contextlib
 import io
-import os
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from synth.dataset.exr_check import check_exr_bytes
 from synth.dataset.fsio import atomic_write_bytes
+from synth.dataset.segmentation import NAMES
 from synth.errors import SynthError
-from synth.segmentation import NAMES
 
 FORMAT = "synth-frame-exr/1"
 HALF_MAX = 65504.0
@@ -103,7 +103,7 @@ def encode_frame_exr(rgba, depth, normals, segmentation, header: dict | None = N
                          "clamp the render output (fireflies) before writing")
     if seg.dtype.kind not in "iu" or (seg.size and (int(seg.min()) < 0 or int(seg.max()) > 0xFFFFFFFF)):
         raise SynthError(f"segmentation must hold non-negative integer class IDs (dtype {seg.dtype})", where,
-                         "pass an integer array of synth.segmentation IDs")
+                         "pass an integer array of synth.dataset.segmentation IDs")
     d = depth.astype(np.float32)  # float64 -> float32 first, so 1e10 stays "large", not inf
     if (d < 0).any():
         raise SynthError(f"depth has {int((d < 0).sum())} negative value(s) (camera-space z must be >= 0)",
@@ -157,7 +157,7 @@ def write_frame_exr(path, rgba, depth, normals, segmentation, header: dict | Non
     - ``depth``: (H, W) camera-space z in metres (float). Values >= 1e9 or +inf (Cycles writes
       1e10 where no surface was hit) are stored as ``0.0`` = background. NaN or negative: refused.
     - ``normals``: (H, W, 3) world-space unit normals (Blender world, Z up), stored as HALF.
-    - ``segmentation``: (H, W) integer class IDs (:mod:`synth.segmentation`), stored as UINT.
+    - ``segmentation``: (H, W) integer class IDs (:mod:`synth.dataset.segmentation`), stored as UINT.
     - ``header``: extra attributes (str -> str | int | float), e.g. ``{"synthFrameKey": key}``.
     """
     path = Path(path)
@@ -178,83 +178,89 @@ def _plain(v):
     return name if isinstance(name, str) else str(v)
 
 
-@contextlib.contextmanager
-def _silenced():
-    """Swallow what the OpenEXR binding prints while decoding a damaged file (a Python-level
-    "Warning: ..." on stdout and C-level lines on fd 2). Process-wide: single-threaded use only."""
-    sys.stdout.flush()
-    sys.stderr.flush()
-    saved = os.dup(2)
-    null = os.open(os.devnull, os.O_WRONLY)
+def _bytes(source, where: str | None) -> tuple[bytes, str]:
+    """The bytes of ``source`` (bytes-like, or a path to read) and a name for messages."""
+    if isinstance(source, (bytes, bytearray, memoryview)):
+        return bytes(source), where or "<bytes>"
+    path = Path(source)
     try:
-        os.dup2(null, 2)
-        with contextlib.redirect_stdout(io.StringIO()):
-            yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(null)
+        return path.read_bytes(), where or str(path)
+    except FileNotFoundError:
+        raise SynthError("EXR file not found", str(path), "check the path (or re-render the frame)") from None
+    except OSError as e:
+        raise SynthError(f"cannot read EXR ({e.strerror})", str(path), "check the file's permissions") from None
 
 
-def _open(path: Path, header_only: bool, quiet: bool = False):
+def _open(data: bytes, where: str, header_only: bool, verify: bool):
+    """OpenEXR's header and channels of checked bytes (:mod:`synth.dataset.exr_check` first, so
+    that a damaged file is reported by that check rather than printed about by OpenEXR)."""
     OpenEXR = _openexr()
-    if not path.is_file():
-        raise SynthError("EXR file not found", str(path), "check the path (or re-render the frame)")
     try:
-        with _silenced() if quiet else contextlib.nullcontext():
-            f = OpenEXR.File(str(path), separate_channels=True, header_only=header_only)
-            hdr = f.header()
-            chans = {} if header_only else f.channels()
-    except Exception as e:  # the binding raises RuntimeError/ValueError with C-level messages
+        check_exr_bytes(data, inflate=verify and not header_only)
+        f = OpenEXR.File(io.BytesIO(data), separate_channels=True, header_only=header_only)
+        hdr = f.header()
+        chans = {} if header_only else f.channels()
+    except Exception as e:  # ExrDamaged, or what the binding raises (RuntimeError/ValueError)
         msg = str(e).splitlines()[0] if str(e) else type(e).__name__
         if "has 0 parts" in msg:
             msg = "pixel data does not decode"
-        raise SynthError(f"cannot read EXR: {msg}", str(path),
+        raise SynthError(f"cannot read EXR: {msg}", where,
                          "the file is corrupt or truncated; re-render the frame") from None
     return hdr, chans
 
 
-def read_frame_exr_header(path, *, quiet: bool = False) -> dict:
-    """Read only the header (fast): ``{"width", "height", "channels": {name: None}, "header": {...}}``."""
-    path = Path(path)
-    hdr, _ = _open(path, header_only=True, quiet=quiet)
-    return _describe(hdr, path)
+def read_frame_exr_header(source, *, where: str | None = None) -> dict:
+    """Only the header of a frame EXR (a path or its bytes): ``{"width", "height", "channels":
+    {name: None}, "header": {...}, "path"}``. The file's structure is checked, not its pixels."""
+    data, where = _bytes(source, where)
+    hdr, _ = _open(data, where, header_only=True, verify=False)
+    return _describe(hdr, where)
 
 
-def _describe(hdr: dict, path: Path, chans: dict | None = None) -> dict:
+def _describe(hdr: dict, where: str, chans: dict | None = None) -> dict:
     (x0, y0), (x1, y1) = (np.asarray(hdr["dataWindow"][0]).tolist(), np.asarray(hdr["dataWindow"][1]).tolist())
     if chans:
         types = {name: c.type().name for name, c in chans.items()}
     else:  # header-only reads carry no pixel types in this binding
         types = {c.name: None for c in hdr.get("channels", [])}
     plain = {k: _plain(v) for k, v in hdr.items() if k != "channels"}
-    return {"path": str(path), "width": int(x1 - x0 + 1), "height": int(y1 - y0 + 1), "channels": types,
+    return {"path": where, "width": int(x1 - x0 + 1), "height": int(y1 - y0 + 1), "channels": types,
             "header": plain}
 
 
-def read_frame_exr(path, *, quiet: bool = False) -> dict:
-    """Read a frame EXR written by :func:`write_frame_exr`.
+def read_frame_exr(source, *, verify: bool = False, where: str | None = None) -> dict:
+    """Read a frame EXR written by :func:`write_frame_exr`, from a path or from its bytes.
 
     Returns ``{"rgba": (H,W,4) float16, "depth": (H,W) float32, "normals": (H,W,3) float16 or
     float32 (as stored), "segmentation": (H,W) uint32, "width", "height", "channels": {name:
-    pixel type}, "header": {attribute: plain value}, "path"}``. Raises :class:`SynthError` for a
-    missing, unreadable or truncated file or missing channels. Pixel values are returned as
-    stored; checks on them (NaN, IDs) belong to ``synth validate``. ``quiet`` swallows what the
-    OpenEXR library prints about a damaged file (process-wide while reading; for CLI tools).
+    pixel type}, "header": {attribute: plain value}, "path"}`` (``path``: ``where``, else the
+    path, else ``"<bytes>"``). Raises :class:`SynthError` for a missing, unreadable or truncated
+    file or missing channels. Pixel values are returned as stored; checks on them (NaN, IDs)
+    belong to ``synth validate``.
+
+    Safe in threads and DataLoader workers: nothing process-wide is touched. A truncated or
+    garbled file is rejected by our own checks before OpenEXR sees it; ``verify`` also inflates
+    every chunk first (about twice the decode time), so that damaged pixel data is reported
+    without OpenEXR printing about it (``synth validate`` and ``synth preview`` use it).
     """
-    path = Path(path)
-    hdr, chans = _open(path, header_only=False, quiet=quiet)
-    desc = _describe(hdr, path, chans)
+    data, where = _bytes(source, where)
+    return decode_frame_exr(data, where, verify=verify)
+
+
+def decode_frame_exr(data: bytes, where: str = "<bytes>", *, verify: bool = False) -> dict:
+    """:func:`read_frame_exr` of bytes already in memory (a shard file, a tar member)."""
+    hdr, chans = _open(data, where, header_only=False, verify=verify)
+    desc = _describe(hdr, where, chans)
     missing = [c for c in CHANNELS if c not in chans]
     if missing:
-        raise SynthError(f"EXR lacks channel(s) {', '.join(missing)}", str(path),
-                         "it was not written by synth.exr.write_frame_exr; re-render the frame")
+        raise SynthError(f"EXR lacks channel(s) {', '.join(missing)}", where,
+                         "it was not written by synth.dataset.exr.write_frame_exr; re-render the frame")
     h, w = desc["height"], desc["width"]
     px = {}
     for name in CHANNELS:
         p = chans[name].pixels
         if p is None or p.shape != (h, w):
-            raise SynthError(f"EXR channel {name} has no pixel data of size {w}x{h}", str(path),
+            raise SynthError(f"EXR channel {name} has no pixel data of size {w}x{h}", where,
                              "the file is corrupt; re-render the frame")
         px[name] = p
     desc["rgba"] = np.stack([px[c] for c in RGBA_CHANNELS], axis=-1)
@@ -263,13 +269,13 @@ def read_frame_exr(path, *, quiet: bool = False) -> dict:
     desc["segmentation"] = px[SEG_CHANNEL]
     types = {"rgba": desc["rgba"].dtype, "depth": desc["depth"].dtype, "segmentation": desc["segmentation"].dtype}
     if types["segmentation"] != np.uint32 or types["depth"] != np.float32:
-        raise SynthError(f"EXR channel types are wrong ({types})", str(path),
+        raise SynthError(f"EXR channel types are wrong ({types})", where,
                          "depth.Z must be FLOAT and segmentation.id UINT; re-render the frame")
     return desc
 
 
 def pixel_defects(px: dict) -> list[str]:
-    """Problems in the pixels of a frame read by :func:`synth.exr.read_frame_exr`."""
+    """Problems in the pixels of a frame read by :func:`synth.dataset.exr.read_frame_exr`."""
     out = []
     rgba = px["rgba"].astype(np.float32)
     normals = px["normals"].astype(np.float32)
@@ -297,4 +303,4 @@ def pixel_defects(px: dict) -> list[str]:
 
 
 __all__ = ["CHANNELS", "REC709_CHROMATICITIES", "HALF_MAX", "BACKGROUND_DEPTH", "encode_frame_exr",
-           "write_frame_exr", "read_frame_exr", "read_frame_exr_header", "pixel_defects"]
+           "write_frame_exr", "read_frame_exr", "decode_frame_exr", "read_frame_exr_header", "pixel_defects"]

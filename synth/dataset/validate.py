@@ -7,7 +7,7 @@ Checks (docs/shard-format.md, "Validation"):
   the manifests; staging leftovers are warnings;
 - shard: ``manifest.json`` parses, lists exactly the planned frames and their two files; no
   missing or extra files; sizes and sha256 match (hashing skipped with ``quick``);
-- frame: the JSON parses and validates (schema + consistency, :mod:`synth.frames`) and names
+- frame: the JSON parses and validates (schema + consistency, :mod:`synth.dataset.frame_json`) and names
   its key; the EXR opens with every channel, the JSON's size and the right pixel types; no
   NaN/Inf in RGBA, normals or depth; depth >= 0; alpha in [0, 1]; segmentation IDs known.
 """
@@ -21,11 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
+from synth.dataset.exr import pixel_defects, read_frame_exr
+from synth.dataset.frame_json import validate_frame_json
 from synth.dataset.fsio import is_temp_name, loads_json, sha256_bytes, sha256_file
 from synth.dataset.index import ManifestError, parse_manifest, read_index
 from synth.dataset.layout import MANIFEST_FILE, SHARDS_DIR, STAGING_DIR, frame_files
+from synth.dataset.shards import load_dataset
 from synth.errors import SynthError
-from synth.exr import pixel_defects
 
 
 class DefectsFound(SynthError):
@@ -68,9 +70,6 @@ class Report:
 
 
 def _check_frame(shard_dir: Path, shard: str, key: str) -> list[Defect]:
-    from synth.exr import read_frame_exr
-    from synth.frames import validate_frame_json
-
     out: list[Defect] = []
     exr, js = frame_files(key)
     fj = None
@@ -91,7 +90,7 @@ def _check_frame(shard_dir: Path, shard: str, key: str) -> list[Defect]:
     if not (shard_dir / exr).exists():
         return out
     try:
-        px = read_frame_exr(shard_dir / exr, quiet=True)
+        px = read_frame_exr(shard_dir / exr, verify=True)
     except SynthError as e:
         out.append(Defect(shard, key, "exr", e.what))
         return out
@@ -189,8 +188,6 @@ def validate_dataset(root, *, quick: bool = False, partial: bool = False, jobs: 
 
     ``progress(shard_id)`` is called after each shard (for a progress bar).
     """
-    from synth.dataset.shards import load_dataset
-
     ds = load_dataset(root)
     root = ds.root
     rep = Report(root=str(root), hashed=not quick)

@@ -1,7 +1,20 @@
-"""Gaussian-mixture prior over identity codes: log-likelihood, sampling, EM fitting.
+"""The identity prior of a head model: a Gaussian mixture over identity codes (log-likelihood,
+sampling, EM fitting). Stored in model files as ``prior_weights``/``prior_means``/``prior_covs``.
 
 All densities are evaluated in float64 through Cholesky factors and log-sum-exp, so the
 log-likelihood stays finite (and decreases monotonically) arbitrarily far from the data.
+
+The parameters are plain arrays so that other frameworks can evaluate the same density
+(the code fitting of the NeRF prior does it in torch). With the per-component arrays of
+:meth:`GaussianMixture.parameters`::
+
+    z_m    = (x - means[m]) @ precision_cholesky[m]            # (D,) whitened offset
+    log p  = logsumexp_m( log_norm[m] - 0.5 * |z_m|^2 )
+    nll    = -log p
+
+where ``precision_cholesky[m]`` is upper triangular with ``precision_cholesky[m] @
+precision_cholesky[m].T == inv(covs[m])`` (scikit-learn's ``precisions_cholesky_``
+convention) and ``log_norm[m] = log weights[m] - 0.5 (D log 2 pi + log det covs[m])``.
 """
 
 from __future__ import annotations
@@ -16,6 +29,8 @@ _LOG2PI = float(np.log(2.0 * np.pi))
 
 @dataclass
 class GaussianMixture:
+    """``weights`` (M,) summing to 1, ``means`` (M, D), ``covs`` (M, D, D) symmetric positive definite."""
+
     weights: np.ndarray  # (M,)
     means: np.ndarray  # (M, D)
     covs: np.ndarray  # (M, D, D)
@@ -27,9 +42,38 @@ class GaussianMixture:
         self._chol = np.linalg.cholesky(self.covs)  # raises if not positive definite
         self._logdet = 2.0 * np.sum(np.log(np.diagonal(self._chol, axis1=1, axis2=2)), axis=1)
 
+    @classmethod
+    def from_model(cls, model) -> "GaussianMixture":
+        """The identity prior stored in a :class:`synth.model.format.HeadModelData`."""
+        return cls(model.prior_weights, model.prior_means, model.prior_covs)
+
     @property
     def dim(self) -> int:
         return int(self.means.shape[1])
+
+    @property
+    def cholesky(self) -> np.ndarray:
+        """(M, D, D) lower-triangular L with covs = L L^T."""
+        return self._chol.copy()
+
+    @property
+    def precision_cholesky(self) -> np.ndarray:
+        """(M, D, D) upper-triangular U = L^-T, so inv(covs) = U U^T and the squared
+        Mahalanobis distance is |(x - mean) U|^2 (a plain matrix product)."""
+        from scipy.linalg import solve_triangular
+
+        eye = np.eye(self.dim)
+        return np.stack([solve_triangular(c, eye, lower=True).T for c in self._chol])
+
+    @property
+    def log_norm(self) -> np.ndarray:
+        """(M,) log weight plus log normalising constant of each component."""
+        return np.log(self.weights) - 0.5 * (self._logdet + self.dim * _LOG2PI)
+
+    def parameters(self) -> dict[str, np.ndarray]:
+        """Everything needed to evaluate the density elsewhere (see the module docstring), float64."""
+        return {"weights": self.weights.copy(), "means": self.means.copy(), "covs": self.covs.copy(),
+                "precision_cholesky": self.precision_cholesky, "log_norm": self.log_norm}
 
     def mahalanobis_sq(self, x: np.ndarray) -> np.ndarray:
         """(N, M) squared Mahalanobis distances to each component."""
@@ -49,6 +93,10 @@ class GaussianMixture:
     def log_likelihood(self, x: np.ndarray) -> np.ndarray:
         """(N,) log p(x)."""
         return logsumexp(self.component_log_pdf(x), axis=1)
+
+    def nll(self, x: np.ndarray) -> np.ndarray:
+        """(N,) negative log-likelihood -log p(x) (the regulariser of code fitting)."""
+        return -self.log_likelihood(x)
 
     def sample(self, rng: np.random.Generator, n: int, max_mahalanobis: float | None = None,
                max_tries: int = 1000) -> np.ndarray:

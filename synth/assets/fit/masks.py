@@ -1,4 +1,5 @@
-"""Per-vertex masks (numpy) from head regions and landmarks, shared by the shader-layer rigs.
+"""Per-vertex masks (numpy) from head regions and landmarks: the shader-layer rigs (makeup,
+skin detail) and the body of fitted shells use them.
 
 All masks are floats in [0, 1] per head vertex, computed on the current vertices at build
 time; they are attached to vertices, so they follow every later expression.
@@ -10,10 +11,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 
-def region_mask(data, names, n: int) -> np.ndarray:
+def region_mask(regions: dict, names, n: int) -> np.ndarray:
+    """True on the ``n`` vertices of any of the named regions (absent regions: none)."""
     m = np.zeros(n, bool)
     for name in names:
-        r = data.regions.get(name)
+        r = regions.get(name)
         if r is not None:
             m[np.asarray(r, np.int64)] = True
     return m
@@ -39,4 +41,4 @@ def segment_distance(V, a, b):
 
 def skin_only(data, n):
     """Vertices that are skin (not eyes, teeth, mouth interior)."""
-    return ~region_mask(data, ("eyes", "teeth", "mouth_interior"), n)
+    return ~region_mask(data.regions, ("eyes", "teeth", "mouth_interior"), n)

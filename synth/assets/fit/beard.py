@@ -1,0 +1,118 @@
+"""Facial hair on the ``beard`` region (assets_manifest/beard.toml).
+
+Style masks are built from the current ibug68 landmarks (mouth corners, upper lip, chin, jaw
+contour), strands grow downward along the skin (tangential gravity blended with the surface
+normal), moustaches sweep outward from the philtrum; long beards fall with gravity and are
+pushed out of the head/neck.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from synth.assets.fit.groom import Groom, Styling, setup
+from synth.assets.fit.strands import DOWN, LEFT, UP, add_curl, arc_length, grow, push_out_strands, scale_count
+from synth.geometry.normals import normalize
+
+
+def counts(resolution: int, density: float = 1.0) -> int:
+    return max(60, int(scale_count(resolution, 14.0, 700, 25000) * float(density)))
+
+
+def _polyline_distance(p, line):
+    a, b = line[:-1], line[1:]
+    ab = b - a
+    t = np.clip(np.einsum("nkd,kd->nk", p[:, None] - a[None], ab) / np.maximum((ab * ab).sum(1), 1e-12), 0, 1)
+    q = a[None] + t[..., None] * ab[None]
+    return np.linalg.norm(p[:, None] - q, axis=2).min(1)
+
+
+def groom(ctx, entry) -> Groom:
+    st = setup(ctx, entry, "beard", "short_full")
+    rng, sid, prm, surface, hf, colour, pg = st.rng, st.sid, st.prm, st.surface, st.hf, st.colour, st.pg
+    lm = hf["lm"]
+    tris = surface.region_triangles("beard", "all", exclude=("lips", "mouth_interior", "teeth", "nose"))
+    corner_r, corner_l = lm[48], lm[54]
+    x_c = 0.5 * (corner_l[0] + corner_r[0])
+    half_w = 0.5 * abs(corner_l[0] - corner_r[0])
+    lip_top, lip_bot, subnasal, chin = lm[51], lm[57], lm[33], lm[8]
+    jaw = lm[0:17]
+    moustache = bool(prm.get("moustache", True))
+    mstyle = str(prm.get("style", "chevron"))
+
+    def mask(p):
+        x = p[:, 0] - x_c
+        upper_lip = (p[:, 2] > lip_top[2] - 0.002) & (p[:, 2] < subnasal[2] - 0.001) & (np.abs(x) < half_w + 0.008)
+        upper_lip &= p[:, 1] < lip_top[1] + 0.025
+        if sid == "stubble" or sid == "short_full" or sid == "full_long":
+            m = np.ones(len(p), bool)
+            if not moustache:
+                m &= ~upper_lip
+            return m
+        if sid == "goatee":
+            chin_zone = (np.abs(x) < half_w + 0.004) & (p[:, 2] < lip_bot[2] + 0.002) & (p[:, 1] < chin[1] + 0.03)
+            return chin_zone | (upper_lip if moustache else False)
+        if sid == "moustache":
+            if mstyle == "pencil":
+                return upper_lip & (p[:, 2] < lip_top[2] + 0.005)
+            if mstyle == "horseshoe":
+                bars = (np.abs(np.abs(x) - half_w - 0.004) < 0.006) & (p[:, 2] < lip_top[2] + 0.004) & (
+                    p[:, 2] > chin[2] + 0.01) & (p[:, 1] < chin[1] + 0.03)
+                return upper_lip | bars
+            return upper_lip
+        if sid == "chin_strap":
+            w = float(prm.get("width_m", 0.012))
+            return (_polyline_distance(p, jaw[2:15]) < w) & (p[:, 2] < lip_bot[2])
+        if sid == "mutton_chops":
+            return (np.abs(x) > half_w + 0.012) & (p[:, 2] > chin[2] + 0.015)
+        return np.ones(len(p), bool)
+
+    n = counts(ctx.resolution, float(prm.get("density", 1.0)))
+    t, b = surface.sample(tris, 6 * n + 64, rng)
+    ok = mask(surface.points(t, b))
+    tri, bary = t[ok][:n], b[ok][:n]
+    if len(tri) < 10:  # degenerate mask on an extreme identity: fall back to the whole region
+        tri, bary = t[:n], b[:n]
+    N = len(tri)
+    R = surface.points(tri, bary)
+    nrm = surface.normals(tri, bary)
+    x = R[:, 0] - x_c
+    upper = (R[:, 2] > lip_top[2] - 0.002) & (R[:, 2] < subnasal[2]) & (np.abs(x) < half_w + 0.008)
+
+    length = float(prm.get("length_m", {"stubble": 0.0015, "chin_strap": 0.008, "mutton_chops": 0.012, "full_long": 0.08,
+                                         "goatee": 0.02, "moustache": 0.015}.get(sid, 0.012)))
+    if sid == "moustache":
+        length = {"pencil": min(length, 0.007), "walrus": max(length, 0.02)}.get(mstyle, length)
+    L = length * rng.uniform(0.75, 1.0, N)
+    side = np.where(x >= 0, 1.0, -1.0)
+    curl = float(prm.get("curl", 0.0))
+    long = sid == "full_long"
+    npts = 3 if sid == "stubble" else (16 if long else 6)
+    lift = 0.0015 if not long else 0.01
+    layer = rng.uniform(0.0005, 0.002 if not long else 0.01, N)
+
+    def field(p, s, k):
+        tdown = DOWN[None] - np.einsum("nd,d->n", nrm, DOWN)[:, None] * nrm
+        d = normalize(tdown + 1e-9) + 0.35 * nrm
+        # moustache hair sweeps outward from the philtrum (handlebar ends turn up)
+        mo = upper[:, None] * (0.7 * side[:, None] * LEFT[None])
+        if mstyle == "handlebar" and sid == "moustache":
+            out = np.clip((np.abs(p[:, 0] - x_c) - half_w) / 0.01, 0.0, 1.0)[:, None]
+            mo = mo * 1.5 + out * 1.8 * UP[None]
+        if long:
+            d = d + 0.8 * DOWN[None] * np.clip(s / 0.02, 0, 1)[:, None]
+        return d + mo
+
+    pts = grow(surface, R, nrm, L, npts, field, lift, layer)
+    if long and curl > 0.02:
+        pts = add_curl(pts, nrm, curl * 0.006 * rng.uniform(0.7, 1.3, N), 0.02, rng.uniform(0, 2 * np.pi, N),
+                         start=0.01)
+    pts = push_out_strands(surface, pts, layer, exact=True)
+    clr = np.minimum(layer[:, None], 0.6 * arc_length(pts))
+    radius = float(np.clip(6e-5 * np.sqrt(20000.0 / N), 6e-5, 2.5e-4))
+    styling = Styling(root_radius=radius, tip_shape=0.45, frizz=0.0006 if long else 0.0,
+                        seed=int(rng.integers(0, 2 ** 31)))
+    info = {"style": sid, "colour": colour, "pigment": pg.as_dict(), "guides": N, "length_m": length}
+    if sid == "moustache":
+        info["moustache_style"] = mstyle
+    return Groom("beard", f"beard_{sid}", surface, pts, tri, bary, clr, styling, info, pg, roughness=0.32, exact=True)

@@ -1,0 +1,224 @@
+"""The body a shell is fitted to (garments, headwear), and the fit itself; pure numpy.
+
+A shell rig (``synth.assets.fit.garment``, ``synth.assets.fit.headwear``) describes its mesh as
+:class:`Parts` built from a :class:`Body` and returns a :class:`Shell`: the parts, the body
+triangles it is bound to, its materials as :class:`Cloth` descriptions and its record.
+:func:`fit_shell` then trims the vertices of trimmable parts that ended up deep inside another
+body part (a chin sunk into the chest at -3 SD), pushes every other vertex out to
+``clearance`` (:func:`synth.assets.fit.attach.push_out`) and binds the result to the body
+(:class:`synth.assets.fit.attach.Binding`); :meth:`FittedShell.follow` re-applies that
+binding to new body vertices (an expression change) and pushes out again. The Blender rigs
+only turn a :class:`FittedShell` into a mesh object and materials.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from synth.assets.fit.attach import Binding, SurfaceQuery, push_out
+from synth.assets.fit.masks import region_mask
+from synth.assets.fit.meshops import clip_by_field, level_points, remove_faces, resample_loop, subdivide
+
+#: vertices of trimmable parts deeper than this inside the skin after shaping are trimmed, not pushed
+TRIM_DEPTH = 0.006
+from synth.geometry.normals import normalize, vertex_normals
+
+
+class WaveNoise:
+    """Smooth deterministic 3D noise in [-1, 1]: a sum of random plane waves (from ``rng``).
+
+    ``stretch`` scales the axes of the wave vectors (e.g. (1, 1, 0.3): folds that run
+    vertically). Used for geometric wrinkles and slack."""
+
+    def __init__(self, rng: np.random.Generator, wavelength: float, n_waves: int = 12, stretch=(1.0, 1.0, 1.0)):
+        d = normalize(rng.normal(size=(n_waves, 3)) * np.asarray(stretch, np.float64))
+        k = 2 * np.pi / (wavelength * rng.uniform(0.7, 1.4, n_waves))
+        self.k = d * k[:, None]
+        self.phase = rng.uniform(0, 2 * np.pi, n_waves)
+        self.amp = rng.uniform(0.5, 1.0, n_waves)
+        self.amp /= self.amp.sum()
+
+    def __call__(self, P: np.ndarray) -> np.ndarray:
+        return np.sin(np.asarray(P) @ self.k.T + self.phase) @ self.amp
+
+
+class NeckFrame:
+    """Where the neck meets the shoulders, for any identity (pure numpy).
+
+    ``ring``: shoulder vertices adjacent to neck vertices (the neck base); ``center``: its
+    centroid; angles ``theta = atan2(x - cx, -(y - cy))`` (0 in front, +-pi behind, +pi/2
+    at the subject's left). ``z_ring(theta)``: height of the neck base around the neck;
+    ``z_cap(theta)``: highest a collar may rise (1.2 cm under the jaw line, ibug68 0-16,
+    in front of the ears; unlimited behind)."""
+
+    def __init__(self, V: np.ndarray, F: np.ndarray, regions: dict, ibug68: np.ndarray):
+        n = len(V)
+        neck = region_mask(regions, ["neck"], n)
+        sh = region_mask(regions, ["shoulders"], n)
+        E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+        E = np.concatenate([E, E[:, ::-1]])
+        ring = np.unique(E[neck[E[:, 0]] & sh[E[:, 1]], 1])
+        self.ring = ring
+        self.center = V[ring].mean(0)
+        th = self.theta(V[ring])
+        o = np.argsort(th)
+        self._th = np.concatenate([th[o] - 2 * np.pi, th[o], th[o] + 2 * np.pi])
+        self._z = np.tile(V[ring][o, 2], 3)
+        jaw = np.asarray(ibug68[:17], np.float64)
+        jt = self.theta(jaw)
+        o = np.argsort(jt)
+        self._jt, self._jz = jt[o], jaw[o, 2] - 0.012
+        self.chin = np.asarray(ibug68[8], np.float64)
+        self.radius = float(np.median(np.linalg.norm((V[ring] - self.center)[:, :2], axis=1)))
+
+    def theta(self, P: np.ndarray) -> np.ndarray:
+        d = np.asarray(P, np.float64) - self.center
+        return np.arctan2(d[..., 0], -d[..., 1])
+
+    def rxy(self, P: np.ndarray) -> np.ndarray:
+        d = np.asarray(P, np.float64) - self.center
+        return np.hypot(d[..., 0], d[..., 1])
+
+    def z_ring(self, th) -> np.ndarray:
+        # smooth the base height a little (the ring is a vertex zig-zag)
+        th = np.asarray(th, np.float64)
+        acc = sum(np.interp(th + d, self._th, self._z) for d in (-0.15, 0.0, 0.15))
+        return acc / 3.0
+
+    def z_cap(self, th) -> np.ndarray:
+        th = np.asarray(th, np.float64)
+        inside = (th >= self._jt[0]) & (th <= self._jt[-1])
+        return np.where(inside, np.interp(th, self._jt, self._jz), np.inf)
+
+    def outward(self, P: np.ndarray) -> np.ndarray:
+        d = np.asarray(P, np.float64) - self.center
+        d[..., 2] = 0.0
+        return normalize(d)
+
+
+class Body:
+    """Body arrays for one build: skin query, source triangles, neck frame, normals."""
+
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, regions: dict, ibug68: np.ndarray):
+        self.V = np.asarray(vertices, np.float64)
+        self.F = np.asarray(triangles, np.int64)
+        self.regions = regions
+        n = len(self.V)
+        skin = region_mask(regions, ["skin"], n)
+        self.skin_tris = np.nonzero(skin[self.F].all(1))[0]
+        self.query = SurfaceQuery(self.V, self.F, self.skin_tris)
+        self.N = vertex_normals(self.V, self.F[self.skin_tris], fallback=(0.0, 0.0, 1.0))
+        ns = region_mask(regions, ["neck", "shoulders"], n) & skin
+        self.torso_tris = np.nonzero(ns[self.F].all(1))[0]
+        hd = region_mask(regions, ["neck", "scalp", "ears", "face"], n) & skin
+        self.head_tris = np.nonzero(hd[self.F].all(1))[0]
+        self.frame = NeckFrame(self.V, self.F, regions, ibug68)
+        self.lm = np.asarray(ibug68, np.float64)
+
+    @classmethod
+    def of(cls, head) -> "Body":
+        """The body of a head context (anything with ``vertices``, ``data.triangles``,
+        ``data.regions`` and ``landmarks["ibug68"]``: the rigs' HeadContext)."""
+        return cls(head.vertices, head.data.triangles, head.data.regions, head.landmarks["ibug68"])
+
+    def shell(self, tris: np.ndarray, field: np.ndarray, offset_fn, subdiv: int = 1):
+        """Clip ``tris`` at ``field >= 0``, subdivide, offset by ``offset_fn(base points, normals)``.
+        Returns (P, faces, cut mask)."""
+        W, faces, cut = clip_by_field(self.F[tris], field, len(self.V))
+        if len(faces) == 0:
+            return np.zeros((0, 3)), faces, cut
+        for _ in range(subdiv):
+            W, faces, cut = subdivide(W, faces, cut)
+        base = np.asarray(W @ self.V)
+        nrm = normalize(np.asarray(W @ self.N))
+        P = base + nrm * np.asarray(offset_fn(base, nrm))[:, None]
+        return P, faces, cut
+
+    def neck_loop(self, z_fn, n: int = 48, angle0: float = 0.0) -> np.ndarray:
+        """Loop on the neck/shoulder surface where ``z == z_fn(theta)``, resampled at ``n``
+        equal angles around the neck (index 0 at theta = angle0 - pi)."""
+        f = z_fn(self.frame.theta(self.V)) - self.V[:, 2]
+        pts = level_points(self.V, self.F[self.torso_tris], f)
+        return resample_loop(pts, self.frame.center, n, angle0)
+
+
+class Parts:
+    """Accumulates mesh parts: (positions, faces, material slot, trimmable)."""
+
+    def __init__(self):
+        self.P, self.F, self.M, self.T = [], [], [], []
+
+    def add(self, P, F, slot: int = 0, trim: bool = False):
+        if len(F) == 0:
+            return
+        self.P.append(np.asarray(P, np.float64))
+        self.F.append(np.asarray(F, np.int64))
+        self.M.append(np.full(len(F), slot, np.int32))
+        self.T.append(np.full(len(P), trim))
+
+    def merged(self):
+        off = np.cumsum([0] + [len(p) for p in self.P])
+        P = np.concatenate(self.P)
+        F = np.concatenate([f + o for f, o in zip(self.F, off[:-1])])
+        return P, F, np.concatenate(self.M), np.concatenate(self.T)
+
+
+@dataclass(frozen=True)
+class Cloth:
+    """One material of a shell, for the Blender side (``cloth_material``): slot = list position."""
+
+    name: str
+    colour: object  # a colour name or an (h, s, v) triple
+    fabric: str
+    knit_scale: float
+    seed: float
+
+
+@dataclass
+class Shell:
+    """A shell before the fit: its parts, the body triangles it is bound to, its materials."""
+
+    cls: str  # asset class (garment, headwear)
+    name: str  # object name
+    parts: Parts
+    anchor_tris: np.ndarray
+    cloths: list[Cloth]
+    info: dict = field(default_factory=dict)
+
+
+@dataclass
+class FittedShell:
+    """A shell trimmed, pushed out and bound: the mesh and what ``follow`` needs."""
+
+    cls: str
+    name: str
+    P: np.ndarray  # (V, 3) world positions
+    F: np.ndarray  # (T, 3) triangles
+    M: np.ndarray  # (T,) material slot per triangle
+    cloths: list[Cloth]
+    binding: Binding
+    body_tris: np.ndarray
+    clearance: float
+    info: dict
+
+    def follow(self, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+        """Positions on new body vertices: the binding re-applied, then pushed out again."""
+        P = self.binding.apply(vertices)
+        q = SurfaceQuery(vertices, triangles, self.body_tris)
+        return push_out(P, q, self.clearance, iterations=6)
+
+
+def fit_shell(body: Body, shell: Shell, clearance: float) -> FittedShell:
+    """Trim deep vertices of trimmable parts, push out, bind."""
+    P, F, M, T = shell.parts.merged()
+    sd = body.query.signed_distance(P)
+    deep = T & (sd < -TRIM_DEPTH)
+    keep = ~deep[F].any(1)
+    P, F, used = remove_faces(P, F, keep)
+    M = M[keep]
+    P = push_out(P, body.query, clearance, iterations=6)
+    binding = Binding(body.V, body.F, shell.anchor_tris, P)
+    info = dict(shell.info, vertices=int(len(P)), faces=int(len(F)), trimmed_vertices=int(deep.sum()))
+    return FittedShell(shell.cls, shell.name, P, F, M, shell.cloths, binding, body.skin_tris, clearance, info)

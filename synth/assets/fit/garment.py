@@ -1,0 +1,245 @@
+"""Procedural upper-body garments (``procedural:garment_shell``), fitted non-rigidly to the bust.
+
+Pure numpy; the Blender rig (``blender_scripts/assets/garment.py``) only makes the mesh
+object and the cloth materials. Every garment is one mesh built from the body itself, so it
+fits any identity (tested at +-3 SD):
+
+1. **Shell**: the skin triangles of the ``neck`` and ``shoulders`` regions are clipped exactly
+   at a neckline field ``z_nl(theta) - z`` (``meshops.clip_by_field``; theta is the angle
+   around the neck base ring, ``body.NeckFrame``), subdivided once, and offset along the
+   interpolated body normals by the fabric thickness plus small outward-only wrinkles. The
+   neckline per garment: crew, V (depth from ``neckline_depth_m``), turtleneck collar
+   (``collar_height_m``, capped 1.2 cm under the jaw line), deep V with raised lapels
+   (``lapel_width_m``) for jackets and coats, scoop + straps (``strap_width_m``) for tank tops.
+2. **Add-ons** (:mod:`synth.assets.fit.garment_parts`): ribbed / rolled rims as tubes along
+   the neckline loop, shirt collars, hoods (up: a smoothed offset of the head behind the face
+   opening; down: a flattened tube on the upper back), drawstrings, ties, scarves (loop /
+   drape / knot, ``scarf_thickness_m``) as swept tubes.
+3. **Fit** (:func:`synth.assets.fit.body.fit_shell`): vertices deep inside another body part
+   are trimmed with their faces; every other vertex closer than ``CLEARANCE`` to the skin (or
+   inside it) is moved to the closest skin point + ``CLEARANCE`` along the normal.
+4. **Update** (:meth:`synth.assets.fit.body.FittedShell.follow`): every vertex is bound to its
+   closest neck/shoulder (or, for hoods, head) triangle in a local frame; the binding is
+   re-applied to the new head vertices and the push-out runs again (about 0.1 s), so the
+   garment follows expressions and a jaw opening never pushes the chin through the collar.
+
+Materials (:class:`~synth.assets.fit.body.Cloth`, built by the rig): per ``fabric``
+(:data:`FABRICS`), colour from ``colour_hsv`` (a name in :data:`COLOURS` or an ``[h, s, v]``
+triple; ``striped_blue``, ``check`` and ``tartan`` are patterns, :func:`colour_rgb`).
+"""
+
+from __future__ import annotations
+
+import colorsys
+
+import numpy as np
+
+from synth.assets.fit.attach import push_out
+from synth.assets.fit.body import Body, Cloth, Parts, Shell
+from synth.assets.fit.garment_parts import (crew_neckline, front_weight, hanging_strip, hood_up, neck_tube,
+                                            necktie, shirt_collar, torso_shell, vee_neckline,
+                                            wrinkle_offset)
+from synth.assets.fit.meshops import icosphere, smoothstep
+
+#: minimum distance (m) kept between every garment vertex and the skin
+CLEARANCE = 0.0015
+
+#: colour names -> sRGB HSV (h, s, v in [0, 1])
+COLOURS = {
+    "white": (0.0, 0.0, 0.92), "black": (0.0, 0.0, 0.06), "grey": (0.0, 0.0, 0.45), "charcoal": (0.6, 0.05, 0.22),
+    "navy": (0.62, 0.7, 0.28), "red": (0.99, 0.8, 0.7), "green": (0.36, 0.6, 0.45), "blue": (0.6, 0.7, 0.7),
+    "yellow": (0.14, 0.8, 0.9), "brown": (0.07, 0.65, 0.35), "pink": (0.95, 0.35, 0.95), "cream": (0.12, 0.15, 0.92),
+    "burgundy": (0.97, 0.75, 0.38), "camel": (0.09, 0.5, 0.72), "light_blue": (0.58, 0.3, 0.92),
+    "striped_blue": (0.6, 0.6, 0.75), "check": (0.0, 0.7, 0.6), "beige": (0.1, 0.25, 0.82), "olive": (0.2, 0.6, 0.4),
+    "teal": (0.5, 0.7, 0.5), "tartan": (0.0, 0.75, 0.55), "mustard": (0.13, 0.8, 0.8), "khaki": (0.12, 0.35, 0.7),
+}
+
+#: fabric -> (thickness m, roughness, sheen weight, surface kind)
+FABRICS = {
+    "cotton_jersey": (0.0025, 0.85, 0.3, "jersey"), "wool_knit": (0.005, 0.95, 0.6, "knit"),
+    "cotton_knit": (0.004, 0.9, 0.4, "knit"), "cotton_fleece": (0.006, 0.95, 0.7, "fleece"),
+    "cotton_poplin": (0.002, 0.6, 0.15, "woven"), "oxford": (0.0025, 0.7, 0.2, "twill"),
+    "linen": (0.0025, 0.8, 0.2, "woven"), "wool_suiting": (0.004, 0.7, 0.3, "twill"),
+    "tweed": (0.005, 0.95, 0.4, "tweed"), "cotton_twill": (0.0035, 0.8, 0.2, "twill"),
+    "wool_felt": (0.006, 0.9, 0.5, "felt"), "gabardine": (0.004, 0.6, 0.2, "twill"),
+    "leather": (0.003, 0.35, 0.0, "leather"), "denim": (0.004, 0.85, 0.1, "twill"),
+    "pique": (0.003, 0.85, 0.25, "knit"), "scrub": (0.0025, 0.75, 0.15, "woven"),
+}
+
+_DEFAULT_FABRIC = {"tshirt_crew": "cotton_jersey", "tshirt_vneck": "cotton_jersey", "sweater": "wool_knit",
+                   "turtleneck": "wool_knit", "hoodie": "cotton_fleece", "shirt_collar": "cotton_poplin",
+                   "jacket_blazer": "wool_suiting", "coat": "wool_felt", "uniform": "scrub",
+                   "tank_top": "cotton_jersey", "scarf_over_sweater": "wool_knit"}
+
+
+def colour_rgb(value) -> tuple[float, float, float]:
+    """Linear RGB from a colour name or an (h, s, v) triple (sRGB-encoded HSV)."""
+    if isinstance(value, str):
+        hsv = COLOURS.get(value, COLOURS["grey"])
+    else:
+        hsv = tuple(float(x) for x in value)[:3]
+    r, g, b = colorsys.hsv_to_rgb(*hsv)
+
+    def lin(c):
+        return c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4
+
+    return (lin(r), lin(g), lin(b))
+
+
+def _params(entry: dict) -> dict:
+    return dict(entry.get("params") or entry.get("parameters") or {})
+
+
+def _num(p: dict, key: str, default: float) -> float:
+    v = p.get(key, default)
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else float(default)
+
+
+def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
+    """The garment of a plan entry on ``body`` (``rng``: the rig's generator, ctx.rng("garment"))."""
+    aid = str(entry.get("id", "tshirt_crew"))
+    p = _params(entry)
+    fr = body.frame
+    fabric = str(p.get("fabric", _DEFAULT_FABRIC.get(aid, "cotton_jersey")))
+    style = str(p.get("style", ""))
+    if aid == "uniform":
+        fabric = {"scrubs": "scrub", "work_shirt": "cotton_twill", "polo": "pique"}.get(style, "scrub")
+    if aid == "tank_top" and "fabric" not in p:
+        fabric = "cotton_jersey"
+    colour = p.get("colour_hsv", "grey")
+    knit = _num(p, "knit_scale_m", 0.005)
+    thick = FABRICS.get(fabric, FABRICS["cotton_jersey"])[0]
+    seed = float(rng.uniform(0, 100))
+    cloths = [Cloth(f"garment_{aid}", colour, fabric, knit, seed)]
+    parts = Parts()
+    info = {"id": aid, "fabric": fabric, "colour": colour if isinstance(colour, str) else list(colour)}
+
+    def wr(base, amp=0.0015):
+        return wrinkle_offset(rng, base, amp)
+
+    if aid in ("tshirt_crew", "sweater", "hoodie", "scarf_over_sweater") or (aid == "uniform" and style not in (
+            "scrubs", "work_shirt", "polo")):
+        depth = _num(p, "neckline_depth_m", 0.01)
+        base = thick + 0.0015
+        rim = 0.0035 if aid != "tshirt_crew" else 0.002
+        torso_shell(body, parts, crew_neckline(body, 0.008, depth), wr(base), rim=rim, rim_flatten=0.8)
+        if aid == "hoodie":
+            if bool(p.get("hood_up", False)):
+                hood_up(body, parts, 0, base)
+            else:
+                neck_tube(body, parts, 0, lambda t: fr.z_ring(t) + 0.02, 0.012 + base, 0.022,
+                           angles=(np.pi - 2.0, np.pi + 2.0), taper=True)
+            if bool(p.get("drawstrings", False)):
+                for sx in (-1, 1):
+                    start = body.neck_loop(crew_neckline(body, 0.008, depth), 48, angle0=np.pi)
+                    k = int(np.argmin(np.abs(fr.theta(start) - sx * 0.35)))
+                    hanging_strip(body, parts, 0, start[k], 0.11, 0.0025, 0.0025, base + 0.002, n=8)
+        if aid == "scarf_over_sweater":
+            st = _num(p, "scarf_thickness_m", 0.02)
+            wrap = str(p.get("wrap", "loop"))
+            cloths.append(Cloth("garment_scarf", colour, "wool_knit", 0.006, seed + 1))
+
+            def zc(t):
+                return np.minimum(fr.z_ring(t) + 0.035, fr.z_cap(t) - 0.03)
+            if wrap in ("loop", "knot"):
+                neck_tube(body, parts, 1, zc, st / 2 + base, 0.03)
+            else:
+                neck_tube(body, parts, 1, zc, st / 2 + base, 0.03, angles=(np.pi - 2.2, np.pi + 2.2))
+            loop = body.neck_loop(zc, 48, angle0=np.pi)
+            if wrap == "knot":
+                Vs, Fs = icosphere(2)
+                k0 = loop[0]
+                ctr = k0 + fr.outward(k0[None])[0] * (st + 0.02) + np.array([0, 0, -0.035])
+                parts.add(push_out(ctr + Vs * np.array([0.035, 0.025, 0.03]), body.query, base + 0.004), Fs, 1)
+                hanging_strip(body, parts, 1, ctr + np.array([0.01, 0, -0.02]), 0.14, 0.035, st / 2, base + 0.004)
+            elif wrap == "drape":
+                for sx in (-1, 1):
+                    k = int(np.argmin(np.abs(fr.theta(loop) - sx * 2.2 / 1.0 * 0.5)))
+                    hanging_strip(body, parts, 1, loop[k] + np.array([0, -0.01, -0.02]), 0.17, 0.03, st / 2, base + 0.004)
+            else:
+                hanging_strip(body, parts, 1, loop[0] + np.array([0.015, -0.01, -0.03]), 0.12, 0.03, st / 2, base + 0.004)
+        info["neckline_depth_m"] = depth
+    elif aid in ("tshirt_vneck",) or (aid == "uniform" and style == "scrubs"):
+        depth = _num(p, "neckline_depth_m", 0.07)
+        base = thick + 0.0015
+        torso_shell(body, parts, vee_neckline(body, 0.008, depth, 0.75), wr(base), rim=0.002, rim_flatten=0.8)
+        info["neckline_depth_m"] = depth
+    elif aid == "turtleneck":
+        h = _num(p, "collar_height_m", 0.06)
+        base = thick + 0.0015
+        wrf = wr(base, 0.002)
+
+        def off(P, N):
+            up = smoothstep(0.0, 0.02, P[:, 2] - (fr.z_ring(fr.theta(P)) + 0.005))
+            return wrf(P, N) + 0.003 * up
+        z = lambda t: np.minimum(fr.z_ring(t) + h, fr.z_cap(t))  # noqa: E731
+        torso_shell(body, parts, z, off, rim=0.006, rim_flatten=0.9)
+        # folded roll: a second tube a little under the top
+        neck_tube(body, parts, 0, lambda t: z(t) - 0.018, base + 0.009, 0.012)
+        info["collar_height_m"] = h
+    elif aid in ("shirt_collar",) or (aid == "uniform" and style in ("work_shirt", "polo")):
+        tie = bool(p.get("tie", False)) and aid == "shirt_collar"
+        open_top = bool(p.get("top_button_open", style == "polo")) and not tie
+        base = thick + 0.001
+        depth = 0.045 if open_top else 0.0
+        torso_shell(body, parts, vee_neckline(body, 0.006, depth, 0.35), wr(base, 0.001), rim=0.0)
+        shirt_collar(body, parts, 0, base, open_top, leaf=0.035 if style == "polo" else 0.045)
+        if tie:
+            cloths.append(Cloth("garment_tie", (rng.uniform(), 0.7, 0.5), "linen", 0.005, seed + 2))
+            necktie(body, parts, 1, base + 0.004)
+        info.update(tie=tie, top_button_open=open_top)
+    elif aid in ("jacket_blazer", "coat"):
+        under = str(p.get("undershirt", "shirt")) if aid == "jacket_blazer" else "shirt"
+        if under != "none":
+            ufab = "cotton_poplin" if under == "shirt" else "cotton_jersey"
+            cloths.append(Cloth("garment_under", "white" if under == "shirt" else "grey", ufab, 0.005, seed + 3))
+            ub = FABRICS[ufab][0] + 0.001
+            if under == "shirt":
+                torso_shell(body, parts, vee_neckline(body, 0.006, 0.0, 0.35), wr(ub, 0.0008), slot=1)
+                shirt_collar(body, parts, 1, ub, False, band_h=0.028, leaf=0.035)
+            else:
+                torso_shell(body, parts, crew_neckline(body, 0.006, 0.01), wr(ub, 0.0008), slot=1, rim=0.002)
+        coat = aid == "coat"
+        base = (0.014 if coat else 0.009) + thick
+        lw = _num(p, "lapel_width_m", 0.08 if coat else 0.07)
+        depth, half = (0.10, 0.9) if coat else (0.14, 0.85)
+        zfn = vee_neckline(body, 0.02, depth, half)
+        wrf = wr(base, 0.002)
+        # lapels: a raised band (+5 mm) along the V edge on the front
+        def off(P, N):
+            th = fr.theta(P)
+            r = fr.rxy(P)
+            zr = fr.z_ring(th) + 0.02 + 0.008 * (1 - np.cos(th))
+            frac = np.clip((zr - P[:, 2]) / depth, 0.0, 1.0)
+            edge = half * (1.0 - frac)  # theta of the V edge at this height
+            s = (np.abs(th) - edge) * r
+            band = smoothstep(-0.002, 0.004, s) * (1.0 - smoothstep(lw - 0.008, lw, s))
+            band = band * (np.cos(th) > 0.2) * (frac < 0.999)
+            return wrf(P, N) + 0.005 * band
+        torso_shell(body, parts, zfn, off, rim=0.003, rim_flatten=0.7)
+        if coat and bool(p.get("collar_up", False)):
+            neck_tube(body, parts, 0, lambda t: np.minimum(fr.z_ring(t) + 0.04, fr.z_cap(t) - 0.02), base, 0.03,
+                       angles=(0.6, 2 * np.pi - 0.6))
+        else:
+            neck_tube(body, parts, 0, lambda t: fr.z_ring(t) + 0.03, base * 0.6, 0.015,
+                       angles=(np.pi - 1.9, np.pi + 1.9))
+        info.update(undershirt=under, lapel_width_m=lw, collar_up=bool(p.get("collar_up", False)))
+    elif aid == "tank_top":
+        w = _num(p, "strap_width_m", 0.03)
+        base = thick + 0.0015
+        xs = 0.5 * fr.radius + 0.045
+
+        def extra(fnl):
+            V = body.V
+            th = fr.theta(V)
+            zr = fr.z_ring(th)
+            torso = np.minimum(zr - 0.05 - 0.04 * front_weight(th) - V[:, 2], 0.13 - np.abs(V[:, 0]))
+            strap = np.minimum(w / 2 - np.abs(np.abs(V[:, 0]) - xs), zr + 0.01 - V[:, 2])
+            return np.maximum(torso, strap)
+        torso_shell(body, parts, lambda t: fr.z_ring(t), wr(base, 0.001), extra_field=extra, rim=0.0)
+        info["strap_width_m"] = w
+    else:
+        raise ValueError(f"unknown garment id '{aid}'")
+
+    anchors = np.union1d(body.torso_tris, body.head_tris) if aid == "hoodie" else body.torso_tris
+    return Shell("garment", f"garment_{aid}", parts, anchors, cloths, info)

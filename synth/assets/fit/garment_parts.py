@@ -1,0 +1,186 @@
+"""The pieces garments are made of, fitted to a :class:`~synth.assets.fit.body.Body`; pure numpy.
+
+Necklines are height functions ``z(theta)`` around the neck base (``theta`` from
+:class:`~synth.assets.fit.body.NeckFrame`: 0 in front); the torso shell is the skin of the
+``neck`` and ``shoulders`` regions clipped under a neckline and offset along the normals by
+the fabric thickness plus outward-only wrinkles. Add-ons: rim tubes on the cut, shirt
+collars (a band clipped from the neck surface plus swept leaves folded outward), ties,
+tubes around the neck (rolled collars, scarves, hoods down), strips hanging down the chest
+(scarf ends, drawstrings) and a raised hood. Each adds its mesh to a
+:class:`~synth.assets.fit.body.Parts` with a material slot.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from synth.assets.fit.attach import push_out
+from synth.assets.fit.body import Body, Parts, WaveNoise
+from synth.assets.fit.meshops import boundary_loops, grid_faces, icosphere, laplacian_smooth, sweep_tube
+from synth.geometry.normals import normalize
+
+
+def front_weight(th):
+    return np.maximum(np.cos(th), 0.0)
+
+
+def crew_neckline(body: Body, rise: float, drop: float):
+    fr = body.frame
+
+    def z(th):
+        return np.minimum(fr.z_ring(th) + rise + 0.008 * (1 - np.cos(th)) - drop * front_weight(th) ** 3, fr.z_cap(th))
+    return z
+
+
+def vee_neckline(body: Body, rise: float, depth: float, half_angle: float):
+    fr = body.frame
+
+    def z(th):
+        v = depth * np.maximum(0.0, 1.0 - np.abs(th) / half_angle)
+        return np.minimum(fr.z_ring(th) + rise + 0.008 * (1 - np.cos(th)) - v, fr.z_cap(th))
+    return z
+
+
+def wrinkle_offset(rng, base_off: float, amp: float, wavelength: float = 0.05):
+    noise = WaveNoise(rng, wavelength, 14, stretch=(1.0, 1.0, 0.35))
+
+    def off(P, N):
+        return base_off + amp * (0.5 + 0.5 * noise(P))
+    return off
+
+
+def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None, rim: float = 0.0,
+                rim_slot=None, rim_flatten: float = 1.0):
+    """Torso shell under the neckline ``z_fn``, with an optional rim tube on the cut."""
+    th = body.frame.theta(body.V)
+    f = z_fn(th) - body.V[:, 2]
+    if extra_field is not None:
+        f = extra_field(f)
+    P, F, cut = body.shell(body.torso_tris, f, off_fn)
+    parts.add(P, F, slot, trim=True)
+    if rim > 0 and len(F):
+        for loop in boundary_loops(F):
+            if cut[loop].mean() < 0.8 or len(loop) < 8:
+                continue
+            path = P[loop]
+            # push the rim centre out so the tube sits on the shell
+            c, _, _, _, n = body.query.closest(path)
+            path = path + normalize(path - c) * rim * 0.6
+            Vt, Ft = sweep_tube(path[::2] if len(path) > 60 else path, rim, 8, closed=True, flatten=rim_flatten)
+            parts.add(Vt, Ft, slot if rim_slot is None else rim_slot)
+    return P, F, cut
+
+
+def shirt_collar(body: Body, parts: Parts, slot: int, base_off: float, open_front: bool, band_h: float = 0.03,
+                  leaf: float = 0.045, n: int = 56):
+    """Standing band on the neck (clipped from the neck surface) + leaves folded down/out."""
+    fr = body.frame
+    gap = 0.22 if open_front else 0.07
+
+    def z_lo(t):
+        return np.minimum(fr.z_ring(t) + 0.004 + 0.008 * (1 - np.cos(t)), fr.z_cap(t) - band_h)
+
+    def z_hi(t):
+        return np.minimum(z_lo(t) + band_h, fr.z_cap(t))
+
+    th = fr.theta(body.V)
+    z = body.V[:, 2]
+    f = np.minimum(np.minimum(z - z_lo(th), z_hi(th) - z), np.abs(th) - gap)
+    P, F, _ = body.shell(body.torso_tris, f, lambda p, nrm: np.full(len(p), base_off + 0.002))
+    parts.add(P, F, slot, trim=True)
+    # leaves: from the band top outward and down
+    top = body.neck_loop(z_hi, n, angle0=np.pi)  # index 0 at theta = 0 (front), seam in front
+    tt = fr.theta(top)
+    keep = np.abs(tt) >= gap
+    # order from +gap ... around the back ... to -gap
+    order = np.argsort(np.mod(tt[keep], 2 * np.pi))
+    top = top[keep][order]
+    c, _, _, _, _ = body.query.closest(top)
+    top = c + fr.outward(top) * (base_off + 0.004)
+    out = fr.outward(top)
+    front = front_weight(fr.theta(top))
+    rows = []
+    for s in np.linspace(0.0, 1.0, 5):
+        down = leaf * (1.0 + 0.5 * front ** 4) * np.sin(s * np.pi / 2)
+        o = (0.004 + 0.018 * s) * (1.0 + 0.5 * front)
+        rows.append(top + out * o[:, None] - np.outer(down, [0.0, 0.0, 1.0]))
+    G = np.stack(rows, 1)  # (n_around, 5, 3)
+    Pl = G.reshape(-1, 3)
+    Pl = push_out(Pl, body.query, base_off + 0.003)
+    parts.add(Pl, grid_faces(G.shape[0], G.shape[1]), slot)
+    return top
+
+
+def necktie(body: Body, parts: Parts, slot: int, base_off: float):
+    fr = body.frame
+    knot_z = min(float(fr.z_ring(0.0)) + 0.012, float(fr.z_cap(0.0)) - 0.02)
+    top = body.neck_loop(lambda t: np.full_like(t, knot_z), 48, angle0=np.pi)[0]
+    zs = np.linspace(knot_z - 0.015, body.V[:, 2].min() + 0.005, 12)
+    path = np.stack([np.zeros_like(zs) + top[0], np.full_like(zs, top[1] - 0.03), zs], 1)
+    path = push_out(path, body.query, base_off + 0.006)
+    path = laplacian_smooth(path, np.stack([np.arange(11), np.arange(1, 12), np.arange(1, 12)], 1), 3, 0.5,
+                                pinned=np.isin(np.arange(12), [0, 11]))
+    w = np.linspace(0.018, 0.04, len(zs))
+    Vt, Ft = sweep_tube(path, w, 8, closed=False, flatten=0.12, up_hint=np.array([0.0, 1.0, 0.0]))
+    parts.add(push_out(Vt, body.query, base_off + 0.003), Ft, slot)
+    Vs, Fs = icosphere(2)
+    knot = top + np.array([0.0, -0.008, -0.005]) + fr.outward(top[None])[0] * base_off
+    Vk = knot + Vs * np.array([0.016, 0.009, 0.014])
+    parts.add(push_out(Vk, body.query, base_off + 0.003), Fs, slot)
+
+
+def neck_tube(body: Body, parts: Parts, slot: int, z_fn, radial: float, radius_v: float, angles=None,
+               n: int = 48, taper: bool = False):
+    """Tube around (part of) the neck at height z_fn(theta): section ``radius_v`` high and
+    ``radial`` thick, sitting ``radial`` outside the skin."""
+    fr = body.frame
+    loop = body.neck_loop(z_fn, n, angle0=np.pi)
+    th = fr.theta(loop)
+    if angles is not None:
+        lo, hi = angles
+        m = (np.mod(th, 2 * np.pi) >= lo) & (np.mod(th, 2 * np.pi) <= hi)
+        loop = loop[m][np.argsort(np.mod(th[m], 2 * np.pi))]
+    c, _, _, _, _ = body.query.closest(loop)
+    path = c + fr.outward(loop) * (radial + 0.003)
+    closed = angles is None
+    r = np.full(len(path), radius_v)
+    if taper and not closed:
+        s = np.linspace(0, 1, len(path))
+        r = radius_v * np.clip(np.sin(np.pi * s) * 1.6, 0.15, 1.0)
+    Vt, Ft = sweep_tube(path, r, 12, closed=closed, flatten=radial / radius_v)
+    parts.add(Vt, Ft, slot)
+    return path
+
+
+def hanging_strip(body: Body, parts: Parts, slot: int, start: np.ndarray, length: float, width: float, thick: float,
+             clearance: float, n: int = 10):
+    """A flat strip/tail hanging down the chest from ``start`` (scarf ends, drawstrings)."""
+    zs = start[2] - np.linspace(0.0, length, n)
+    zs = np.maximum(zs, body.V[:, 2].min() + 0.01)
+    path = np.stack([np.full(n, start[0]), np.full(n, start[1]), zs], 1)
+    path = push_out(path, body.query, clearance + thick, iterations=4)
+    Vt, Ft = sweep_tube(path, width, 8, closed=False, flatten=thick / width, up_hint=np.array([0.0, 1.0, 0.0]))
+    parts.add(Vt, Ft, slot)
+
+
+def hood_up(body: Body, parts: Parts, slot: int, base_off: float):
+    lm = body.lm
+    brow = 0.5 * (lm[19] + lm[24])
+    ear_y = 0.5 * (lm[0, 1] + lm[16, 1]) + 0.012
+    z0, z1 = 0.5 * (lm[0, 2] + lm[16, 2]), brow[2] + 0.045
+    y1 = brow[1] + 0.03
+    V = body.V
+    t = np.clip((V[:, 2] - z0) / (z1 - z0), 0.0, 1.0)
+    y_open = ear_y + (y1 - ear_y) * t
+    fr = body.frame
+    f = np.minimum(V[:, 1] - y_open, V[:, 2] - (fr.z_ring(fr.theta(V)) + 0.02))
+    P, F, cut = body.shell(body.head_tris, f, lambda p, n: np.full(len(p), 0.022), subdiv=1)
+    P = laplacian_smooth(P, F, 12, 0.5)
+    P = push_out(P, body.query, 0.01)
+    P = laplacian_smooth(P, F, 4, 0.5)
+    P = push_out(P, body.query, 0.008)
+    parts.add(P, F, slot)
+    for loop in boundary_loops(F):
+        if cut[loop].mean() > 0.5 and len(loop) > 8:
+            Vt, Ft = sweep_tube(P[loop][::2], 0.006, 8, closed=True)
+            parts.add(push_out(Vt, body.query, 0.004), Ft, slot)

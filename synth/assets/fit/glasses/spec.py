@@ -1,0 +1,98 @@
+"""Glasses styles, frame colours and the frame description (:class:`FrameSpec`).
+
+:func:`frame_spec` completes the plan's parameters of one glasses asset with rig-drawn ones
+(bridge width, missing sizes, tilt, wrap, colour) from the rig's generator; the draws are
+always made, in a fixed order, so they stay aligned whatever the plan gives.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+
+STYLES = ("rectangular", "round", "oval", "aviator", "cat_eye", "browline", "rimless", "half_rim")
+
+COLOURS = {  # linear sRGB base colours
+    "black": (0.012, 0.012, 0.013), "tortoise": (0.16, 0.06, 0.018), "brown": (0.09, 0.04, 0.018),
+    "clear": (0.8, 0.8, 0.8), "silver": (0.85, 0.86, 0.87), "gold": (0.9, 0.62, 0.25),
+    "navy": (0.01, 0.02, 0.08), "red": (0.45, 0.02, 0.02), "white": (0.8, 0.8, 0.78),
+    "titanium": (0.55, 0.53, 0.5),
+}
+METALLIC_COLOURS = {"silver", "gold", "titanium"}
+
+
+@dataclasses.dataclass
+class FrameSpec:
+    style: str
+    lens_w: float  # box width of one lens (m)
+    lens_h: float  # box height
+    rim_w: float  # rim face width (in the lens plane)
+    rim_d: float  # rim depth (along the optical axis)
+    bridge: float  # distance between lenses (DBL)
+    rim_mode: str  # full | half | none | browline
+    material: str  # acetate | metal
+    colour: str
+    temple_colour: str
+    tint: float
+    superellipse: float
+    wing_lift: float = 0.0
+    double_bridge: bool = False
+    pantoscopic_deg: float = 8.0
+    wrap_deg: float = 4.0
+    lens_thickness: float = 0.002
+    temple_r: tuple = (0.0012, 0.0022)  # half sizes (horizontal, vertical) of the temple section
+    tip_r: float = 0.0016
+
+    def record(self) -> dict:
+        d = dataclasses.asdict(self)
+        return {k: (round(v, 6) if isinstance(v, float) else (list(v) if isinstance(v, tuple) else v))
+                for k, v in d.items()}
+
+
+def frame_spec(style: str, params: dict, rng: np.random.Generator) -> FrameSpec:
+    """Complete the plan's parameters with rig-drawn ones (bridge, missing sizes, ...)."""
+    if style not in STYLES:
+        raise ValueError(f"unknown glasses style {style!r}; expected one of {STYLES}")
+    p = dict(params or {})
+    u = lambda lo, hi: float(rng.uniform(lo, hi))  # noqa: E731 - always drawn, so draws stay aligned
+    draws = {"w": u(0.046, 0.054), "h": u(0.03, 0.038), "rim": u(0.002, 0.005), "bridge": u(0.016, 0.021),
+             "pct": u(6.0, 10.0), "wrap": u(2.0, 6.0), "mat": u(0.0, 1.0), "col": int(rng.integers(1 << 30))}
+    w = float(p.get("lens_width_m", p.get("lens_diameter_m", draws["w"])))
+    h = float(p.get("lens_height_m", p.get("lens_diameter_m", 0.0))) or None
+    colour = str(p.get("frame_colour", ["black", "tortoise", "brown", "silver", "gold"][draws["col"] % 5]))
+    material = str(p.get("frame_material", "metal" if colour in METALLIC_COLOURS else "acetate"))
+    if style in ("aviator", "rimless"):
+        material = "metal"
+    rim_w = float(p.get("rim_thickness_m", draws["rim"]))
+    n_exp, rim_mode, wing, dbl = 2.0, "full", 0.0, False
+    if style == "rectangular":
+        n_exp, h = 4.5, h or 0.68 * w
+    elif style == "round":
+        n_exp, h = 2.0, h or w
+    elif style == "oval":
+        n_exp, h = 2.3, h or 0.68 * w
+    elif style == "aviator":
+        n_exp, h, dbl = 2.4, h or 0.86 * w, bool(p.get("double_bridge", True))
+        rim_w = min(rim_w, 0.0025)
+    elif style == "cat_eye":
+        n_exp, h, wing = 2.8, h or 0.66 * w, float(p.get("wing_lift", 0.5))
+    elif style == "browline":
+        n_exp, h, rim_mode = 3.2, h or 0.7 * w, "browline"
+    elif style == "rimless":
+        n_exp, h, rim_mode = 3.0, h or 0.62 * w, "none"
+    elif style == "half_rim":
+        n_exp, h, rim_mode = 3.5, h or 0.66 * w, "half"
+    metal = material == "metal"
+    if metal and style != "browline":
+        rim_w = float(np.clip(0.45 * rim_w, 0.0012, 0.0022))
+    rim_d = rim_w if metal else float(np.clip(1.3 * rim_w, 0.003, 0.006))
+    temple_colour = str(p.get("temple_colour", colour))
+    return FrameSpec(style=style, lens_w=w, lens_h=float(h), rim_w=rim_w, rim_d=rim_d, bridge=draws["bridge"],
+                     rim_mode=rim_mode, material=material, colour=colour, temple_colour=temple_colour,
+                     tint=float(p.get("lens_tint", 0.0)), superellipse=n_exp, wing_lift=wing, double_bridge=dbl,
+                     pantoscopic_deg=draws["pct"], wrap_deg=draws["wrap"],
+                     lens_thickness=0.0022 if style == "rimless" else 0.0018,
+                     temple_r=(0.0007, 0.0007) if metal else (0.0011, 0.0021),
+                     tip_r=0.0014 if metal else 0.0016)

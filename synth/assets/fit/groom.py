@@ -1,0 +1,152 @@
+"""What a strand rig builds, and how its strands stay attached; numpy, no bpy.
+
+A groom module (``synth.assets.fit.hair``, ``beard``, ``eyebrows``, ``eyelashes``) starts from
+:func:`setup` (the rig's generator, the style id, the head surface, reference points and the
+pigment, drawn first) and returns a :class:`Groom`: the strands, their roots, the push-out
+clearances, the Geometry Nodes :class:`Styling`, the pigment and the record. The Blender rig
+(``blender_scripts.assets.strands.StrandRig``) turns a Groom into a Curves object.
+
+Attachment. The head's UV map "UVMap" cannot drive Blender's Deform Curves on Surface: the
+eye meshes' UVs cover the whole unit square, overlapping the skin islands, so a UV -> surface
+lookup is ambiguous. Instead every strand stores the triangle and barycentric coordinates of
+its root and its points in the local frame of that triangle (:func:`attach`).
+:meth:`Attachment.positions` re-places every strand rigidly with the frame of its root
+triangle on the current head vertices (roots land exactly on the surface; no rebuild, no new
+random numbers) and pushes points that ended up inside the head back out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from synth.appearance import pigment as pig
+from synth.assets.fit.strands import Surface
+
+
+@dataclass
+class Styling:
+    """Geometry Nodes styling stack (Blender's bundled procedural hair node groups)."""
+
+    root_radius: float = 4e-5
+    tip_shape: float = 0.5  # Set Hair Curve Profile "Shape" (taper toward the tip)
+    frizz: float = 0.0  # Frizz Hair Curves "Distance" (m)
+    frizz_shape: float = 0.5
+    clump: float = 0.0  # Clump Hair Curves "Factor"
+    clump_distance: float = 0.01
+    clump_shape: float = 0.5
+    seed: int = 0
+
+
+def head_frame(ctx) -> dict:
+    """Head-centric reference points from the scalp and landmarks (current vertices)."""
+    V = np.asarray(ctx.vertices, np.float64)
+    sc = V[ctx.data.regions["scalp"]]
+    lo, hi = sc.min(0), sc.max(0)
+    lm = ctx.landmarks.get("ibug68")
+    top = hi[2]
+    c = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), top - 0.095])
+    f = {"centre": c, "top": top, "scalp_lo": lo, "scalp_hi": hi}
+    if lm is not None:
+        f["brow_z"] = float(lm[17:27, 2].max())
+        f["eye_z"] = float(lm[36:48, 2].mean())
+        f["chin"] = lm[8]
+        f["lm"] = lm
+    else:
+        f["brow_z"] = c[2] + 0.01
+        f["eye_z"] = c[2]
+    return f
+
+
+def colour_of(entry: dict, ctx, default: str = "dark_brown") -> str:
+    col = (entry.get("params") or {}).get("colour")
+    if isinstance(col, str) and col in pig.COLOURS:
+        return col
+    hair = (ctx.assets or {}).get("hair") or {}
+    col = (hair.get("params") or {}).get("colour")
+    if isinstance(col, str) and col in pig.COLOURS:
+        return col
+    return default
+
+
+@dataclass
+class StrandSetup:
+    """What every strand rig starts from (the rng has already drawn the pigment)."""
+
+    rng: np.random.Generator
+    sid: str
+    prm: dict
+    surface: Surface
+    hf: dict
+    colour: str
+    pg: object
+
+
+def setup(ctx, entry: dict, cls: str, default_id: str, default_colour: str = "dark_brown") -> StrandSetup:
+    rng = ctx.rng(cls)
+    colour = colour_of(entry, ctx, default_colour)
+    return StrandSetup(rng, str(entry.get("id", default_id)), dict(entry.get("params") or {}), Surface(ctx),
+                       head_frame(ctx), colour, pig.sample(colour, rng))
+
+
+@dataclass
+class Groom:
+    """The strands of one asset, ready for the rig."""
+
+    cls: str  # asset class
+    name: str  # object and material name
+    surface: Surface
+    pts: np.ndarray  # (N, P, 3) world points, roots first
+    tri: np.ndarray  # (N,) root triangles
+    bary: np.ndarray  # (N, 3) root barycentrics
+    clearance: np.ndarray | float  # push-out clearance per strand or point
+    styling: Styling
+    info: dict
+    pigment: pig.HairPigment
+    roughness: float
+    coat: float = 0.0
+    exact: bool = False  # exact (per-triangle) push-out on update (small strand sets)
+
+
+@dataclass
+class Attachment:
+    """Strands attached by (root triangle, barycentrics) and triangle-local shapes."""
+
+    tri: np.ndarray
+    bary: np.ndarray
+    local: np.ndarray  # (N, P, 3) points relative to the root, in the root triangle frame
+    clearance: np.ndarray  # (N, P) push-out clearance per point (root: -inf)
+    #: exact (per-triangle) collision push-out; the small strand sets (brows, lashes, beards)
+    #: use it, scalp hair uses the fast nearest-vertex test only (update speed)
+    exact: bool = False
+
+    def positions(self, ctx) -> np.ndarray:
+        """The strands on the current head of ``ctx`` (``vertices``, ``data``)."""
+        surface = Surface(ctx)
+        root = surface.points(self.tri, self.bary)
+        F = surface.frames(self.tri)
+        pts = root[:, None] + np.einsum("ndk,npk->npd", F, self.local)
+        fin = np.isfinite(self.clearance)
+        if fin.any():
+            c = np.where(fin, self.clearance, -1.0)
+            moved = surface.push_out(pts, c, iterations=2)
+            if self.exact:
+                moved = surface.push_out_exact(moved, c)
+            pts = np.where(fin[..., None], moved, pts)
+        pts[:, 0] = root
+        return pts
+
+
+def attach(g: Groom) -> tuple[np.ndarray, Attachment]:
+    """The groom's points with the roots put exactly on the surface, and their attachment."""
+    pts = np.asarray(g.pts, np.float64)
+    root = g.surface.points(g.tri, g.bary)
+    pts[:, 0] = root
+    if not np.all(np.isfinite(pts)):
+        raise FloatingPointError(f"{g.cls}: non-finite strand points")
+    F = g.surface.frames(g.tri)
+    local = np.einsum("npd,ndk->npk", pts - root[:, None], F)
+    clr = np.broadcast_to(np.asarray(g.clearance, np.float64), pts.shape[:2]).copy()
+    clr[:, 0] = -np.inf
+    return pts, Attachment(g.tri, g.bary, local, clr, bool(g.exact))

@@ -1,0 +1,338 @@
+"""Scalp hair: procedural strand grooms on the ``scalp`` region (assets_manifest/hair.toml).
+
+Free-flowing styles grow a few hundred to a few thousand guide strands in a style direction
+field (parting sweep, gravity, volume) with collision push-out, then interpolate children
+in the guides' root-triangle frames. Gathered styles (bun, ponytail, braids) compute every
+strand from a shared path (scalp -> tie point -> bun coil / tail / plait).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from synth.assets.fit.groom import Groom, Styling, setup
+from synth.assets.fit.strands import (BACK, DOWN, FORWARD, LEFT, UP, add_curl, arc_length, grow, interpolate,
+                                      push_out_strands, resample_fast, scale_count, transport_frames, trim_below)
+from synth.geometry.normals import normalize
+
+POINTS = {"buzz_cut": 4, "short_straight": 10, "short_curly": 14, "undercut": 14, "medium_wavy": 22, "bob": 20,
+          "long_straight": 28, "long_curly": 40, "afro": 32, "bun": 28, "ponytail": 30, "braids": 40}
+
+
+def counts(resolution: int, density: float = 1.0) -> tuple[int, int]:
+    """(strands, guides) for a render resolution: ~30 strands per pixel of resolution."""
+    n = int(scale_count(resolution, 30.0, 1500, 60000) * float(density))
+    g = scale_count(resolution, 2.5, 200, 2000)
+    return max(n, 200), min(g, max(n, 200))
+
+
+def _tie_point(surface, hf, direction):
+    V = surface.V
+    sc = V[surface.data.regions["scalp"]]
+    c = hf["centre"]
+    u = normalize(np.asarray(direction, np.float64))
+    j = int(np.argmax(normalize(sc - c) @ u))
+    p = sc[j]
+    n = normalize(p - c)
+    return p, n
+
+
+def _sphere_path(c, roots, target, n_points, lift=0.004):
+    """Paths from roots to a target point over a sphere around c (radius interpolated)."""
+    target = np.broadcast_to(np.asarray(target, np.float64), roots.shape)
+    ur, ut = normalize(roots - c), normalize(target - c)
+    rr, rt = np.linalg.norm(roots - c, axis=1), np.linalg.norm(target - c, axis=1)[:, None]
+    cosw = np.clip(np.einsum("nd,nd->n", ur, ut), -1.0, 1.0)
+    w = np.arccos(cosw)
+    t = np.linspace(0.0, 1.0, n_points)[None, :]
+    sw = np.maximum(np.sin(w), 1e-6)[:, None]
+    a = np.where(w[:, None] > 1e-4, np.sin((1 - t) * w[:, None]) / sw, 1 - t)
+    b = np.where(w[:, None] > 1e-4, np.sin(t * w[:, None]) / sw, t)
+    dirs = normalize(a[..., None] * ur[:, None] + b[..., None] * ut[:, None])
+    rad = (1 - t) * rr[:, None] + t * rt + lift * np.sin(np.pi * t) ** 0.5
+    return c + dirs * rad[..., None]
+
+
+def groom(ctx, entry) -> Groom:
+    st = setup(ctx, entry, "hair", "short_straight")
+    rng, sid, prm, surface, hf, colour, pg = st.rng, st.sid, st.prm, st.surface, st.hf, st.colour, st.pg
+    c = hf["centre"]
+    density = float(prm.get("density", 1.0))
+    n, g = counts(ctx.resolution, density)
+    P = POINTS.get(sid, 20)
+    tris = surface.region_triangles("scalp", "all")
+
+    # ---- roots (rejection for receding hairlines), by area, from ctx.rng only
+    rec = float(prm.get("hairline_recession", 0.0))
+    lo, hi = hf["scalp_lo"], hf["scalp_hi"]
+
+    def keep(p):
+        u = (p[:, 1] - lo[1]) / max(hi[1] - lo[1], 1e-6)  # 0 at the front hairline, 1 at the back
+        thr = rec * (0.22 + 0.35 * (np.abs(p[:, 0] - c[0]) / 0.06) ** 2)
+        return ~((u < thr) & (p[:, 2] > hf["brow_z"] + 0.02))
+
+    def roots(m):
+        t, b = surface.sample(tris, 2 * m + 16, rng)
+        ok = keep(surface.points(t, b))
+        t, b = t[ok][:m], b[ok][:m]
+        return t, b
+
+    c_tri, c_bary = roots(n)
+    n = len(c_tri)
+    styling = Styling(root_radius=float(np.clip(4e-5 * np.sqrt(100000.0 / n), 5e-5, 3.5e-4)), tip_shape=0.4,
+                        frizz=0.0008, frizz_shape=0.6, seed=int(rng.integers(0, 2 ** 31)))
+    info = {"style": sid, "colour": colour, "pigment": pg.as_dict()}
+
+    if sid in ("bun", "ponytail", "braids"):
+        pts, clr, g_used = _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng)
+        info["guides"] = g_used
+        if sid == "braids":
+            styling.frizz = 0.0004
+    else:
+        g_tri, g_bary = roots(g)
+        pts, clr, extra = _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng)
+        info["guides"] = int(len(g_tri))
+        info.update(extra)
+        if sid in ("short_curly", "long_curly", "afro"):
+            styling.frizz = 0.0025 if sid == "afro" else 0.0015
+            styling.clump = 0.35
+            styling.clump_distance = 0.006
+        if sid == "buzz_cut":
+            styling.frizz = 0.0
+    return Groom("hair", f"hair_{sid}", surface, pts, c_tri, c_bary, clr, styling, info, pg, roughness=0.28)
+
+
+# --------------------------------------------------------------------------- free styles
+
+
+def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
+    c = hf["centre"]
+    gr = surface.points(g_tri, g_bary)
+    gn = surface.normals(g_tri, g_bary)
+    G = len(gr)
+    parting = prm.get("parting", "centre" if sid in ("bob", "long_straight", "medium_wavy") else "none")
+    xp = {"left": c[0] + 0.028, "right": c[0] - 0.028, "centre": c[0]}.get(str(parting))
+    fringe = bool(prm.get("fringe", False))
+    curl = float(prm.get("curl", 0.0))
+    extra = {"parting": str(parting)}
+
+    rel = gr - c
+    front = np.clip((-rel[:, 1] - 0.02) / 0.05, 0.0, 1.0) * (gr[:, 2] > hf["brow_z"] + 0.01)
+    top = np.clip((gr[:, 2] - (c[2] + 0.0)) / 0.04, 0.0, 1.0)
+    side_sign = np.where(gr[:, 0] >= (xp if xp is not None else c[0]), 1.0, -1.0)
+
+    group = np.zeros(G, np.int64)  # interpolation groups (children never mix groups)
+    if sid == "buzz_cut":
+        L = rng.uniform(*sorted((float(prm.get("length_m", 0.006)) * 0.85, float(prm.get("length_m", 0.006)))), G)
+        sweep = normalize(BACK[None] * 0.6 + DOWN[None] * 0.6 + 0.0 * gr)
+        grav, lift, layer, bend = 0.3, 0.002, np.full(G, 0.0008), 1.0
+        sweep_w = 1.0
+    elif sid == "undercut":
+        is_top = (np.abs(rel[:, 0]) < 0.045) & (gr[:, 2] > c[2] + 0.015) & (rel[:, 1] < 0.06)
+        group = is_top.astype(np.int64)
+        Lt, Ls = float(prm.get("top_length_m", 0.08)), float(prm.get("side_length_m", 0.006))
+        L = np.where(is_top, Lt * rng.uniform(0.85, 1.0, G), Ls * rng.uniform(0.8, 1.0, G))
+        sw = {"back": BACK, "left": LEFT, "right": -LEFT}[str(prm.get("swept", "back"))]
+        sweep = np.where(is_top[:, None], normalize(sw[None] + 0.15 * UP[None] + 0 * gr), normalize(DOWN + BACK * 0.4 + 0 * gr))
+        grav, lift, bend = 0.25, np.where(is_top, 0.015, 0.002), 1.0
+        layer = np.where(is_top, rng.uniform(0.004, 0.014, G), 0.001)
+        sweep_w = 1.0
+        extra["swept"] = str(prm.get("swept", "back"))
+    elif sid == "afro":
+        R = float(prm.get("volume_radius_m", 0.07))
+        ce = c + np.array([0.0, 0.01, 0.025])
+        env = 0.095 + R
+        L = np.clip(env - np.linalg.norm(gr - ce, axis=1), 0.02, None) * 1.15 * rng.uniform(0.9, 1.0, G)
+        sweep = normalize(normalize(gr - ce) + 0.25 * UP)
+        grav, lift, layer, bend = 0.05, 0.03, rng.uniform(0.01, 0.03, G), 1.0
+        sweep_w = 1.0
+        extra["volume_radius_m"] = R
+    else:
+        Lm = float(prm.get("length_m", {"short_straight": 0.05, "short_curly": 0.04, "medium_wavy": 0.15, "bob": 0.16,
+                                        "long_straight": 0.35, "long_curly": 0.3}.get(sid, 0.1)))
+        L = Lm * rng.uniform(0.85, 1.0, G)
+        short = sid in ("short_straight", "short_curly")
+        # sweep away from the parting on top, back over the head at the front
+        part_dir = np.where(xp is None, 0.0, 1.0) * side_sign[:, None] * LEFT[None] * top[:, None]
+        back_dir = BACK[None] * front[:, None] * (1.5 if xp is None else 1.0)
+        sweep = part_dir + back_dir + 0.35 * BACK[None] * (xp is None)
+        if fringe:
+            fr = (front > 0.5) & (np.abs(rel[:, 0]) < 0.055)
+            group = fr.astype(np.int64)
+            sweep = np.where(fr[:, None], FORWARD[None] * 0.5 + 0 * sweep, sweep)
+            extra["fringe"] = True
+        sweep = np.where(np.linalg.norm(sweep, axis=1, keepdims=True) < 1e-6, DOWN[None] + 0 * sweep, sweep)
+        sweep = normalize(sweep)
+        grav = 0.55 if short else 1.0
+        lift = 0.006 if short else 0.01
+        layer = rng.uniform(0.002, 0.008 if short else 0.012, G)
+        bend = 1.0
+        sweep_w = 1.6 if short else 1.0
+
+    zc = c[2]
+    face_y = float(hf["scalp_lo"][1]) + 0.035
+    chin_z = float(hf["chin"][2]) - 0.02 if "chin" in hf else zc - 0.12
+    guard = np.ones(G) if not fringe else (group == 0).astype(np.float64)
+    g_side = np.where(gr[:, 0] >= c[0], 1.0, -1.0)
+
+    def field(p, s, k):
+        # the sweep holds on the top of the head and fades below it; gravity takes over
+        w = sweep_w * np.clip((p[:, 2] - (zc - 0.03)) / 0.05, 0.0, 1.0)[:, None]
+        if sid in ("afro", "buzz_cut"):
+            w = np.ones_like(w)
+        vol = 0.15 * normalize(p - c)
+        # keep hair out of the face: in front of the face plane, push sideways and back
+        in_face = ((p[:, 1] < face_y) & (p[:, 2] > chin_z) & (p[:, 2] < hf["brow_z"] + 0.03)
+                   & (np.abs(p[:, 0] - c[0]) < 0.08)) * guard
+        fg = in_face[:, None] * (2.0 * g_side[:, None] * LEFT[None] + 1.0 * BACK[None])
+        return w * sweep + grav * DOWN[None] + vol + fg
+
+    guides = grow(surface, gr, gn, L, P, field, lift, layer, bend=bend)
+
+    # curls / waves on guides (children inherit them: coherent locks)
+    if sid in ("short_curly", "long_curly", "afro"):
+        r = float(prm.get("curl_radius_m", 0.005 if sid == "short_curly" else 0.008))
+        cu = float(prm.get("curl", 0.9))
+        r_g = r * rng.uniform(0.8, 1.2, G)
+        per = r_g * (10.0 - 5.0 * cu) if sid != "afro" else r_g * 5.0
+        guides = add_curl(guides, gn, r_g, per, rng.uniform(0, 2 * np.pi, G), start=min(0.01, 0.3 * L.min()))
+        extra.update({"curl": cu, "curl_radius_m": r})
+    elif curl > 0.02:
+        amp = curl * 0.012
+        guides = add_curl(guides, gn, amp * rng.uniform(0.8, 1.2, G), 0.05 * rng.uniform(0.85, 1.15, G),
+                            rng.uniform(0, 2 * np.pi, G), start=0.03, planar=True)
+        extra["curl"] = curl
+
+    # length limits: bob at the jaw, fringe at the brows
+    if sid == "bob" or (fringe and sid in ("long_straight", "bob", "medium_wavy")):
+        chin_z = float(hf["chin"][2]) if "chin" in hf else c[2] - 0.1
+        zcut = np.full(G, -np.inf)
+        if sid == "bob":
+            zcut[:] = chin_z + 0.015 + 0.01 * rng.random(G)
+        if fringe:
+            zcut = np.where(group == 1, hf["brow_z"] + 0.006, zcut)
+        guides = trim_below(guides, zcut)
+
+    clr_g = layer
+    guides = push_out_strands(surface, guides, clr_g)
+
+    # children in the guides' root frames, within their interpolation group
+    cr = surface.points(c_tri, c_bary)
+    c_group = np.zeros(len(cr), np.int64)
+    if group.max() > 0:
+        # a child belongs to the group of its nearest guide
+        from scipy.spatial import cKDTree
+
+        c_group = group[cKDTree(gr).query(cr)[1]]
+    pts = np.empty((len(cr), guides.shape[1], 3))
+    for gid in np.unique(c_group):
+        sel_c = c_group == gid
+        sel_g = group == gid
+        if not sel_g.any():
+            sel_g = np.ones(G, bool)
+        pts[sel_c], _ = interpolate(surface, g_tri[sel_g], g_bary[sel_g], guides[sel_g], c_tri[sel_c], c_bary[sel_c],
+                                      k=3, rng=rng, jitter=0.08)
+    clr = np.minimum(float(np.median(layer)), 0.6 * arc_length(pts))
+    pts[:, 1:] = surface.push_out(pts[:, 1:], clr[:, 1:], iterations=2)
+    return pts, clr, extra
+
+
+# --------------------------------------------------------------------------- gathered styles
+
+
+def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
+    c = hf["centre"]
+    R = surface.points(c_tri, c_bary)
+    N = len(R)
+    n1 = 12 if sid != "braids" else 8
+    n2 = P - n1
+    layer = rng.uniform(0.0015, 0.004, N)
+    if sid in ("bun", "ponytail"):
+        if sid == "bun":
+            h = str(prm.get("bun_height", "mid"))
+            d = {"low": (0.0, 1.0, -0.15), "mid": (0.0, 1.0, 0.7), "top": (0.0, 0.3, 1.0)}.get(h, (0.0, 1.0, 0.7))
+        else:
+            h = str(prm.get("tie_height", "mid"))
+            d = {"low": (0.0, 1.0, -0.4), "mid": (0.0, 1.0, 0.2), "top": (0.0, 0.6, 1.0), "high": (0.0, 0.6, 1.0)}.get(
+                h, (0.0, 1.0, 0.2))
+        Bs, Bn = _tie_point(surface, hf, d)
+        B = Bs + Bn * 0.006
+        part1 = _sphere_path(c, R, B, n1 + 1, lift=0.003)
+        part1 = push_out_strands(surface, part1, layer)
+        if sid == "bun":
+            rb = float(prm.get("bun_radius_m", 0.04))
+            Bc = Bs + Bn * rb * 0.85
+            e1 = normalize(B - Bc)[None].repeat(N, 0)
+            rnd = normalize(rng.normal(size=(N, 3)))
+            e2 = normalize(rnd - (rnd @ e1[0])[:, None] * e1)
+            rr = rb * np.sqrt(rng.uniform(0.35, 1.0, N))
+            turns = rng.uniform(0.9, 1.6, N)
+            th = np.linspace(0.0, 1.0, n2)[1:][None] * turns[:, None] * 2 * np.pi
+            coil = Bc + rr[:, None, None] * (np.cos(th)[..., None] * e1[:, None] + np.sin(th)[..., None] * e2[:, None])
+            pts = np.concatenate([part1, coil], 1)
+            # loose strands: some low roots fall freely instead
+            loose = float(prm.get("loose_strands", 0.0))
+            sel = (rng.random(N) < loose * 0.3) & (R[:, 2] < c[2] - 0.01)
+            if sel.any():
+                nrm = surface.normals(c_tri[sel], c_bary[sel])
+                free = grow(surface, R[sel], nrm, rng.uniform(0.06, 0.14, int(sel.sum())), P,
+                              lambda p, s, k: DOWN[None] + 0.2 * normalize(p - c), 0.008, layer[sel])
+                pts[sel] = free
+            g_used = 1
+        else:
+            Lt = float(prm.get("tail_length_m", 0.25))
+            start_dir = normalize(BACK * 0.8 + (UP * 0.6 if h in ("top", "high") else DOWN * 0.3))
+            centre = grow(surface, B[None], start_dir[None], np.array([Lt]), n2 + 1,
+                            lambda p, s, k: DOWN[None] * 1.0 + 0.25 * BACK[None], 0.05, 0.02)[0]
+            t, b1, b2 = transport_frames(centre[None], LEFT)
+            disk = rng.normal(size=(N, 2)) * 0.5
+            u = np.linspace(0.0, 1.0, n2 + 1)
+            rad = 0.007 + 0.022 * u
+            off = disk[:, None, 0:1] * (rad[None, :, None] * b1[0][None]) + disk[:, None, 1:2] * (
+                rad[None, :, None] * b2[0][None])
+            tail = centre[None] + off
+            pts = np.concatenate([part1, tail[:, 1:]], 1)
+            lt = rng.uniform(0.8, 1.0, N)
+            s = arc_length(pts)
+            pts = resample_fast(pts, s[:, n1] + lt * (s[:, -1] - s[:, n1]))
+            curl = float(prm.get("curl", 0.0))
+            if curl > 0.02:
+                pts = add_curl(pts, np.tile(BACK, (N, 1)), curl * 0.01 * rng.uniform(0.7, 1.2, N), 0.045,
+                                 rng.uniform(0, 2 * np.pi, N), start=0.1, planar=False)
+            g_used = 1
+    else:  # braids
+        K = int(np.clip(int(prm.get("braid_count", 8)), 2, 40))
+        Lb = float(prm.get("length_m", 0.3))
+        # braid bases: farthest-point sampling over the roots (deterministic)
+        base_idx = [int(np.argmax(R[:, 2]))]
+        dmin = np.linalg.norm(R - R[base_idx[0]], axis=1)
+        for _ in range(K - 1):
+            j = int(np.argmax(dmin))
+            base_idx.append(j)
+            dmin = np.minimum(dmin, np.linalg.norm(R - R[j], axis=1))
+        bases = R[base_idx]
+        bn = surface.normals(c_tri[base_idx], c_bary[base_idx])
+        assign = np.argmin(np.linalg.norm(R[:, None] - bases[None], axis=2), axis=1)
+        Bk = bases + bn * 0.005
+        part1 = _sphere_path(c, R, Bk[assign], n1 + 1, lift=0.002)
+        # per-braid centre lines hanging down from their bases
+        cent = grow(surface, Bk, bn, Lb * rng.uniform(0.85, 1.0, K), n2 + 1,
+                      lambda p, s, k: DOWN[None] + 0.3 * normalize(p - c), 0.01, 0.01)
+        _, b1, b2 = transport_frames(cent, np.tile(LEFT, (K, 1)))
+        rb = float(np.clip(0.012 * np.sqrt(6.0 / K), 0.003, 0.012))
+        sub = np.arange(N) % 3
+        u = arc_length(cent)  # (K, n2+1)
+        lam = 6.0 * rb
+        ph = 2 * np.pi * sub / 3.0
+        ang = 2 * np.pi * u[assign] / lam + ph[:, None]
+        taper = 1.0 - 0.5 * u[assign] / np.maximum(u[assign][:, -1:], 1e-6)
+        jit = rng.normal(size=(N, 2)) * 0.18
+        x = rb * taper * (np.sin(ang) + jit[:, :1])
+        y = 0.5 * rb * taper * (np.sin(2 * ang) + jit[:, 1:])
+        plait = cent[assign] + x[..., None] * b1[assign] + y[..., None] * b2[assign]
+        pts = np.concatenate([part1, plait[:, 1:]], 1)
+        g_used = K
+    pts[:, 0] = R
+    clr = np.minimum(layer[:, None], 0.6 * arc_length(pts))
+    pts[:, 1:] = surface.push_out(pts[:, 1:], clr[:, 1:], iterations=2)
+    return pts, clr, g_used

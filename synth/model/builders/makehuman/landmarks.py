@@ -1,0 +1,184 @@
+"""Landmarks of the default model: the 68 iBUG points placed by anatomical rules on the
+template (lid and lip loops, the midline profile, rays for brows and the jaw line), snapped to
+the skin surface; and ``dense`` points by farthest-point sampling of the face. Also the
+orchestration of regions and landmarks (the face regions need the landmarks)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from synth.geometry.normals import vertex_normals
+from synth.model import meshutil as mu
+from synth.model.builders.makehuman.mesh import Mesh
+from synth.model.builders.makehuman.regions import Features, feature_regions, landmark_regions, ring_midpoints
+from synth.model.builders.makehuman.surface import (arc_at_x, closest_on_surface, level_points, polyline_at,
+                                                    split_loop, surface_hits)
+from synth.model.builders.makehuman.targets import TargetSpace
+
+IBUG_GROUPS = (("jaw", 17), ("brow_r", 5), ("brow_l", 5), ("nose_bridge", 4), ("nose_base", 5),
+               ("eye_r", 6), ("eye_l", 6), ("lip_outer", 12), ("lip_inner", 8))
+DENSE_LANDMARKS = 600
+CHIN_NORMAL_DOWN = 0.8  # chin landmark: first midline point below the lip whose normal points down by >= asin(0.8)
+BROW_HEIGHT = (0.40, 0.53, 0.58, 0.55, 0.42)  # brow above the upper lid, in eye widths, medial -> lateral
+BROW_SPAN = (-0.10, 1.12)  # brow extent along the eye, in eye widths from the medial corner
+_FORWARD = np.array([0.0, 1.0, 0.0])  # rays cast from in front of the face toward the back (+Y)
+
+
+def regions_and_landmarks(mesh: Mesh, X: np.ndarray, tris: np.ndarray, family: np.ndarray,
+                          joint_rest: np.ndarray, space: TargetSpace, data: Path):
+    """(regions, landmarks, landmark names) of the template ``X`` in the model file's layout."""
+    f = feature_regions(mesh, X, tris, space, data)
+    pts, tip = ibug68_points(f, X, tris, joint_rest)
+    P68 = np.array([pts[i] for i in range(68)])
+    skin_tri = np.nonzero(f.skin[tris].all(1))[0]
+    local, bary68 = closest_on_surface(X, tris[skin_tri], P68)
+    tri68 = skin_tri[local]
+    names68 = [f"{grp}_{i:02d}" for grp, n in IBUG_GROUPS for i in range(n)]
+    landmark_regions(f, X, family, joint_rest, pts)
+    face = f.reg["face"]
+    dense = face[mu.farthest_point_sampling(X[face], DENSE_LANDMARKS, int(np.nonzero(face == tip)[0][0]))]
+    dtri, dbary = mu.vertex_landmarks(tris, dense)
+    landmarks = {"ibug68": (tri68.astype(np.int32), bary68.astype(np.float32)),
+                 "dense": (dtri.astype(np.int32), dbary.astype(np.float32))}
+    names = {"ibug68": names68, "dense": [f"dense_{i:03d}" for i in range(DENSE_LANDMARKS)]}
+    regions = {k: np.asarray(v, np.int32) for k, v in sorted(f.reg.items())}
+    return regions, landmarks, names
+
+
+def ibug68_points(f: Features, X: np.ndarray, tris: np.ndarray, joint_rest: np.ndarray):
+    """({ibug index: 3D point}, nose-tip vertex). The points lie on (or very near) the skin."""
+    pts: dict[int, np.ndarray] = {}
+    _eyes(f, X, pts)
+    _mouth(f, X, pts)
+    tip = _nose(f, X, joint_rest, pts)
+    _brows(f, X, tris, pts)
+    _nose_base(f, X, tris, pts)
+    _jaw(f, X, tris, joint_rest, pts)
+    return pts, tip
+
+
+def _midline(f: Features, X: np.ndarray, joint_rest: np.ndarray) -> np.ndarray:
+    """Visible vertices on x = 0 in front of the eyes."""
+    return np.nonzero(f.visible & (X[:, 0] == 0.0) & (X[:, 1] < joint_rest[3, 1]))[0]
+
+
+def _eyes(f: Features, X: np.ndarray, pts: dict) -> None:
+    for t, ids in (("r", (36, 37, 38, 39, 40, 41)), ("l", (42, 43, 44, 45, 46, 47))):
+        up, lo = f.lids[t]["upper"], f.lids[t]["lower"]
+        x0, x1 = X[up[0], 0], X[up[-1], 0]
+        xs = [x0 + (x1 - x0) * g for g in (1 / 3, 2 / 3)]
+        pts[ids[0]], pts[ids[3]] = X[up[0]], X[up[-1]]
+        pts[ids[1]], pts[ids[2]] = arc_at_x(X, up, xs[0]), arc_at_x(X, up, xs[1])
+        pts[ids[4]], pts[ids[5]] = arc_at_x(X, lo, xs[1]), arc_at_x(X, lo, xs[0])
+
+
+def _mouth(f: Features, X: np.ndarray, pts: dict) -> None:
+    rings, k_out = f.lip_rings, f.lip_outer
+    inner, outer = split_loop(X, rings[0]), split_loop(X, rings[k_out])
+    ou, ol, iu, il = outer["upper"], outer["lower"], inner["upper"], inner["lower"]
+    x48, x54 = X[ou[0], 0], X[ou[-1], 0]
+    right_half = [v for v in ou if X[v, 0] < 0]
+    peak = max(right_half, key=lambda v: X[v, 2])  # cupid's bow peak
+    x50 = X[peak, 0] if x48 * 0.8 < X[peak, 0] < x48 * 0.15 else x48 / 3
+    pts[48], pts[54] = X[ou[0]], X[ou[-1]]
+    pts[51], pts[57] = X[ring_midpoints(X, rings[k_out])[0]], X[ring_midpoints(X, rings[k_out])[1]]
+    pts[50], pts[52] = arc_at_x(X, ou, x50), arc_at_x(X, ou, -x50)
+    pts[49], pts[53] = arc_at_x(X, ou, (x48 + x50) / 2), arc_at_x(X, ou, (x54 - x50) / 2)
+    pts[58], pts[56] = arc_at_x(X, ol, x50), arc_at_x(X, ol, -x50)
+    pts[59], pts[55] = arc_at_x(X, ol, (x48 + x50) / 2), arc_at_x(X, ol, (x54 - x50) / 2)
+    x60, x64 = X[iu[0], 0], X[iu[-1], 0]
+    pts[60], pts[64] = X[iu[0]], X[iu[-1]]
+    pts[62], pts[66] = X[ring_midpoints(X, rings[0])[0]], X[ring_midpoints(X, rings[0])[1]]
+    pts[61], pts[63] = arc_at_x(X, iu, x60 / 2), arc_at_x(X, iu, x64 / 2)
+    pts[67], pts[65] = arc_at_x(X, il, x60 / 2), arc_at_x(X, il, x64 / 2)
+
+
+def _nose(f: Features, X: np.ndarray, joint_rest: np.ndarray, pts: dict) -> int:
+    """Bridge (27-30), subnasale (33) and alar bases (31, 35) from the midline profile; returns the tip vertex."""
+    lid_top = X[f.lids["l"]["upper"], 2].max()
+    midline = _midline(f, X, joint_rest)
+    front = midline[(X[midline, 2] > pts[51][2]) & (X[midline, 2] < lid_top)]
+    tip = front[np.argmin(X[front, 1])]
+    pts[30] = X[tip]
+    above = front[X[front, 2] > X[tip, 2]]
+    nasion = above[np.argmax(X[above, 1])]
+    pts[27] = X[nasion]
+    ridge = above[X[above, 2] <= X[nasion, 2]]
+    ridge = ridge[np.argsort(-X[ridge, 2])]
+    ridge_pts = np.concatenate([X[ridge], X[[tip]]])
+    pts[28], pts[29] = polyline_at(ridge_pts, (1 / 3, 2 / 3))
+    below = front[(X[front, 2] < X[tip, 2])]
+    sub = below[np.argmax(X[below, 1])]
+    pts[33] = X[sub]
+    z33, z30 = X[sub, 2], X[tip, 2]
+    wing = np.nonzero(f.nose & (X[:, 0] < 0) & (X[:, 2] < z33 + 0.35 * (z30 - z33)))[0]
+    ala = wing[np.argmin(X[wing, 0])]  # lateral end of the nostril base (alar base)
+    pts[31] = X[ala]
+    pts[35] = X[ala] * [-1, 1, 1]
+    return int(tip)
+
+
+def _brows(f: Features, X: np.ndarray, tris: np.ndarray, pts: dict) -> None:
+    """Rays from the front at heights above the upper lid, in eye widths."""
+    for t, ids in (("l", (22, 23, 24, 25, 26)), ("r", (21, 20, 19, 18, 17))):
+        s = 1.0 if t == "l" else -1.0
+        upper = f.lids[t]["upper"]
+        med, lat = X[upper[0 if t == "l" else -1]], X[upper[-1 if t == "l" else 0]]
+        w = abs(lat[0] - med[0])
+        top = X[upper, 2].max()
+        xs = med[0] + s * w * np.linspace(BROW_SPAN[0], BROW_SPAN[1], 5)
+        zs = top + w * np.array(BROW_HEIGHT)
+        o = np.stack([xs, np.full(5, X[:, 1].min() - 0.1), zs], 1)
+        hits = surface_hits(X, tris[f.vis_tris], o, np.tile(_FORWARD, (5, 1)))
+        for k in range(5):
+            pts[ids[k]] = hits[k]
+
+
+def _nose_base(f: Features, X: np.ndarray, tris: np.ndarray, pts: dict) -> None:
+    """Points 32 and 34 between subnasale and alar base (rays from the front)."""
+    o = np.array([[pts[31][0] / 2, X[:, 1].min() - 0.1, (pts[31][2] + pts[33][2]) / 2]])
+    pts[32] = surface_hits(X, tris[f.vis_tris], o, _FORWARD[None])[0]
+    pts[34] = pts[32] * [-1, 1, 1]
+
+
+def _jaw(f: Features, X: np.ndarray, tris: np.ndarray, joint_rest: np.ndarray, pts: dict) -> None:
+    """Chin (gnathion) on the midline profile, cheek silhouette from ear level down to the jaw
+    angle, then the mandible body as a straight side-view line projected onto the skin."""
+    vn = vertex_normals(X, tris[f.vis_tris])
+    midline = _midline(f, X, joint_rest)
+    chin_line = midline[(X[midline, 2] < pts[57][2]) & (X[midline, 1] < joint_rest[2, 1])]
+    chin_line = chin_line[np.argsort(-X[chin_line, 2])]
+    dy = np.diff(X[chin_line, 1])
+    fold = int(np.nonzero(dy < 0)[0][0])  # profile turns forward again below the labiomental fold
+    pog = fold + int(np.nonzero(dy[fold:] > 0)[0][0])  # ... and back again under the chin (pogonion)
+    chin_line = chin_line[pog:]
+    g = vn[chin_line, 2] + CHIN_NORMAL_DOWN
+    k = int(np.nonzero(g < 0)[0][0])
+    a = g[k - 1] / (g[k - 1] - g[k])
+    pts[8] = X[chin_line[k - 1]] * (1 - a) + X[chin_line[k]] * a
+    z0 = pts[36][2] - 0.15 * (pts[36][2] - pts[8][2])
+    zg = pts[48][2] - 0.35 * (pts[48][2] - pts[8][2])
+    y_ear = X[f.reg["ears"], 1].min()
+
+    def silhouette(z):
+        p = level_points(X, tris, X[:, 2] - z, f.vis_tris)
+        p = p[(p[:, 1] < y_ear - 0.002) & (p[:, 0] < 0)]
+        return p[np.argmin(p[:, 0])]
+
+    side = np.array([silhouette(z) for z in np.linspace(z0, zg, 8)])
+    angle = side[-1]
+    origins, dirs = [], []
+    for t in np.linspace(0.0, 1.0, 12)[1:-1]:
+        q = angle * (1 - t) + pts[8] * t
+        o = np.array([0.0, joint_rest[2, 1], q[2]])
+        d = q - o
+        d[2] = 0.0
+        origins.append(o)
+        dirs.append(d / np.linalg.norm(d))
+    body_line = surface_hits(X, tris[f.vis_tris], np.array(origins), np.array(dirs), farthest=True)
+    contour = np.concatenate([side, body_line, pts[8][None]])
+    for i, p in enumerate(polyline_at(contour, np.linspace(0.0, 1.0, 9))[:8]):
+        pts[i] = p
+        pts[16 - i] = p * [-1, 1, 1]
