@@ -1,49 +1,38 @@
 """Negative log-likelihood of identity codes under the head model's Gaussian mixture, in torch.
 
 The mixture is the one the planner samples identities from (``prior_weights``,
-``prior_means``, ``prior_covs`` of the model file; numpy twin in
-:class:`synth.model.prior.GaussianMixture`). With L_m the Cholesky factor of component m's
-covariance (computed once, in float64):
+``prior_means``, ``prior_covs`` of the model file), evaluated from the parameters that
+:meth:`synth.model.identity_gmm.GaussianMixture.parameters` exports (float64):
 
-    z_m  = L_m^-1 (x - mu_m)
-    nll  = -logsumexp_m( log w_m - 0.5 (D log 2 pi + log det C_m) - 0.5 |z_m|^2 )
+    z_m  = U_m^T (x - mu_m)            U_m = precision_cholesky[m], U_m U_m^T = C_m^-1
+    nll  = -logsumexp_m( log_norm[m] - 0.5 |z_m|^2 )
 
 which stays finite and smooth arbitrarily far from the data (log-sum-exp).
 """
 
 from __future__ import annotations
 
-import numpy as np
 import torch
 
 from synth.model.format import HeadModelData
+from synth.model.identity_gmm import GaussianMixture
 
 
 class TorchGMM:
-    def __init__(self, weights, means, covs, dtype: torch.dtype = torch.float64, device="cpu"):
-        w = np.asarray(weights, np.float64)
-        mu = np.asarray(means, np.float64)
-        C = np.asarray(covs, np.float64)
-        L = np.linalg.cholesky(C)
-        Linv = np.linalg.inv(L)  # (M, D, D) lower triangular
-        D = mu.shape[1]
-        logdet = 2.0 * np.log(np.diagonal(L, axis1=1, axis2=2)).sum(1)
-        log_norm = np.log(w) - 0.5 * (D * np.log(2.0 * np.pi) + logdet)
+    def __init__(self, gmm: GaussianMixture, dtype: torch.dtype = torch.float64, device="cpu"):
+        p = gmm.parameters()
         t = lambda a: torch.as_tensor(a, dtype=dtype, device=device)  # noqa: E731
-        self.weights, self.means, self.whiten, self.log_norm = t(w), t(mu), t(Linv), t(log_norm)
-        self.dim = D
+        self.weights, self.means, self.log_norm = t(p["weights"]), t(p["means"]), t(p["log_norm"])
+        self.whiten = t(p["precision_cholesky"]).transpose(-1, -2).contiguous()  # z = whiten @ (x - mu)
+        self.dim = gmm.dim
 
     @classmethod
     def from_model(cls, data: HeadModelData, dtype: torch.dtype = torch.float64, device="cpu") -> "TorchGMM":
-        return cls(data.prior_weights, data.prior_means, data.prior_covs, dtype, device)
+        return cls(GaussianMixture.from_model(data), dtype, device)
 
     def mean(self) -> torch.Tensor:
         """(D,) mean of the mixture."""
         return self.weights @ self.means
-
-    def mode_component(self) -> int:
-        """Index of the component with the highest density at its own mean."""
-        return int(torch.argmax(self.log_norm))
 
     def nll(self, x: torch.Tensor) -> torch.Tensor:
         """(B,) -log p(x) for codes (B, D) (or (D,) -> ())."""

@@ -51,3 +51,21 @@ def test_gradient_and_single(data):
     assert torch.autograd.gradcheck(g.nll, (x,), fast_mode=True)
     assert g.nll(x[0]).shape == ()
     np.testing.assert_allclose(g.mean().numpy(), prior_of(data).mean(), atol=1e-12)
+
+
+def test_curvature_is_responsibility_weighted_precision(data):
+    g = TorchGMM.from_model(data)
+    x = prior_of(data).sample(np.random.default_rng(3), 2)
+    for xi in x:
+        lp = prior_of(data).component_log_pdf(xi[None])[0]
+        r = np.exp(lp - logsumexp(lp))
+        ref = np.einsum("m,mij->ij", r, np.linalg.inv(data.prior_covs))
+        np.testing.assert_allclose(g.curvature(torch.tensor(xi)).numpy(), ref, rtol=1e-8, atol=1e-10)
+    # one component: the curvature is the exact Hessian of the nll (the precision)
+    from synth.model.identity_gmm import GaussianMixture
+
+    A = np.random.default_rng(4).normal(size=(5, 5))
+    one = TorchGMM(GaussianMixture(np.ones(1), np.zeros((1, 5)), (A @ A.T + np.eye(5))[None]))
+    x5 = torch.tensor(np.random.default_rng(5).normal(size=5))
+    H = torch.autograd.functional.hessian(one.nll, x5)
+    np.testing.assert_allclose(one.curvature(x5).numpy(), H.numpy(), rtol=1e-10)
