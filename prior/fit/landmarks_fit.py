@@ -6,11 +6,11 @@ Minimises, in torch (float64, CPU by default),
       + w_id  * -log p_GMM(beta)                           identity (the planner's mixture)
       + w_ex  * mean_i |psi_i|^2                           expression codes
       + w_jt  * mean_i |r_i|^2                             joint rotations (jaw, eyes)
-      + w_mc  * sum_i (|psi_i - psi|^2 + |r_i - r|^2)      micro-changes (per-image mode only)
+      + w_mc  * sum_i (|psi_i - mean psi|^2 + |r_i - mean r|^2)   micro-changes (per-image mode)
 
 over the identity code beta (shared), the expression code and joint rotations (one shared
-set, or per image psi_i = psi + delta_i, r_i = r + epsilon_i: small involuntary changes
-between photos taken one after another), the cameras' extrinsics (one per image) and, when
+set, or one per image, kept close to their mean: small involuntary changes between photos
+taken one after another), the cameras' extrinsics (one per image) and, when
 the intrinsics are unknown, one shared focal length. No self-intersection term (not
 implemented). A stiff penalty (zero unless a landmark comes within 1 cm of a camera plane)
 keeps the landmarks in front of every camera.
@@ -92,7 +92,7 @@ class Observations:
 
 @dataclass(frozen=True)
 class FitOptions:
-    per_image_expression: bool = False  # psi_i = psi + delta_i per image, else one shared code
+    per_image_expression: bool = False  # one code (and joint pose) per image, else one shared
     joints: tuple[str, ...] = ("jaw", "eye_l", "eye_r")
     w_landmarks: float = 1.0
     w_identity: float = 1.0
@@ -145,6 +145,7 @@ class _Problem:
         self.gmm = gmm or TorchGMM.from_model(model, dt)
         self.obs, self.opt = obs, opt
         N = self.N = obs.mean.shape[0]
+        self.E = N if opt.per_image_expression else 1  # rows of expression codes and joint poses
         for j in opt.joints:
             if j not in self.head.joint_index:
                 raise SynthError(f"unknown joint '{j}'", "fit options", f"joints are {self.head.joint_names}")
@@ -172,14 +173,13 @@ class _Problem:
             "omega": torch.zeros(N, 3, dtype=dt), "tcam": torch.zeros(N, 3, dtype=dt),
             "log_f": torch.zeros(1, dtype=dt), "root_rot": torch.zeros(3, dtype=dt),
             "trans": torch.zeros(3, dtype=dt), "beta": self.gmm.mean().clone(),
-            "psi": torch.zeros(1, Ke, dtype=dt), "jrot": torch.zeros(1, nj, 3, dtype=dt),
-            "dpsi": torch.zeros(N, Ke, dtype=dt), "djrot": torch.zeros(N, nj, 3, dtype=dt)}
+            "psi": torch.zeros(self.E, Ke, dtype=dt), "jrot": torch.zeros(self.E, nj, 3, dtype=dt)}
         if start is not None:  # given codes instead of the mean face
             beta, psi, rot = start
             self.values["beta"] = t(beta).reshape(self.head.Ki)
-            self.values["psi"] = t(psi).reshape(1, Ke)
+            self.values["psi"] = t(psi).reshape(1, Ke).expand(self.E, -1).clone()
             if rot is not None:
-                self.values["jrot"] = t(rot).reshape(self.head.J, 3)[self.jidx].unsqueeze(0)
+                self.values["jrot"] = t(rot).reshape(self.head.J, 3)[self.jidx].expand(self.E, -1, -1).clone()
         known = obs.world_to_camera is not None
         self.camera_blocks = (["root_rot", "trans"] if known else ["omega", "tcam"]) + (
             [] if obs.K is not None else ["log_f"])
@@ -188,8 +188,7 @@ class _Problem:
             self.values["tcam"] = t(obs.world_to_camera[:, :3, 3])
         else:
             self.R0, self.values["tcam"] = self._initial_cameras()
-        self.all_blocks = self.camera_blocks + ["beta", "psi", "jrot"] + (
-            ["dpsi", "djrot"] if opt.per_image_expression else [])
+        self.all_blocks = self.camera_blocks + ["beta", "psi", "jrot"]
 
     def _initial_cameras(self) -> tuple[torch.Tensor, torch.Tensor]:
         v = self.values
@@ -225,11 +224,10 @@ class _Problem:
 
     # ---- model ---------------------------------------------------------------------------
 
-    def codes(self, v) -> tuple[torch.Tensor, torch.Tensor]:
+    @staticmethod
+    def codes(v) -> tuple[torch.Tensor, torch.Tensor]:
         """Expression codes (E, Ke) and fitted joint rotations (E, nj, 3): E = 1 when shared
         (the head is then evaluated once for all images), else one row per image."""
-        if self.opt.per_image_expression:
-            return v["psi"] + v["dpsi"], v["jrot"] + v["djrot"]
         return v["psi"], v["jrot"]
 
     def joint_rotations(self, v, jrot: torch.Tensor) -> torch.Tensor:
@@ -270,19 +268,17 @@ class _Problem:
         }
         if "log_f" in self.camera_blocks:
             parts["focal"] = v["log_f"] / self.opt.focal_prior_sd
-        if self.opt.per_image_expression:
-            parts["micro"] = np.sqrt(2.0 * self.opt.w_micro) * torch.cat([v["dpsi"].reshape(-1),
-                                                                          v["djrot"].reshape(-1)])
+        if self.opt.per_image_expression:  # deviations from the images' mean code and pose
+            parts["micro"] = np.sqrt(2.0 * self.opt.w_micro) * torch.cat([(psi - psi.mean(0)).reshape(-1),
+                                                                          (jrot - jrot.mean(0)).reshape(-1)])
         return parts
 
     def identity_term(self, v) -> torch.Tensor:
         return self.opt.w_identity * self.gmm.nll(v["beta"])
 
     def bounds(self, names: list[str]) -> tuple[torch.Tensor, torch.Tensor]:
-        """Box on the expression codes. In per-image mode the shared code is boxed and each
-        deviation is boxed so that psi + delta_i stays in the box too (a conservative,
-        separable version of the constraint: delta_i within [lo - psi, hi - psi] at the
-        start of each solve)."""
+        """Boxes: every expression coefficient (of every image) within ``expression_bounds``;
+        the focal length within ``fov_range_deg``."""
         lo = {n: torch.full_like(self.values[n], -float("inf")) for n in names}
         hi = {n: torch.full_like(self.values[n], float("inf")) for n in names}
         if "log_f" in names:  # the field-of-view range as bounds on log(f / f0)
@@ -295,9 +291,6 @@ class _Problem:
             if "psi" in names:
                 lo["psi"].fill_(a)
                 hi["psi"].fill_(b)
-            if "dpsi" in names:
-                lo["dpsi"], hi["dpsi"] = (a - self.values["psi"]).expand_as(lo["dpsi"]).clone(), \
-                    (b - self.values["psi"]).expand_as(hi["dpsi"]).clone()
         return torch.cat([lo[n].reshape(-1) for n in names]), torch.cat([hi[n].reshape(-1) for n in names])
 
     def solve(self, names: list[str], max_iters: int):

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -68,6 +70,8 @@ def test_noise_free_recovers_truth(model, kit, landmark_set):
     assert e["rotation_deg"].max() < 0.01
     assert e["position_m"].max() < 5e-4
     assert e["rmse_true_px"].max() < 0.01
+    d = json.loads(json.dumps(fit.to_json()))  # plain JSON for the fit's report
+    assert d["converged"] and np.allclose(d["world_to_camera"], fit.world_to_camera)
 
 
 def test_known_extrinsics_fit_the_head_placement(model, kit):
