@@ -12,14 +12,14 @@ mediapipe needs protobuf<5, so it lives in its own environment; the steps altern
     # 4. fit the held-out identities with it and compare with the renders' cameras
     .venv/bin/python scripts/mediapipe_correspondence.py evaluate WORK --train 4
 
-Derivation: for every frame and detected point, the camera ray through the point is cast
-onto the posed model mesh of that frame (the frame JSON's codes; hair and clothes ignored):
-the front-most triangle containing the point in the image, with perspective-correct
-barycentric weights. The hit is carried to the rest template (same triangle, same weights).
-Per mediapipe point over all training frames: the median template position, the medoid hit
-(the frame's hit nearest that median, so the result lies on the surface) and the spread (RMS
-distance of the hits to the median, metres), which sets the point's sigma when fitting.
-Points hit in fewer than half of the frames are left out.
+Derivation: for every training frame and detected point, the camera ray through the point
+is cast onto the posed model mesh of that frame (the frame JSON's codes; hair and clothes
+ignored): the front-most triangle containing the point in the image, with perspective-correct
+barycentric weights. Each hit (triangle, weights) is a candidate surface point; it is posed in
+every training frame and projected with that frame's camera, and the candidate with the
+smallest RMS distance to the detections, in units of each frame's face width (distance of
+points 234 and 454), is kept. That RMS ("sigma_face") becomes the point's sigma when fitting
+(times the detected face width). Points hit in fewer than half of the frames are left out.
 """
 
 from __future__ import annotations
@@ -120,6 +120,7 @@ def cast(points: np.ndarray, V: np.ndarray, tris: np.ndarray, K: np.ndarray, w2c
 def derive(work: Path, train: int, out_dir: Path | None) -> Path:
     _setup_path()
     from prior.fit.landmark_sources import CORRESPONDENCE_DIR, model_key
+    from synth.conventions import project
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
 
@@ -129,24 +130,31 @@ def derive(work: Path, train: int, out_dir: Path | None) -> Path:
     tmpl = np.asarray(model.template, np.float64)
     truth, det = _load(work)
     keys = [k for k, t in truth.items() if t["identity_index"] < train and det["points"].get(k)]
-    hits_t = np.full((len(keys), N_POINTS), -1)
-    hits_b = np.zeros((len(keys), N_POINTS, 3))
-    for f, k in enumerate(keys):
-        t = truth[k]
-        hits_t[f], hits_b[f] = cast(np.asarray(det["points"][k]), _posed(hm, t), tris, np.asarray(t["K"]),
-                                    np.asarray(t["world_to_camera"]))
+    F = len(keys)
+    posed = [_posed(hm, truth[k]) for k in keys]
+    cams = [(np.asarray(truth[k]["K"]), np.asarray(truth[k]["world_to_camera"])) for k in keys]
+    det_px = np.asarray([det["points"][k] for k in keys])  # (F, 478, 2)
+    face_px = np.linalg.norm(det_px[:, 454] - det_px[:, 234], axis=-1)  # (F,) face width in pixels
+    hits_t = np.full((F, N_POINTS), -1)
+    hits_b = np.zeros((F, N_POINTS, 3))
+    for f in range(F):
+        hits_t[f], hits_b[f] = cast(det_px[f], posed[f], tris, *cams[f])
     points = []
     for j in range(N_POINTS):
-        ok = hits_t[:, j] >= 0
-        if ok.sum() < max(2, 0.5 * len(keys)):
+        ok = np.nonzero(hits_t[:, j] >= 0)[0]
+        if len(ok) < max(2, 0.5 * F):
             continue
-        P = np.einsum("fk,fkc->fc", hits_b[ok, j], tmpl[tris[hits_t[ok, j]]])
-        med = np.median(P, 0)
-        d = np.linalg.norm(P - med, axis=1)
-        f = int(np.argmin(d))
-        points.append({"mediapipe": j, "triangle": int(hits_t[ok, j][f]),
-                       "bary": [round(float(x), 6) for x in hits_b[ok, j][f]],
-                       "spread_m": round(float(np.sqrt(np.mean(d ** 2))), 6), "frames": int(ok.sum())})
+        cand_t, cand_b = hits_t[ok, j], hits_b[ok, j]  # one candidate surface point per frame that hit
+        # each candidate's 2D residual in every training frame, in units of that frame's face width
+        res = np.empty((len(ok), F))
+        for f in range(F):
+            X = np.einsum("ck,ckd->cd", cand_b, posed[f][tris[cand_t]])
+            uv, _ = project(*cams[f], X)
+            res[:, f] = np.linalg.norm(uv - det_px[f, j], axis=-1) / face_px[f]
+        rms = np.sqrt(np.mean(res ** 2, axis=1))
+        c = int(np.argmin(rms))
+        points.append({"mediapipe": j, "triangle": int(cand_t[c]), "bary": [round(float(x), 6) for x in cand_b[c]],
+                       "sigma_face": round(float(rms[c]), 6), "frames": int(len(ok))})
     doc = {"format": "synth-mediapipe-correspondence", "format_version": 1, "model": model.name,
            "model_key": model_key(model), "mediapipe": det["mediapipe"],
            "derivation": {"frames": len(keys), "identities": train, "script": "scripts/mediapipe_correspondence.py"},
@@ -154,9 +162,9 @@ def derive(work: Path, train: int, out_dir: Path | None) -> Path:
     path = (out_dir or CORRESPONDENCE_DIR) / f"mediapipe-{model_key(model)}.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(doc, indent=0) + "\n")
-    sp = np.array([p["spread_m"] for p in points])
-    print(f"{len(points)}/{N_POINTS} points mapped from {len(keys)} frames; spread median "
-          f"{1000 * np.median(sp):.1f} mm, 90th percentile {1000 * np.percentile(sp, 90):.1f} mm -> {path}")
+    sp = 100.0 * np.array([p["sigma_face"] for p in points])
+    print(f"{len(points)}/{N_POINTS} points mapped from {F} frames; RMS residual median {np.median(sp):.2f} %, "
+          f"90th percentile {np.percentile(sp, 90):.2f} % of the face width -> {path}")
     return path
 
 

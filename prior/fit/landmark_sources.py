@@ -25,9 +25,8 @@ from synth.errors import SynthError
 
 MEDIAPIPE_VERSION = "0.10.21"
 CORRESPONDENCE_DIR = Path(__file__).resolve().parent / "data"
-#: Width between mediapipe's cheek points 234 and 454 taken for scale (metres; an average
-#: adult face, used only to turn the correspondence spread into pixels).
-FACE_WIDTH_M = 0.14
+#: mediapipe's points at the two sides of the face: their distance is the image's scale
+FACE_SIDES = (234, 454)
 
 
 # --------------------------------------------------------------------------- synth frames
@@ -105,7 +104,8 @@ def model_key(model) -> str:
 
 def load_correspondence(model) -> dict:
     """The mediapipe -> model correspondence for this model: ``index`` (P,) mediapipe point
-    indices, ``triangles`` (P,), ``bary`` (P, 3), ``spread_m`` (P,) and the file's metadata."""
+    indices, ``triangles`` (P,), ``bary`` (P, 3), ``sigma_face`` (P,: the point's RMS residual
+    on the derivation renders in units of the face width) and the file's metadata."""
     key = model_key(model)
     path = CORRESPONDENCE_DIR / f"mediapipe-{key}.json"
     if not path.is_file():
@@ -116,7 +116,7 @@ def load_correspondence(model) -> dict:
     return {**d, "index": np.array([p["mediapipe"] for p in pts], np.int64),
             "triangles": np.array([p["triangle"] for p in pts], np.int64),
             "bary": np.array([p["bary"] for p in pts], np.float64),
-            "spread_m": np.array([p["spread_m"] for p in pts], np.float64)}
+            "sigma_face": np.array([p["sigma_face"] for p in pts], np.float64)}
 
 
 def mediapipe_observations(images, model, *, min_sigma_px: float = 1.0) -> tuple[Observations, list[np.ndarray]]:
@@ -145,11 +145,11 @@ def mediapipe_observations(images, model, *, min_sigma_px: float = 1.0) -> tuple
 def mediapipe_points_observations(points, width: int, height: int, corr: dict, *,
                                   min_sigma_px: float = 1.0) -> Observations:
     """Observations from detected face-mesh points (N, 478, 2) in pixels and a correspondence
-    (:func:`load_correspondence`). Each mapped point's sigma is its correspondence spread
-    (metres, over the derivation renders) at the image's scale, estimated from the detected
-    face width (points 234 and 454, taken as ``FACE_WIDTH_M``), and at least ``min_sigma_px``."""
+    (:func:`load_correspondence`). Each mapped point's sigma is its residual on the derivation
+    renders (``sigma_face``) times the detected face width (distance of points ``FACE_SIDES``),
+    and at least ``min_sigma_px``."""
     pts = np.asarray(points, np.float64)
-    px_per_m = np.linalg.norm(pts[:, 454] - pts[:, 234], axis=-1) / FACE_WIDTH_M  # (N,)
-    sigma = np.maximum(min_sigma_px, corr["spread_m"][None] * px_per_m[:, None])
+    face_px = np.linalg.norm(pts[:, FACE_SIDES[1]] - pts[:, FACE_SIDES[0]], axis=-1)  # (N,)
+    sigma = np.maximum(min_sigma_px, corr["sigma_face"][None] * face_px[:, None])
     return Observations(pts[:, corr["index"]], sigma, width, height, None, landmark_set="mediapipe",
                         landmark_def=(corr["triangles"], corr["bary"]))
