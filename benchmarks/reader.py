@@ -20,14 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import fake_frames as ff  # noqa: E402
 from exr_io import fake_frame  # noqa: E402
 
 from synth.dataset.reader import list_frames, rays  # noqa: E402
 from synth.dataset.shards import open_dataset  # noqa: E402
+from tests.support import fake_frames as ff  # noqa: E402
 
 
 def make_dataset(root: Path, size: int, n_frames: int) -> Path:

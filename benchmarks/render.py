@@ -1,4 +1,4 @@
-"""Rendering benchmarks (issue 4). Prints Markdown tables for docs/performance.md.
+"""Rendering benchmarks. Prints Markdown tables for docs/performance.md.
 
     .venv/bin/python benchmarks/render.py overhead [--identities 1 --expressions 2 --views 15]
     .venv/bin/python benchmarks/render.py quality  [--views 2 --reference-spp 1024]
@@ -22,7 +22,6 @@ import argparse
 import os
 import platform
 import resource
-import shutil
 import sys
 import tempfile
 import time

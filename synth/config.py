@@ -21,7 +21,7 @@ from typing import Any
 from synth.assets import classes as asset_classes
 from synth.errors import SynthError
 
-# The render presets live here and nowhere else (the render issue consumes them).
+# The render presets live here and nowhere else (the plan records the resolved settings).
 RENDER_PRESETS: dict[str, dict[str, Any]] = {
     "ci": {"resolution": (64, 64), "samples": 4, "denoise": False, "adaptive_sampling": False,
            "adaptive_threshold": 0.0},

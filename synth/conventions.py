@@ -213,13 +213,6 @@ def project(K: np.ndarray, world_to_camera: np.ndarray, points) -> tuple[np.ndar
 # --------------------------------------------------------------------------- joints
 
 
-def rotation_x(deg) -> np.ndarray:
-    """(..., 3) axis-angle for a rotation about +X."""
-    r = _rad(deg)
-    z = np.zeros_like(r)
-    return np.stack([r, z, z], axis=-1)
-
-
 def jaw_axis_angle(open_deg, lateral_deg=0.0) -> np.ndarray:
     """Jaw rotation: ``open_deg`` > 0 opens the mouth (about +X), ``lateral_deg`` > 0 swings
     the chin toward the subject's left (about +Z). Returned as (..., 3) axis-angle of

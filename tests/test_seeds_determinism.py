@@ -17,7 +17,7 @@ from synth import seeds
 from synth.config import load_config
 from synth.plan import planner
 from synth.plan.io import load_plan
-from toy_model import write_toy_model
+from tests.support.toy_model import write_toy_model
 
 SYNTH = Path(__file__).resolve().parents[1] / "synth"
 U64 = st.integers(0, 2**64 - 1)
@@ -75,7 +75,6 @@ def test_no_global_rng_or_wall_clock_seed(package):
 
 # --------------------------------------------------------------------------- seeds
 
-
 @settings(max_examples=60, deadline=None)
 @given(seed=U64, stream=U64, c=st.lists(U64, min_size=3, max_size=3))
 def test_vectorised_philox_equals_numpy(seed, stream, c):
@@ -105,7 +104,6 @@ def test_frame_seeds_are_pure_and_in_range():
 
 
 # --------------------------------------------------------------------------- plans
-
 
 @pytest.fixture(scope="module")
 def toy(tmp_path_factory):

@@ -1,12 +1,9 @@
 """Iris rig: a procedural iris on the eye material (no new objects).
 
-Per-vertex eye coordinates are written to the head mesh (point attribute ``iris_coord``):
-for each eyeball, with its centre fitted to the rest-pose sclera and its forward axis from
-the centre to the iris centroid (the eye joint's rest orientation), ``(rho cos phi, rho sin
-phi, rho)`` where ``rho`` is the angle from the forward axis divided by the limbus angle
-(0 at the pupil centre, 1 at the limbus) and ``phi`` the angle around the axis (mirrored on
-the left eye so nasal/temporal match). Being attached to vertices, the coordinates follow
-the eyeball when the eye joints rotate (gaze), for both eyes.
+Polar eye coordinates per vertex (``rho``: 0 at the pupil centre, 1 at the limbus; ``phi``
+around the eye's axis; :func:`synth.assets.fit.eyes.eye_coordinates`) are written to the
+head mesh (point attribute ``iris_coord``). Being attached to vertices, the coordinates
+follow the eyeball when the eye joints rotate (gaze), for both eyes.
 
 The shader (``synth.appearance.iris`` palette from melanin + stroma scattering): radial fibres (noise
 stretched along rho), crypts (Voronoi), a collarette / central-heterochromia inner zone,
@@ -15,55 +12,11 @@ the limbal ring and the pupil (radius from ``pupil_dilation``), mixed over the s
 
 from __future__ import annotations
 
-import numpy as np
-
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
 from synth.appearance.iris import iris_palette, pupil_ratio
+from synth.assets.fit.eyes import eye_coordinates
 from synth.dataset.segmentation import CLASSES
-
-
-def _sphere_centre(P):
-    A = np.c_[2 * P, np.ones(len(P))]
-    b = (P ** 2).sum(1)
-    x = np.linalg.lstsq(A, b, rcond=None)[0]
-    return x[:3]
-
-
-def eye_coordinates(data, rest: np.ndarray) -> tuple[np.ndarray, dict]:
-    V = np.asarray(rest, np.float64)
-    out = np.full((len(V), 3), 9.0)
-    info = {}
-    for side, s in (("l", 1.0), ("r", -1.0)):
-        eye = data.regions.get(f"eye_{side}")
-        sclera = data.regions.get(f"sclera_{side}", eye)
-        iris = data.regions.get(f"iris_{side}")
-        if eye is None or sclera is None:
-            continue
-        eye = np.asarray(eye, np.int64)
-        c = _sphere_centre(V[np.asarray(sclera, np.int64)])
-        if iris is not None:
-            f = V[np.asarray(iris, np.int64)].mean(0) - c
-        else:
-            f = np.array([0.0, -1.0, 0.0])
-        f /= np.linalg.norm(f)
-        u = np.cross(f, [0.0, 0.0, 1.0])
-        u /= np.linalg.norm(u)
-        w = np.cross(u, f)
-        q = V[eye] - c
-        q /= np.linalg.norm(q, axis=1, keepdims=True)
-        theta = np.arccos(np.clip(q @ f, -1, 1))
-        if iris is not None:
-            qi = V[np.asarray(iris, np.int64)] - c
-            qi /= np.linalg.norm(qi, axis=1, keepdims=True)
-            lim = float(np.arccos(np.clip(qi @ f, -1, 1)).max())
-        else:
-            lim = 0.5
-        rho = theta / lim
-        phi = np.arctan2(q @ w, s * (q @ u))
-        out[eye] = np.c_[rho * np.cos(phi), rho * np.sin(phi), rho]
-        info[side] = {"centre": c.round(6).tolist(), "forward": f.round(5).tolist(), "limbus_rad": round(lim, 5)}
-    return out, info
 
 
 def build(ctx, entry: dict) -> Rig:

@@ -1,9 +1,9 @@
 """Makeup rig: shader layers over the skin material (no new objects).
 
-Masks are computed per vertex with numpy from the head regions and ibug68 landmarks and
-written to the head mesh as two point colour attributes (``makeup_mask``: lips, eyeshadow,
-eyeliner, blush; ``makeup_mask2``: foundation, eyeliner wing), read back in the skin
-material by Attribute nodes and mixed over the skin's base colour / roughness / coat.
+Masks are computed per vertex with numpy from the head regions and ibug68 landmarks
+(:func:`synth.assets.fit.masks.makeup_masks`) and written to the head mesh as two point
+colour attributes (``makeup_mask``: lips, eyeshadow, eyeliner, blush; ``makeup_mask2``:
+foundation, eyeliner wing), read back in the skin material by Attribute nodes and mixed over the skin's base colour / roughness / coat.
 Looks: ``light_foundation``, ``lipstick`` (with gloss), ``eyeliner`` (optional wing),
 ``eyeshadow`` (with shimmer), ``blush``, ``full_look`` (lips + shadow + liner + blush).
 """
@@ -14,7 +14,7 @@ import numpy as np
 
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
-from synth.assets.fit.masks import distance_to, feather, region_mask, segment_distance, skin_only
+from synth.assets.fit.masks import makeup_masks
 from synth.dataset.segmentation import CLASSES
 
 LIP_COLOURS = {"red": (0.42, 0.02, 0.03), "nude": (0.42, 0.2, 0.15), "pink": (0.6, 0.16, 0.25),
@@ -23,53 +23,6 @@ SHADOW_COLOURS = {"brown": (0.12, 0.06, 0.03), "gold": (0.5, 0.33, 0.1), "grey":
                   "plum": (0.17, 0.05, 0.12), "blue": (0.06, 0.12, 0.32), "green": (0.07, 0.2, 0.08)}
 LINER = (0.01, 0.008, 0.008)
 BLUSH = (0.62, 0.18, 0.2)
-
-
-def compute_masks(data, V: np.ndarray, lm: np.ndarray, extent: float = 0.6, liner: float = 0.6,
-                  wing: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """(V, 4) [lips, eyeshadow, eyeliner, blush] and (V, 4) [foundation, wing, 0, 0]."""
-    n = len(V)
-    skin = skin_only(data, n).astype(float)
-    lips_idx = data.regions.get("lips")
-    lips_pts = V[np.asarray(lips_idx)] if lips_idx is not None else V[0:0]
-    if len(lips_pts) == 0:  # fall back to the landmark lip contour
-        lips_pts = lm[48:60]
-    lips = feather(distance_to(V, lips_pts), 0.0005, 0.0025) * skin
-    shadow = np.zeros(n)
-    eyeliner = np.zeros(n)
-    wingm = np.zeros(n)
-    blush = np.zeros(n)
-    for sl, outer_i, sign in ((slice(36, 42), 36, -1.0), (slice(42, 48), 45, 1.0)):
-        eye = lm[sl]
-        c = eye.mean(0)
-        half_w = 0.5 * np.linalg.norm(eye[0] - eye[3])
-        upper = eye[1:3]  # upper lid points
-        z_lid = upper[:, 2].mean()
-        dx = np.abs(V[:, 0] - c[0]) / (half_w * (1.15 + 0.3 * extent))
-        dz = (V[:, 2] - z_lid) / (0.006 + 0.008 * extent)
-        front = V[:, 1] < c[1] + 0.012
-        shadow = np.maximum(shadow, feather(dx, 0.6, 1.0) * np.clip(dz * 4, 0, 1) * feather(dz, 0.5, 1.0) * front)
-        # eyeliner: along the upper lash line (upper lid landmarks + corners)
-        line = np.concatenate([eye[[0, 1, 2, 3]]])
-        dl = np.min([segment_distance(V, line[i], line[i + 1]) for i in range(3)], axis=0)
-        eyeliner = np.maximum(eyeliner, feather(dl, 0.0004 + 0.0008 * liner, 0.0012 + 0.0012 * liner)
-                              * (V[:, 2] > z_lid - 0.0025) * front)
-        if wing:
-            corner = lm[outer_i]
-            tip = corner + np.array([sign * 0.007, 0.002, 0.0035])
-            wingm = np.maximum(wingm, feather(segment_distance(V, corner, tip), 0.0005 * (1 + liner), 0.0015)
-                               * front)
-        # blush: on the cheek apple, below and outside the eye
-        cheek = c + np.array([sign * 0.008, -0.002, -0.03])
-        blush = np.maximum(blush, feather(np.linalg.norm(V - cheek, axis=1), 0.006, 0.022))
-    shadow *= skin * (1 - lips)
-    eyeliner = np.maximum(eyeliner, wingm) * skin
-    blush *= skin * (1 - lips)
-    face = region_mask(data.regions, ("face",), n).astype(float)
-    face = np.maximum(face, feather(distance_to(V, V[face > 0]), 0.0, 0.01)) if face.any() else np.ones(n)
-    m1 = np.stack([lips, shadow, eyeliner, blush], 1)
-    m2 = np.stack([face * skin, wingm, np.zeros(n), np.zeros(n)], 1)
-    return np.clip(m1, 0, 1), np.clip(m2, 0, 1)
 
 
 def _choose(v, table, rng):
@@ -112,7 +65,7 @@ def build(ctx, entry: dict) -> Rig:
         gloss = float(p.get("gloss", 0.4))
     else:
         raise ValueError(f"unknown makeup look {look!r}")
-    m1, m2 = compute_masks(ctx.data, np.asarray(ctx.vertices), np.asarray(ctx.landmarks["ibug68"]),
+    m1, m2 = makeup_masks(ctx.data, np.asarray(ctx.vertices), np.asarray(ctx.landmarks["ibug68"]),
                            extent=extent, liner=thick, wing=wing)
     me = ctx.head.data
     bmat.write_point_colour(me, "makeup_mask", m1)

@@ -21,26 +21,8 @@ import numpy as np
 
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
-from synth.assets.fit.masks import feather, region_mask, skin_only
+from synth.assets.fit.masks import skin_detail_mask
 from synth.dataset.segmentation import CLASSES
-
-
-def compute_mask(data, V, lm) -> np.ndarray:
-    n = len(V)
-    skin = skin_only(data, n).astype(float)
-    nose_tip, c_l, c_r = lm[30], lm[42:48].mean(0), lm[36:42].mean(0)
-    cheeks = np.maximum.reduce([feather(np.linalg.norm(V - (c + [0, -0.003, -0.025]), axis=1), 0.008, 0.025)
-                                for c in (c_l, c_r)] + [feather(np.linalg.norm(V - nose_tip, axis=1), 0.006, 0.02)])
-    brow_c = 0.5 * (lm[19] + lm[24])
-    tz = np.maximum(feather(np.abs(V[:, 0] - nose_tip[0]), 0.008, 0.02) * (V[:, 2] > nose_tip[2] - 0.01)
-                    * (V[:, 2] < brow_c[2] + 0.05), feather(np.linalg.norm(V - lm[8], axis=1), 0.01, 0.025))
-    forehead = (V[:, 2] > brow_c[2] + 0.012) * feather(np.abs(V[:, 0] - brow_c[0]), 0.035, 0.055) * (V[:, 1] < brow_c[1] + 0.03)
-    crows = np.maximum(feather(np.linalg.norm(V - (lm[45] + [0.01, 0.004, 0]), axis=1), 0.002, 0.012),
-                       feather(np.linalg.norm(V - (lm[36] + [-0.01, 0.004, 0]), axis=1), 0.002, 0.012))
-    wr = np.maximum(forehead, crows)
-    beard = region_mask(data.regions, ("beard",), n).astype(float)
-    m = np.stack([cheeks, tz, wr, beard], 1) * skin[:, None]
-    return np.clip(m, 0, 1)
 
 
 def _tex_node(mat, kind, scale, seed, vec=None):
@@ -66,7 +48,7 @@ def build(ctx, entry: dict) -> Rig:
     mat = ctx.materials[CLASSES["skin"]]
     nt = mat.node_tree
     V, lm = np.asarray(ctx.vertices), np.asarray(ctx.landmarks["ibug68"])
-    bmat.write_point_colour(ctx.head.data, "skin_mask", compute_mask(ctx.data, V, lm))
+    bmat.write_point_colour(ctx.head.data, "skin_mask", skin_detail_mask(ctx.data, V, lm))
     attr = bmat.attribute(mat, "skin_mask")
     sep = nt.nodes.new("ShaderNodeSeparateColor")
     nt.links.new(attr.outputs["Color"], sep.inputs["Color"])

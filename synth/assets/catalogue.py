@@ -16,7 +16,6 @@ Sampling from a catalogue is :mod:`synth.plan.assets`.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import tomllib
 from dataclasses import dataclass, field
@@ -27,6 +26,7 @@ from typing import Any
 from synth.assets import packs
 from synth.assets.classes import NAMES
 from synth.errors import SynthError
+from synth.io import sha256_bytes
 
 SCHEMA_PATH = Path(__file__).resolve().parents[1] / "schemas" / "asset.schema.json"
 #: Parameters an asset may have: the planner gives each class 2 + MAX_PARAMETERS uniforms
@@ -121,7 +121,7 @@ def load_catalogue(manifest_dir: str | Path | None = None) -> Catalogue:
         _validate(doc, rp, "rules_file")
         rules = list(doc.get("exclude", []))
     canon = json.dumps({"classes": classes, "rules": rules}, sort_keys=True, separators=(",", ":"))
-    return Catalogue(classes, rules, hashlib.sha256(canon.encode()).hexdigest(), str(d), pack_records)
+    return Catalogue(classes, rules, sha256_bytes(canon.encode()), str(d), pack_records)
 
 
 def _check_params(asset: dict, path: Path) -> None:

@@ -5,7 +5,7 @@ classes reads this table: the configuration (``assets.disabled_classes``), the c
 loader and ``synth assets validate`` (one manifest file per class, generator ownership,
 which classes packs may provide), the plan (sampling order and seeds), the render worker
 (build order, the frame JSON's ``assets`` object), the rigs (``blender_scripts.assets``:
-module, segmentation id) and the schema tests (``tests/test_assets_registry.py`` checks
+module, segmentation id) and the schema tests (``tests/assets/test_registry.py`` checks
 ``synth/schemas/*.json`` against this table). Adding a class is one entry here, a
 ``<name>.toml`` in the catalogue and a rig module in ``blender_scripts/assets/``.
 

@@ -15,8 +15,8 @@ import os
 from pathlib import Path
 
 from synth.assets.classes import PACK_ANCHORS
-from synth.dataset.fsio import sha256_file
 from synth.errors import SynthError
+from synth.io import sha256_file
 
 #: Skull width (X extent of the scalp region in the head-joint frame, metres) a pack is
 #: modelled for unless the entry says otherwise (the default head measures 0.149 m).

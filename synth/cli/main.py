@@ -27,7 +27,7 @@ def _register() -> None:
 
     for mod, attr in (("synth.cli.config_cmd", "register"), ("synth.cli.plan_cmd", "register"),
                       ("synth.cli.render_cmd", "register"), ("synth.cli.dataset_cmd", "register"),
-                      ("synth.cli.assets_cmd", "register")):
+                      ("synth.cli.assets_cmd", "register"), ("prior.cli", "register")):
         try:
             m = importlib.import_module(mod)
         except ModuleNotFoundError as e:

@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Optional
 
@@ -94,8 +91,10 @@ def sample(n: int = typer.Option(4, "--n", min=1, max=100000, help="Number of me
     hm = HeadModel(data)
     gmm = GaussianMixture.from_model(data)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=".synth-sample-", dir=out.parent))  # same filesystem: atomic rename
-    try:
+    from synth.io import atomic_dir, dumps_json
+    from synth.model.export import write_mesh
+
+    with atomic_dir(out) as tmp:  # replaces an empty ``out`` (checked above)
         records = []
         for i in range(n):
             # one generator per mesh index, so mesh i is the same whatever n is
@@ -108,19 +107,11 @@ def sample(n: int = typer.Option(4, "--n", min=1, max=100000, help="Number of me
                 psi[idx] = rng.uniform(0.2, 0.9, size=idx.size)
             v = hm.vertices(beta, psi)[0]
             name = f"sample_{i:05d}.{fmt}"
-            from synth.model.export import write_mesh
-
             write_mesh(tmp / name, v, data)
             records.append({"file": name, "identity": [round(float(x), 6) for x in beta],
                             "expression": {data.expression_names[j]: round(float(psi[j]), 6)
                                            for j in np.nonzero(psi)[0]}})
-        (tmp / "codes.json").write_text(json.dumps({"model": data.name, "seed": seed, "meshes": records}, indent=1))
-        if out.exists():
-            out.rmdir()
-        os.replace(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+        (tmp / "codes.json").write_bytes(dumps_json({"model": data.name, "seed": seed, "meshes": records}))
     typer.echo(f"wrote {n} meshes to {out}")
 
 

@@ -32,9 +32,9 @@ from typing import Any
 import numpy as np
 
 from synth.dataset.exr_check import check_exr_bytes
-from synth.dataset.fsio import atomic_write_bytes
 from synth.dataset.segmentation import NAMES
 from synth.errors import SynthError
+from synth.io import atomic_write_bytes
 
 FORMAT = "synth-frame-exr/1"
 HALF_MAX = 65504.0

@@ -17,11 +17,10 @@ from pathlib import Path
 import numpy as np
 
 from synth.dataset.exr import CHANNELS
-from synth.dataset.fsio import atomic_write_json, loads_json
 from synth.dataset.layout import frame_files, parse_frame_key
 from synth.errors import SynthError
+from synth.io import atomic_write_json, loads_json
 
-NUM_LANDMARKS = 68
 SCHEMA_PATH = Path(__file__).parent.parent / "schemas" / "frame.schema.json"
 #: Largest allowed distance (pixels) between landmarks_2d and the projection of landmarks_3d.
 PROJECTION_TOL_PX = 0.01

@@ -12,9 +12,9 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from synth.dataset.fsio import atomic_write_json, loads_json, sha256_bytes
 from synth.dataset.layout import (INDEX_FILE, INDEX_FORMAT, LOCK_FILE, MANIFEST_FILE, SHARD_FORMAT, SHARDS_DIR,
                                   SHARD_ID_RE, flock)
+from synth.io import atomic_write_json, loads_json, sha256_bytes
 
 
 class ManifestError(ValueError):

@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 
 from synth.dataset.exr import read_frame_exr
-from synth.dataset.fsio import atomic_write_bytes
 from synth.dataset.layout import frame_files, parse_frame_key
 from synth.dataset.segmentation import PALETTE
 from synth.dataset.shards import load_dataset
 from synth.errors import SynthError
+from synth.io import atomic_write_bytes
 
 GREY_SRGB = 0.5
 BG = (24, 24, 24)

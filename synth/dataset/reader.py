@@ -40,12 +40,24 @@ import numpy as np
 
 from synth.dataset.exr import decode_frame_exr
 from synth.dataset.frame_json import check_frame_json
-from synth.dataset.fsio import loads_json
 from synth.dataset.layout import MANIFEST_FILE, SHARDS_DIR, SHARD_ID_RE
 from synth.errors import SynthError
+from synth.io import loads_json
 
 #: Largest frame member read from a tar stream (bytes); a larger one is refused, not read.
 MAX_MEMBER_BYTES = 1 << 30
+
+
+def _meta_field(section: str | None, key: str, kind, doc: str) -> cached_property:
+    """A read-only frame attribute taken from the frame JSON (``meta[section][key]``, or
+    ``meta[key]`` without a section): an int, or an array of dtype ``kind``."""
+
+    def get(self):
+        v = (self.meta if section is None else self.meta[section])[key]
+        return int(v) if kind is int else np.asarray(v, kind)
+
+    get.__doc__ = doc
+    return cached_property(get)
 
 
 @dataclass(eq=False)
@@ -66,23 +78,11 @@ class Frame:
     shard: str | None = None
 
     # ---------------------------------------------------------------- pixels
-    @property
-    def height(self) -> int:
-        return int(self.rgba.shape[0])
-
-    @property
-    def width(self) -> int:
-        return int(self.rgba.shape[1])
-
-    @property
-    def alpha(self) -> np.ndarray:
-        """(H, W) coverage in [0, 1]."""
-        return self.rgba[..., 3]
-
-    @property
-    def rgb_premultiplied(self) -> np.ndarray:
-        """(H, W, 3) colour premultiplied by alpha (= colour over a black background)."""
-        return self.rgba[..., :3]
+    height = property(lambda self: int(self.rgba.shape[0]), doc="Image height, pixels.")
+    width = property(lambda self: int(self.rgba.shape[1]), doc="Image width, pixels.")
+    alpha = property(lambda self: self.rgba[..., 3], doc="(H, W) coverage in [0, 1].")
+    rgb_premultiplied = property(lambda self: self.rgba[..., :3],
+                                 doc="(H, W, 3) colour premultiplied by alpha (= colour over a black background).")
 
     @cached_property
     def rgb(self) -> np.ndarray:
@@ -92,49 +92,21 @@ class Frame:
             out = np.where(a > 0, self.rgb_premultiplied / np.where(a > 0, a, 1), 0)
         return out.astype(np.float32, copy=False)
 
-    # ---------------------------------------------------------------- indices and codes
-    @property
-    def identity_index(self) -> int:
-        return int(self.meta["identity_index"])
-
-    @property
-    def expression_index(self) -> int:
-        return int(self.meta["expression_index"])
-
-    @property
-    def view_index(self) -> int:
-        return int(self.meta["view_index"])
-
-    @cached_property
-    def identity_code(self) -> np.ndarray:
-        """The head model's identity code (beta), float32."""
-        return np.asarray(self.meta["model"]["identity"], np.float32)
-
-    @cached_property
-    def expression_code(self) -> np.ndarray:
-        """The head model's expression code (psi), float32."""
-        return np.asarray(self.meta["model"]["expression"], np.float32)
+    # ---------------------------------------------------------------- indices, codes, camera
+    identity_index = _meta_field(None, "identity_index", int, "The frame's identity index.")
+    expression_index = _meta_field(None, "expression_index", int, "The expression's index within the identity.")
+    view_index = _meta_field(None, "view_index", int, "The view's index within the expression.")
+    identity_code = _meta_field("model", "identity", np.float32, "The head model's identity code (beta), float32.")
+    expression_code = _meta_field("model", "expression", np.float32,
+                                  "The head model's expression code (psi), float32.")
+    K = _meta_field("camera", "K", np.float64, "(3, 3) intrinsics in pixels (top-left corner at (0, 0)).")
+    world_to_camera = _meta_field("camera", "world_to_camera", np.float64, "(4, 4) rigid world -> OpenCV camera.")
+    camera_to_world = _meta_field("camera", "camera_to_world", np.float64, "(4, 4) rigid OpenCV camera -> world.")
 
     @cached_property
     def joint_rotations(self) -> dict[str, np.ndarray]:
         """Joint name -> axis-angle (3,) radians, float32, in the model's joint order."""
         return {k: np.asarray(v, np.float32) for k, v in (self.meta["model"].get("joint_rotations") or {}).items()}
-
-    # ---------------------------------------------------------------- camera
-    @cached_property
-    def K(self) -> np.ndarray:  # noqa: N802 - the usual name
-        """(3, 3) intrinsics in pixels (top-left corner at (0, 0))."""
-        return np.asarray(self.meta["camera"]["K"], np.float64)
-
-    @cached_property
-    def world_to_camera(self) -> np.ndarray:
-        """(4, 4) rigid world -> OpenCV camera."""
-        return np.asarray(self.meta["camera"]["world_to_camera"], np.float64)
-
-    @cached_property
-    def camera_to_world(self) -> np.ndarray:
-        """(4, 4) rigid OpenCV camera -> world."""
-        return np.asarray(self.meta["camera"]["camera_to_world"], np.float64)
 
 
 def decode_frame(json_bytes: bytes, exr_bytes: bytes, *, key: str | None = None, shard: str | None = None,

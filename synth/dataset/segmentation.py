@@ -1,6 +1,5 @@
-"""Segmentation class IDs (the EXR ``segmentation`` layer). Fixed forever: IDs are data.
-
-Classes without an asset yet keep their IDs so datasets stay comparable across versions.
+"""Segmentation class IDs (the EXR ``segmentation`` layer). Fixed forever: IDs are data, so
+datasets stay comparable across versions.
 """
 
 from __future__ import annotations

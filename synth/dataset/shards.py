@@ -30,13 +30,13 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import synth
-from synth.dataset.fsio import atomic_write_json, is_temp_name, loads_json
 from synth.dataset.index import ManifestError, parse_manifest, read_index, update_index
 from synth.dataset.frame_json import jsonable
 from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, LOCK_FILE, MANIFEST_FILE, SHARDS_DIR,
                                   STAGING_DIR, check_shard_id, flock, shard_dir, staging_dir, utc_now)
 from synth.dataset.staging import ShardBusy, ShardCommitted, StagingShard
 from synth.errors import SynthError
+from synth.io import atomic_write_json, is_temp_name, loads_json
 
 
 #: ``synth render`` keeps the plan directory it renders next to the shards (DIR/plan/).
@@ -140,10 +140,6 @@ class Dataset:
             raise SynthError(f"shard {shard_id} is not committed", str(p.parent), "render it first") from None
         except ManifestError as e:
             raise SynthError(str(e), str(p), "run `synth validate`; re-render the shard into a new --out") from None
-
-    def update_index(self) -> dict:
-        self._need_writable()
-        return update_index(self.root, self.plan_hash)
 
     # -- writing -----------------------------------------------------------------------------
     def _need_writable(self) -> None:

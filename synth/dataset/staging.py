@@ -7,7 +7,6 @@ crash-safety argument.
 from __future__ import annotations
 
 import fcntl
-import hashlib
 import os
 import platform
 from collections.abc import Sequence
@@ -18,11 +17,11 @@ import numpy as np
 import synth
 from synth.dataset.exr import encode_frame_exr, read_frame_exr_header
 from synth.dataset.frame_json import check_frame_json, jsonable
-from synth.dataset.fsio import (atomic_write_bytes, atomic_write_json, dumps_json, fsync_dir, is_temp_name,
-                                loads_json, sha256_bytes)
 from synth.dataset.index import update_index
 from synth.dataset.layout import MANIFEST_FILE, SHARD_FORMAT, frame_files, shard_dir, staging_dir, utc_now
 from synth.errors import SynthError
+from synth.io import (atomic_write_bytes, atomic_write_json, dumps_json, file_digest, fsync_dir, is_temp_name,
+                      loads_json, sha256_bytes)
 
 
 class ShardBusy(SynthError):
@@ -231,7 +230,8 @@ class StagingShard:
                              "remove them (only KEY.exr and KEY.json belong to a shard)")
         files = {}
         for name in sorted(wanted):
-            files[name] = self._hash_and_sync(self.dir / name, durable)
+            digest, size = file_digest(self.dir / name, sync=durable)
+            files[name] = {"sha256": digest, "bytes": size}
         manifest = {
             "format": SHARD_FORMAT,
             "shard_id": self.shard_id,
@@ -270,21 +270,3 @@ class StagingShard:
         self.close()
         manifest["manifest_sha256"] = sha256_bytes(data)
         return manifest
-
-    @staticmethod
-    def _hash_and_sync(path: Path, durable: bool) -> dict:
-        h = hashlib.sha256()
-        n = 0
-        fd = os.open(path, os.O_RDONLY)
-        try:
-            while True:
-                b = os.read(fd, 1 << 20)
-                if not b:
-                    break
-                h.update(b)
-                n += len(b)
-            if durable:
-                os.fsync(fd)
-        finally:
-            os.close(fd)
-        return {"sha256": h.hexdigest(), "bytes": n}

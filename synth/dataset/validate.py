@@ -23,11 +23,11 @@ import numpy as np
 
 from synth.dataset.exr import pixel_defects, read_frame_exr
 from synth.dataset.frame_json import validate_frame_json
-from synth.dataset.fsio import is_temp_name, loads_json, sha256_bytes, sha256_file
 from synth.dataset.index import ManifestError, parse_manifest, read_index
 from synth.dataset.layout import MANIFEST_FILE, SHARDS_DIR, STAGING_DIR, frame_files
 from synth.dataset.shards import load_dataset
 from synth.errors import SynthError
+from synth.io import is_temp_name, loads_json, sha256_bytes, sha256_file
 
 
 class DefectsFound(SynthError):

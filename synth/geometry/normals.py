@@ -1,4 +1,4 @@
-"""Unit vectors, face normals and vertex normals of triangle meshes (numpy, batched).
+"""Dot products, unit vectors, face normals and vertex normals of triangle meshes (numpy, batched).
 
 ``vertices`` are (V, 3) floats, ``triangles`` (T, 3) vertex indices, counter-clockwise seen
 from the side the normal points to. Everything is computed in float64.
@@ -7,6 +7,11 @@ from the side the normal points to. Everything is computed in float64.
 from __future__ import annotations
 
 import numpy as np
+
+
+def dot(a, b) -> np.ndarray:
+    """Dot products along the last axis of broadcastable arrays."""
+    return np.einsum("...i,...i->...", a, b)
 
 
 def normalize(v: np.ndarray, eps: float = 1e-12) -> np.ndarray:

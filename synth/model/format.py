@@ -18,7 +18,6 @@ import dataclasses
 import io
 import json
 import os
-import tempfile
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -26,13 +25,15 @@ from typing import Any
 import numpy as np
 
 from synth.errors import ModelFormatError
+from synth.io import atomic_place
 
 FORMAT_NAME = "synth-head-model"
 FORMAT_VERSION = 1
 
 #: Joints every model must have (more are allowed).
 REQUIRED_JOINTS = ("neck", "head", "jaw", "eye_l", "eye_r")
-#: Region names every model should define (a missing one is an error only if listed here).
+#: Region names every model is expected to define (the asset rigs read them; hair needs
+#: ``scalp``). validate_model does not require them.
 REQUIRED_REGIONS = ("face", "scalp", "ears", "eyes", "teeth", "mouth_interior", "eyelash_lines", "neck")
 #: Landmark sets every model must define.
 REQUIRED_LANDMARK_SETS = ("ibug68",)
@@ -70,17 +71,9 @@ class HeadModelData:
     landmark_names: dict[str, list[str]] = dataclasses.field(default_factory=dict)
     extra: dict[str, Any] = dataclasses.field(default_factory=dict)  # free-form JSON metadata
 
-    @property
-    def num_vertices(self) -> int:
-        return int(self.template.shape[0])
-
-    @property
-    def identity_dims(self) -> int:
-        return int(self.identity_basis.shape[0])
-
-    @property
-    def expression_dims(self) -> int:
-        return int(self.expression_basis.shape[0])
+    num_vertices = property(lambda self: int(self.template.shape[0]), doc="V, the number of vertices.")
+    identity_dims = property(lambda self: int(self.identity_basis.shape[0]), doc="Ki, identity code length.")
+    expression_dims = property(lambda self: int(self.expression_basis.shape[0]), doc="Ke, expression code length.")
 
     def meta(self) -> dict[str, Any]:
         return {
@@ -102,28 +95,19 @@ class HeadModelData:
 
 # --------------------------------------------------------------------------- schema
 
-# member name -> (dtype kind, ndim); shapes are cross-checked in validate_model.
+# member name -> (dtype kind, ndim), one concept a line; shapes are cross-checked in
+# validate_model. The order is the order of the members in the file.
 _ARRAY_SCHEMA: dict[str, tuple[str, int]] = {
-    "template": ("f", 2),
-    "triangles": ("i", 2),
-    "identity_basis": ("f", 3),
-    "identity_scale": ("f", 1),
-    "expression_basis": ("f", 3),
-    "expression_scale": ("f", 1),
-    "joint_parents": ("i", 1),
-    "joint_rest": ("f", 2),
-    "joint_identity_basis": ("f", 3),
+    "template": ("f", 2), "triangles": ("i", 2),
+    "identity_basis": ("f", 3), "identity_scale": ("f", 1),
+    "expression_basis": ("f", 3), "expression_scale": ("f", 1),
+    "joint_parents": ("i", 1), "joint_rest": ("f", 2), "joint_identity_basis": ("f", 3),
     "skin_weights": ("f", 2),
-    "prior_weights": ("f", 1),
-    "prior_means": ("f", 2),
-    "prior_covs": ("f", 3),
+    "prior_weights": ("f", 1), "prior_means": ("f", 2), "prior_covs": ("f", 3),
 }
 _OPTIONAL_ARRAYS: dict[str, tuple[str, int]] = {
-    "poly_offsets": ("i", 1),
-    "poly_indices": ("i", 1),
-    "uvs": ("f", 2),
-    "tri_uv": ("i", 2),
-    "poly_uv": ("i", 1),
+    "poly_offsets": ("i", 1), "poly_indices": ("i", 1),
+    "uvs": ("f", 2), "tri_uv": ("i", 2), "poly_uv": ("i", 1),
 }
 
 _META_SCHEMA = {
@@ -290,18 +274,12 @@ def write_model(m: HeadModelData, path: str | os.PathLike, compress: bool = Fals
     validate_model(m, where=str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     members = _to_members(m)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    os.chmod(tmp, 0o644)  # mkstemp creates 0600; a model or mesh is meant to be shared
-    try:
-        with os.fdopen(fd, "wb") as f:
+
+    def fill(tmp: Path) -> None:
+        with open(tmp, "wb") as f:
             (np.savez_compressed if compress else np.savez)(f, **members)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+
+    atomic_place(path, fill)
     return path
 
 

@@ -34,12 +34,6 @@ def cap_area(r: float) -> float:
     return 4.0 * np.pi * np.sin(0.5 * r) ** 2
 
 
-def patch_area(az_deg, el_deg) -> float:
-    a0, a1 = np.deg2rad(az_deg)
-    e0, e1 = np.deg2rad(el_deg)
-    return float((a1 - a0) * (np.sin(e1) - np.sin(e0)))
-
-
 def _point_halfwidth(e: float, ep: np.ndarray, r: float) -> np.ndarray:
     """Azimuth half-width at latitudes ``ep`` of the cap of radius r around latitude e."""
     ce = np.cos(e) * np.cos(ep)

@@ -16,7 +16,6 @@ sha256 of every shard file, so the hash covers the whole plan.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -28,6 +27,7 @@ import orjson
 
 from synth.dataset.layout import frame_key
 from synth.errors import SynthError
+from synth.io import atomic_dir, fsync_file, sha256_bytes, sha256_file
 
 PLAN_FORMAT = "synth-plan"
 PLAN_FORMAT_VERSION = 1
@@ -68,15 +68,7 @@ def dumps_pretty(obj: Any) -> bytes:
 
 def header_hash(header: dict) -> str:
     body = {k: v for k, v in header.items() if k != "plan_hash"}
-    return hashlib.sha256(orjson.dumps(body, option=orjson.OPT_SORT_KEYS)).hexdigest()
-
-
-def file_sha256(path: str | os.PathLike) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+    return sha256_bytes(orjson.dumps(body, option=orjson.OPT_SORT_KEYS))
 
 
 # --------------------------------------------------------------------------- writer
@@ -108,7 +100,7 @@ def write_shards(tmp: Path, shards: Iterable[tuple[str, dict]]) -> list[dict]:
         n_frames = sum(len(e["frames"]) for i in idents for e in i["expressions"])
         listing.append({"shard_id": shard_id, "file": name,
                         "identities": [idents[0]["identity_index"], idents[-1]["identity_index"] + 1],
-                        "frames": n_frames, "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()})
+                        "frames": n_frames, "bytes": len(data), "sha256": sha256_bytes(data)})
     return listing
 
 
@@ -126,32 +118,20 @@ def write_plan(out: str | os.PathLike, header: dict,
     except OSError as e:
         raise SynthError(f"cannot create the output's parent directory ({e.strerror})", str(out.parent),
                          "choose a writable --out") from None
-    tmp = out.parent / f".{out.name}.tmp-{os.getpid()}"
-    if tmp.exists():
-        shutil.rmtree(tmp)
-    try:
-        (tmp / SHARDS_DIR).mkdir(parents=True)
+    with atomic_dir(out) as tmp:  # replaces an empty ``out`` (checked above)
+        (tmp / SHARDS_DIR).mkdir()
         listing, summary = produce(tmp)
         header = {**header, "shards": listing}
         header["plan_hash"] = header_hash(header)
         summary = {**summary, "plan_hash": header["plan_hash"]}
         (tmp / SUMMARY_FILE).write_bytes(dumps_pretty(summary))
-        with open(tmp / HEADER_FILE, "wb") as f:
-            f.write(dumps_pretty(header))
-            f.flush()
-            os.fsync(f.fileno())
+        (tmp / HEADER_FILE).write_bytes(dumps_pretty(header))
+        fsync_file(tmp / HEADER_FILE)
         if existing is not None:
             if existing != header["plan_hash"]:
                 raise SynthError(f"output directory holds a different plan (hash {existing[:16]}, this plan "
                                  f"{header['plan_hash'][:16]})", str(out), "use a new --out or delete the old plan")
-            shutil.rmtree(tmp)
-            return header, summary
-        if out.exists():
-            out.rmdir()  # empty (checked above)
-        os.replace(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+            shutil.rmtree(tmp)  # the identical plan is already there: keep it
     return header, summary
 
 
@@ -207,7 +187,7 @@ class Plan:
             data = p.read_bytes()
         except OSError as e:
             raise SynthError(f"cannot read shard spec ({e.strerror})", str(p), "re-run 'synth plan'") from None
-        if hashlib.sha256(data).hexdigest() != entry["sha256"]:
+        if sha256_bytes(data) != entry["sha256"]:
             raise SynthError("shard spec does not match its sha256 in plan.json", str(p), "re-run 'synth plan'")
         spec = orjson.loads(data)
         if validate_spec:
@@ -249,7 +229,7 @@ class Plan:
         path = self.model_path()
         if not path.is_file():
             raise SynthError("the plan's model file is missing", str(path), "restore it or re-run 'synth plan'")
-        if file_sha256(path) != self.model_sha256():
+        if sha256_file(path) != self.model_sha256():
             raise SynthError("the model file changed since planning (sha256 mismatch)", str(path),
                              "re-run 'synth plan' with this model")
         return read_model(path)

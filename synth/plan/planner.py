@@ -185,9 +185,8 @@ def replan_frame(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: 
 
 def model_record(model_path) -> tuple[HeadModelData, dict[str, Any]]:
     """Read the model (``None`` = the embedded default) and describe it for the plan header."""
-
+    from synth.io import sha256_file
     from synth.model.format import read_model
-    from synth.plan.io import file_sha256
 
     if model_path is None:
         from synth.model.default import default_model_path
@@ -197,7 +196,7 @@ def model_record(model_path) -> tuple[HeadModelData, dict[str, Any]]:
         p = Path(model_path).resolve()
         rec = str(p)
     data = read_model(p)
-    return data, {"name": data.name, "sha256": file_sha256(p), "path": rec, "identity_dims": data.identity_dims,
+    return data, {"name": data.name, "sha256": sha256_file(p), "path": rec, "identity_dims": data.identity_dims,
                   "expression_dims": data.expression_dims, "expression_names": list(data.expression_names),
                   "joint_names": list(data.joint_names)}
 

@@ -11,13 +11,12 @@ from prior.fit.head import TorchHeadModel  # noqa: E402
 from prior.fit.rotations import axis_angle_to_matrix  # noqa: E402
 from synth.errors import CodeError  # noqa: E402
 from synth.geometry import axis_angle_to_matrix as np_axis_angle_to_matrix  # noqa: E402
-from synth.model.default import load_default_model  # noqa: E402
 from synth.model.head import HeadModel  # noqa: E402
 
 
 @pytest.fixture(scope="module")
-def data():
-    return load_default_model()
+def data(default_model):
+    return default_model
 
 
 @pytest.fixture(scope="module")

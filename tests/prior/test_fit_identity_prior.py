@@ -11,13 +11,12 @@ from scipy.special import logsumexp  # noqa: E402
 from scipy.stats import multivariate_normal  # noqa: E402
 
 from prior.fit.identity_prior import TorchGMM  # noqa: E402
-from synth.model.default import load_default_model  # noqa: E402
 from synth.plan.identities import prior_of  # noqa: E402
 
 
 @pytest.fixture(scope="module")
-def data():
-    return load_default_model()
+def data(default_model):
+    return default_model
 
 
 def _points(data, rng):

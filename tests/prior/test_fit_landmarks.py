@@ -17,15 +17,14 @@ from prior.fit.synthetic import make_scene, scene_errors  # noqa: E402
 from synth.conventions import invert_rigid, look_at, project  # noqa: E402
 from synth.errors import SynthError  # noqa: E402
 from synth.geometry import axis_angle_to_matrix  # noqa: E402
-from synth.model.default import load_default_model  # noqa: E402
 from synth.model.head import HeadModel  # noqa: E402
 
 SEED = 7
 
 
 @pytest.fixture(scope="module")
-def model():
-    return load_default_model()
+def model(default_model):
+    return default_model
 
 
 @pytest.fixture(scope="module")

@@ -3,18 +3,15 @@
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: fake_frames
-
-import fake_frames as ff  # noqa: E402
-from prior.fit.landmark_sources import (  # noqa: E402
-    MEDIAPIPE_VERSION, frame_observations, load_correspondence, read_frames, require_mediapipe)
-from synth.dataset.shards import open_dataset  # noqa: E402
-from synth.errors import SynthError  # noqa: E402
+from prior.fit.landmark_sources import (MEDIAPIPE_VERSION, frame_observations, load_correspondence, read_frames,
+                                        require_mediapipe)
+from synth.dataset.shards import open_dataset
+from synth.errors import SynthError
+from tests.support import fake_frames as ff
 
 pytest.importorskip("OpenEXR")
 
@@ -81,21 +78,13 @@ def test_mediapipe_missing_is_one_line(monkeypatch):
 
 
 def test_correspondence_only_for_its_model():
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from toy_model import make_toy_model
+    from tests.support.toy_model import make_toy_model
 
     with pytest.raises(SynthError, match="no mediapipe landmark correspondence"):
         load_correspondence(make_toy_model())
 
 
 # --------------------------------------------------------------------------- the correspondence
-
-
-@pytest.fixture(scope="module")
-def default_model():
-    from synth.model.default import load_default_model
-
-    return load_default_model()
 
 
 def test_default_correspondence_is_sane(default_model):

@@ -11,7 +11,10 @@ and node trees from the result.
   resampling), :mod:`.groom` (what a strand rig builds; attachment), one groom module per
   class (:mod:`.hair`, :mod:`.beard`, :mod:`.eyebrows`, :mod:`.eyelashes`);
 - glasses: :mod:`.glasses` (frame geometry, contact, pose solve);
-- :mod:`.closest`: closest point on triangles, used by all of them.
+- shader layers: :mod:`.masks` (per-vertex masks of makeup and skin detail), :mod:`.eyes`
+  (polar coordinates on the eyeballs for the iris).
+
+Closest points, signed distances and ray casting come from :mod:`synth.geometry`.
 
 Randomness comes only from the generator the rig passes in (``ctx.rng(cls)``,
 :func:`synth.assets.classes.rig_rng`).

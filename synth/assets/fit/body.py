@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from synth.assets.fit.attach import Binding, SurfaceQuery, push_out
+from synth.assets.fit.attach import Binding, body_query, push_out
 from synth.assets.fit.masks import region_mask
 from synth.assets.fit.meshops import clip_by_field, level_points, remove_faces, resample_loop, subdivide
 
@@ -108,7 +108,7 @@ class Body:
         n = len(self.V)
         skin = region_mask(regions, ["skin"], n)
         self.skin_tris = np.nonzero(skin[self.F].all(1))[0]
-        self.query = SurfaceQuery(self.V, self.F, self.skin_tris)
+        self.query = body_query(self.V, self.F, self.skin_tris)
         self.N = vertex_normals(self.V, self.F[self.skin_tris], fallback=(0.0, 0.0, 1.0))
         ns = region_mask(regions, ["neck", "shoulders"], n) & skin
         self.torso_tris = np.nonzero(ns[self.F].all(1))[0]
@@ -206,14 +206,13 @@ class FittedShell:
     def follow(self, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
         """Positions on new body vertices: the binding re-applied, then pushed out again."""
         P = self.binding.apply(vertices)
-        q = SurfaceQuery(vertices, triangles, self.body_tris)
-        return push_out(P, q, self.clearance, iterations=6)
+        return push_out(P, body_query(vertices, triangles, self.body_tris), self.clearance, iterations=6)
 
 
 def fit_shell(body: Body, shell: Shell, clearance: float) -> FittedShell:
     """Trim deep vertices of trimmable parts, push out, bind."""
     P, F, M, T = shell.parts.merged()
-    sd = body.query.signed_distance(P)
+    sd = body.query(P)
     deep = T & (sd < -TRIM_DEPTH)
     keep = ~deep[F].any(1)
     P, F, used = remove_faces(P, F, keep)

@@ -64,8 +64,7 @@ def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None
                 continue
             path = P[loop]
             # push the rim centre out so the tube sits on the shell
-            c, _, _, _, n = body.query.closest(path)
-            path = path + normalize(path - c) * rim * 0.6
+            path = path + normalize(path - body.query.query(path).point) * rim * 0.6
             Vt, Ft = sweep_tube(path[::2] if len(path) > 60 else path, rim, 8, closed=True, flatten=rim_flatten)
             parts.add(Vt, Ft, slot if rim_slot is None else rim_slot)
     return P, F, cut
@@ -95,8 +94,7 @@ def shirt_collar(body: Body, parts: Parts, slot: int, base_off: float, open_fron
     # order from +gap ... around the back ... to -gap
     order = np.argsort(np.mod(tt[keep], 2 * np.pi))
     top = top[keep][order]
-    c, _, _, _, _ = body.query.closest(top)
-    top = c + fr.outward(top) * (base_off + 0.004)
+    top = body.query.query(top).point + fr.outward(top) * (base_off + 0.004)
     out = fr.outward(top)
     front = front_weight(fr.theta(top))
     rows = []
@@ -140,8 +138,7 @@ def neck_tube(body: Body, parts: Parts, slot: int, z_fn, radial: float, radius_v
         lo, hi = angles
         m = (np.mod(th, 2 * np.pi) >= lo) & (np.mod(th, 2 * np.pi) <= hi)
         loop = loop[m][np.argsort(np.mod(th[m], 2 * np.pi))]
-    c, _, _, _, _ = body.query.closest(loop)
-    path = c + fr.outward(loop) * (radial + 0.003)
+    path = body.query.query(loop).point + fr.outward(loop) * (radial + 0.003)
     closed = angles is None
     r = np.full(len(path), radius_v)
     if taper and not closed:

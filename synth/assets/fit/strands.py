@@ -18,8 +18,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from synth.assets.fit.closest import closest_on_triangles
-from synth.geometry.normals import normalize
+from synth.geometry.normals import face_normals, normalize, vertex_normals
+from synth.geometry.rotations import rotate_between
+from synth.geometry.sdf import SignedDistance
 
 UP = np.array([0.0, 0.0, 1.0])
 DOWN = -UP
@@ -57,17 +58,11 @@ class Surface:
         self.ext = np.flatnonzero(keep & used)
         self.tree = cKDTree(self.V[self.ext])
         self.ext_tris = np.flatnonzero(keep[self.T].all(1) & (self.area > 1e-14))
-        self._tri_tree = None
+        self._exact = None
 
     def _compute(self):
-        p = self.V[self.T]
-        cr = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        self.area = 0.5 * np.linalg.norm(cr, axis=1)
-        self.tri_n = normalize(cr)
-        vn = np.zeros_like(self.V)
-        for k in range(3):
-            np.add.at(vn, self.T[:, k], cr)
-        self.vn = normalize(vn)
+        self.area = 0.5 * np.linalg.norm(face_normals(self.V, self.T, unit=False), axis=1)
+        self.vn = vertex_normals(self.V, self.T)
 
     # -- regions
     def mask(self, region: str) -> np.ndarray:
@@ -129,24 +124,13 @@ class Surface:
         r = np.arange(len(flat))
         return d[r, j].reshape(P.shape[:-1]), n[r, j].reshape(P.shape)
 
-    def closest(self, P: np.ndarray, k: int = 16):
-        """Closest points on the (exterior) head triangles among the k with nearest centroids,
-        their signed distance (by the face normal) and that face's unit normal."""
-        if self._tri_tree is None:
-            self._tri_tree = cKDTree(self.V[self.T[self.ext_tris]].mean(1))
-        flat = P.reshape(-1, 3)
-        _, idx = self._tri_tree.query(flat, k=k, workers=-1)
-        tri = self.V[self.T[self.ext_tris[idx]]]
-        Pk = np.broadcast_to(flat[:, None], tri.shape[:2] + (3,))
-        Q = closest_on_triangles(Pk, tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])[0]
-        d = np.linalg.norm(Pk - Q, axis=-1)
-        j = d.argmin(1)
-        r = np.arange(len(flat))
-        q = Q[r, j]
-        t = tri[r, j]
-        n = normalize(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]))
-        sd = np.einsum("nd,nd->n", flat - q, n)
-        return q, sd, n
+    def closest(self, P: np.ndarray):
+        """Closest points on the exterior head triangles (the 16 with the nearest centroids
+        tried), the height above the closest face's plane and that face's unit normal."""
+        if self._exact is None:
+            self._exact = SignedDistance(self.V, self.T, faces=self.ext_tris, sign="face", k=16, by="distance")
+        h = self._exact.query(P.reshape(-1, 3))
+        return h.point, h.signed, h.normal
 
     def push_out_exact(self, P: np.ndarray, clearance, iterations: int = 3, chunk: int = 25000, margin: float = 0.002) -> np.ndarray:
         """Like :meth:`push_out`, with exact closest points on the head triangles. Only points
@@ -299,16 +283,6 @@ def trim_below(P: np.ndarray, z_cut: np.ndarray, min_len: float = 0.005) -> np.n
     first = np.where(below.any(1), below.argmax(1), P.shape[1] - 1)
     L = s[np.arange(len(P)), first]
     return resample_fast(P, np.maximum(L, min_len))
-
-
-def rotate_between(a: np.ndarray, b: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Apply the minimal rotation taking unit vectors a -> b (both (..., 3)) to x (..., P, 3)."""
-    v = np.cross(a, b)
-    c = np.einsum("...d,...d->...", a, b)
-    k = 1.0 / np.maximum(1.0 + c, 1e-6)
-    v = v[..., None, :]
-    vx = np.cross(np.broadcast_to(v, x.shape), x)
-    return x + vx + np.cross(np.broadcast_to(v, x.shape), vx) * k[..., None, None]
 
 
 def interpolate(surface: Surface, g_tri, g_bary, g_pts, c_tri, c_bary, k: int = 3, rng=None,

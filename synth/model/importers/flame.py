@@ -25,16 +25,17 @@ up, face toward +Z; synth is Z up, face toward -Y: (x, y, z) -> (x, -z, y).
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 import numpy as np
 
 from synth.errors import ModelFormatError, SynthError
 from synth.geometry.normals import normalize
+from synth.io import sha256_file
 from synth.model import meshutil as mu
 from synth.model.format import HeadModelData
 from synth.model.importers import regions as rg
+from synth.model.importers.assemble import imported_model
 from synth.model.importers.safe_pickle import load_npy_object, load_pickle, to_plain
 
 IMPORTER_VERSION = 1
@@ -54,14 +55,6 @@ def to_synth(p: np.ndarray) -> np.ndarray:
     """FLAME (m, Y up, face +Z) -> synth (m, Z up, face -Y) on the last axis."""
     p = np.asarray(p, np.float64)
     return np.stack([p[..., 0], -p[..., 2], p[..., 1]], axis=-1)
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def _array(d: dict, key: str, where: str, ndim: int, kind: str = "f") -> np.ndarray:
@@ -222,30 +215,12 @@ def import_flame(model_file: str | Path, landmark_embedding: str | Path | None =
     if len(regions["face"]):
         start = int(regions["face"][np.argmin(np.linalg.norm(v[regions["face"]] - lm[30], axis=1))])
         landmarks["dense"] = rg.dense_landmarks(v, f, regions["face"], start, 600)
-    return HeadModelData(
-        name="flame",
-        template=v.astype(np.float32),
-        triangles=f.astype(np.int32),
-        identity_basis=id_dirs.astype(np.float32),
-        identity_scale=id_scale.astype(np.float32),
-        expression_basis=ex_dirs.astype(np.float32),
-        expression_scale=ex_scale.astype(np.float32),
-        expression_names=[f"exp{i:03d}" for i in range(expression_dims)],
-        joint_names=list(JOINT_NAMES),
-        joint_parents=np.array([-1, 0, 1, 1, 1], np.int32),
-        joint_rest=joints.astype(np.float32),
-        joint_identity_basis=jb.astype(np.float32),
-        skin_weights=weights.astype(np.float32),
-        regions={k: np.asarray(r, np.int32) for k, r in sorted(regions.items())},
-        landmarks=landmarks,
-        landmark_names={"ibug68": list(rg.IBUG68_NAMES)},
-        prior_weights=np.ones(1),
-        prior_means=np.zeros((1, identity_dims)),
-        prior_covs=np.eye(identity_dims)[None].copy(),
-        license=LICENSE_TEXT,
+    return imported_model(
+        "flame", (v, f), (id_dirs, id_scale), (ex_dirs, ex_scale, [f"exp{i:03d}" for i in range(expression_dims)]),
+        (JOINT_NAMES, [-1, 0, 1, 1, 1], joints, jb), weights, regions, landmarks, LICENSE_TEXT,
         provenance={
             "source": "FLAME (MPI-IS), user-supplied", "source_file": model_file.name,
-            "source_sha256": _sha256(model_file), "landmark_file": Path(landmark_embedding).name,
+            "source_sha256": sha256_file(model_file), "landmark_file": Path(landmark_embedding).name,
             "masks_file": Path(masks).name if masks is not None else None,
             "importer": "synth.model.importers.flame", "importer_version": IMPORTER_VERSION,
             "vertices": n, "triangles": int(len(f)), "identity_dims": identity_dims,

@@ -33,6 +33,7 @@ from synth.model import meshutil as mu
 from synth.model.format import HeadModelData
 from synth.model.importers import ict_rig as ir
 from synth.model.importers import regions as rg
+from synth.model.importers.assemble import imported_model
 from synth.model.importers.obj import read_obj, read_obj_vertices
 
 IMPORTER_VERSION = 1
@@ -201,27 +202,9 @@ def import_ict_facekit(directory: str | Path) -> HeadModelData:
     landmarks = {"ibug68": mu.vertex_landmarks(mesh.triangles, lm_ids),
                  "dense": rg.dense_landmarks(v, mesh.triangles, regions["face"], int(lm_ids[30]), 600)}
     license_text, license_file = _license(root, model_dir)
-    return HeadModelData(
-        name="ict-facekit",
-        template=v.astype(np.float32),
-        triangles=mesh.triangles.astype(np.int32),
-        identity_basis=id_dirs.astype(np.float32),
-        identity_scale=id_scale.astype(np.float32),
-        expression_basis=ex_off.astype(np.float32),
-        expression_scale=np.ones(len(ex_names), np.float32),
-        expression_names=ex_names,
-        joint_names=list(ir.JOINT_NAMES),
-        joint_parents=ir.JOINT_PARENTS.copy(),
-        joint_rest=joints.astype(np.float32),
-        joint_identity_basis=joint_basis.astype(np.float32),
-        skin_weights=weights.astype(np.float32),
-        regions={k: np.asarray(r, np.int32) for k, r in sorted(regions.items())},
-        landmarks=landmarks,
-        landmark_names={"ibug68": list(rg.IBUG68_NAMES)},
-        prior_weights=np.ones(1),
-        prior_means=np.zeros((1, len(id_files))),
-        prior_covs=np.eye(len(id_files))[None].copy(),
-        license=license_text,
+    return imported_model(
+        "ict-facekit", (v, mesh.triangles), (id_dirs, id_scale), (ex_off, np.ones(len(ex_names)), ex_names),
+        (ir.JOINT_NAMES, ir.JOINT_PARENTS, joints, joint_basis), weights, regions, landmarks, license_text,
         provenance={
             "source": "ICT-FaceKit (USC Institute for Creative Technologies), MIT licence",
             "source_dir": root.name, "license_file": license_file,

@@ -16,11 +16,9 @@ from synth.model import meshutil as mu
 from synth.model.importers import regions as rg
 
 NUM_VERTICES = 26719
-FACE = (0, 9409)
-NARROW_FACE = (0, 6706)
-EAR_BLOCK = (6706, 8186)  # both ears (plus a few stray skin vertices) follow the narrow face area
-HEAD_NECK = (9409, 11248)
-SKIN = (0, 11248)
+FACE = (0, 9409)  # the narrow face area 0-6706, then the ears, then the rest of the face
+EAR_BLOCK = (6706, 8186)  # both ears (plus a few stray skin vertices)
+SKIN = (0, 11248)  # the face, then the head and neck 9409-11248
 MOUTH_SOCKET = (11248, 13294)
 EYE_SOCKET = {"l": (13294, 13678), "r": (13678, 14062)}
 GUMS_TONGUE = (14062, 17039)

@@ -8,8 +8,18 @@ import math
 
 import numpy as np
 
-from synth.assets.fit.closest import closest_on_triangles
-from synth.assets.fit.glasses.surface import RayGrid, Surface
+from synth.geometry.closest import nearest_on_candidates
+from synth.geometry.normals import normalize
+from synth.geometry.raycast import RayGrid
+from synth.geometry.sdf import SignedDistance
+
+#: candidate triangles per closest-point query on the head (nearest centroids)
+HEAD_CANDIDATES = 24
+
+
+def head_surface(vertices, triangles) -> SignedDistance:
+    """The head's signed distance as the glasses use it (pseudo-normal sign)."""
+    return SignedDistance(vertices, triangles, sign="pseudo", k=HEAD_CANDIDATES)
 
 
 def region_indices(data_regions, name):
@@ -88,8 +98,8 @@ class HeadQuery:
     """Signed distance to the head with the sign from ray parity (robust to folds and holes):
     front parts look forward (-Y of the head basis), temples look outward (+-X)."""
 
-    def __init__(self, vertices, triangles, basis, midline_x: float, surface: Surface | None = None):
-        self.surf = surface or Surface(vertices, triangles)
+    def __init__(self, vertices, triangles, basis, midline_x: float, surface: SignedDistance | None = None):
+        self.surf = surface or head_surface(vertices, triangles)
         self.B = basis
         self.mid = float(midline_x)
         self.gy = RayGrid(vertices, triangles, basis[:, 1])
@@ -97,7 +107,8 @@ class HeadQuery:
 
     def sd(self, P, lateral=None):
         P = np.asarray(P, np.float64).reshape(-1, 3)
-        cp, dist, sdn, n, _ = self.surf.query(P)
+        h = self.surf.query(P)
+        cp, dist, sdn, n = h.point, h.distance, h.signed, h.normal
         # parity rays only where the answer is in doubt: near the surface or on its inner side
         # by the pseudo-normal (far points on the outer side are outside)
         doubt = (sdn < 0) | (dist < 0.004)
@@ -185,18 +196,10 @@ def nose_faces(V, triangles, regions, lm, radius: float = 0.014):
     return np.nonzero(sel)[0]
 
 
-def closest_on_faces(surf: Surface, P, faces):
-    tri = surf.F[faces]
-    q, bary = closest_on_triangles(P[:, None, :], surf.V[tri[:, 0]][None], surf.V[tri[:, 1]][None],
-                                         surf.V[tri[:, 2]][None])
-    d2 = ((q - P[:, None]) ** 2).sum(-1)
-    b = np.argmin(d2, 1)
-    r = np.arange(len(P))
-    cp = q[r, b]
-    n = surf.face_normals[faces[b]]
-    # smooth normal: barycentric blend of vertex normals
-    bc = bary[r, b]
-    vn = surf.vertex_normals[tri[b]]
-    ns = (bc[..., None] * vn).sum(1)
-    ns /= np.linalg.norm(ns, axis=1, keepdims=True)
-    return cp, ns, np.sqrt(d2[r, b])
+def closest_on_faces(surf: SignedDistance, P, faces):
+    """Closest points of ``P`` on the triangles ``faces`` of the head, the smooth normal there
+    (barycentric blend of the angle-weighted vertex normals) and the distance."""
+    faces = np.asarray(faces, np.int64)
+    c = nearest_on_candidates(P, surf.V, surf.F, np.broadcast_to(faces, (len(P), len(faces))))
+    ns = normalize((c.bary[..., None] * surf.vertex_normals[surf.F[c.face]]).sum(1))
+    return c.point, ns, c.distance

@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 
-from synth.assets.fit.closest import dot
 from synth.assets.fit.glasses.spec import FrameSpec
+from synth.geometry.normals import dot
 
 
 def outline_2d(spec: FrameSpec, n: int = 96) -> np.ndarray:

@@ -25,15 +25,14 @@ import math
 
 import numpy as np
 
-from synth.assets.fit.closest import dot
 from synth.assets.fit.glasses.contact import (HeadQuery, closest_on_faces, ear_hook_path, ear_rests, head_basis,
                                               nose_faces, region_indices, settle)
 from synth.assets.fit.glasses.front import Front, build_front
 from synth.assets.fit.glasses.shapes import (bezier, ellipsoid, merge_meshes, resample_polyline, rot_x,
                                              smooth_polyline, tube_along)
 from synth.assets.fit.glasses.spec import FrameSpec
-from synth.assets.fit.glasses.surface import Surface
-
+from synth.geometry.normals import dot
+from synth.geometry.sdf import SignedDistance
 
 MARGIN = 0.0002  # clearance left between any frame part and the skin (m)
 #: the parts of the frame (one material each; the lenses are the "lens" part), in slot order
@@ -46,7 +45,7 @@ class GlassesFit:
     info: dict
 
 
-def fit_glasses(vertices, triangles, regions, landmarks: dict, spec: FrameSpec, surface: Surface | None = None,
+def fit_glasses(vertices, triangles, regions, landmarks: dict, spec: FrameSpec, surface: SignedDistance | None = None,
                 front: Front | None = None) -> GlassesFit:
     """Pose the frame on a head: see the module docstring. Deterministic."""
     V = np.asarray(vertices, np.float64)
@@ -100,7 +99,7 @@ def fit_glasses(vertices, triangles, regions, landmarks: dict, spec: FrameSpec, 
     z_nom = pupil_h - 0.12 * spec.lens_h
     ear_h = B.T @ ears.mean(0)
     nose_idx = nose_faces(V, T, regions, lm)
-    nose_surf = Surface(V, T[nose_idx], k=8)
+    nose_surf = SignedDistance(V, T[nose_idx], k=8)
     best = None
     for dz in (0.0, -0.003, 0.002, -0.006):
         pitch = math.radians(spec.pantoscopic_deg)
@@ -115,7 +114,7 @@ def fit_glasses(vertices, triangles, regions, landmarks: dict, spec: FrameSpec, 
                 break
         y = contact(z_nom + dz, pitch)
         bs = place(front.bridge_samples, tvec(y, z_nom + dz), pitch)
-        gap = float(nose_surf.query(bs)[1].min())
+        gap = float(nose_surf.query(bs).distance.min())
         cost = gap + 0.25 * abs(dz)
         if best is None or cost < best[0] - 1e-9:
             best = (cost, dz, pitch, y, gap)
@@ -241,14 +240,14 @@ def _clear_tube(hq: "HeadQuery", centre, h1, h2, exponent, lateral: bool, up, fi
     return tube_along(C, h1, h2, exponent, m, up=up)
 
 
-def measure(hq: HeadQuery, parts: dict, nose_surf: Surface, ears) -> dict:
+def measure(hq: HeadQuery, parts: dict, nose_surf: SignedDistance, ears) -> dict:
     """Contact facts: smallest clearance (negative = penetration), nose gap, ear gaps."""
     front_keys = [k for k in parts if k not in ("temple", "tip")]
     Pf = np.concatenate([parts[k][0] for k in front_keys])
     Pt = np.concatenate([parts[k][0] for k in ("temple", "tip")])
     sdf = hq.sd(Pf, False)[0]
     sdt = hq.sd(Pt, True)[0]
-    nose_gap = float(nose_surf.query(Pf)[1].min())
+    nose_gap = float(nose_surf.query(Pf).distance.min())
     ear_gap = []
     for e in ears:
         ear_gap.append(float(np.linalg.norm(Pt - e, axis=1).min()))

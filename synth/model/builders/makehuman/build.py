@@ -19,7 +19,8 @@ from synth.model.builders.makehuman.targets import TargetSpace
 from synth.model.format import HeadModelData
 from synth.model.identity_gmm import fit_gmm
 
-BUILDER_VERSION = "2"  # "1" was only ever built from development snapshots; bump on every output change
+BUILDER_VERSION = "3"  # bump on every output change ("3": ibug68 landmarks on mesh edges name another
+# adjacent triangle since synth.geometry.closest places them; their evaluated positions are unchanged)
 SEED = 20241128
 N_SAMPLES = 3000  # identity samples before mirroring (the PCA sees 2 * N_SAMPLES)
 GMM_COMPONENTS = 6

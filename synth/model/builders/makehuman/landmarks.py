@@ -9,12 +9,12 @@ from pathlib import Path
 
 import numpy as np
 
+from synth.geometry.closest import ClosestPoints
 from synth.geometry.normals import vertex_normals
 from synth.model import meshutil as mu
 from synth.model.builders.makehuman.mesh import Mesh
 from synth.model.builders.makehuman.regions import Features, feature_regions, landmark_regions, ring_midpoints
-from synth.model.builders.makehuman.surface import (arc_at_x, closest_on_surface, level_points, polyline_at,
-                                                    split_loop, surface_hits)
+from synth.model.builders.makehuman.surface import arc_at_x, level_points, polyline_at, split_loop, surface_hits
 from synth.model.builders.makehuman.targets import TargetSpace
 
 IBUG_GROUPS = (("jaw", 17), ("brow_r", 5), ("brow_l", 5), ("nose_bridge", 4), ("nose_base", 5),
@@ -33,8 +33,8 @@ def regions_and_landmarks(mesh: Mesh, X: np.ndarray, tris: np.ndarray, family: n
     pts, tip = ibug68_points(f, X, tris, joint_rest)
     P68 = np.array([pts[i] for i in range(68)])
     skin_tri = np.nonzero(f.skin[tris].all(1))[0]
-    local, bary68 = closest_on_surface(X, tris[skin_tri], P68)
-    tri68 = skin_tri[local]
+    on_skin = ClosestPoints(X, tris, skin_tri)(P68)
+    tri68, bary68 = on_skin.face, on_skin.bary
     names68 = [f"{grp}_{i:02d}" for grp, n in IBUG_GROUPS for i in range(n)]
     landmark_regions(f, X, family, joint_rest, pts)
     face = f.reg["face"]

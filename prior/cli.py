@@ -1,0 +1,141 @@
+"""``synth prior``: train the conditional NeRF face prior, render novel views, inspect a run.
+
+    synth prior train DATASET --out RUN [--preset small|paper] [--config F] [--set key=value]
+                              [--steps N] [--resume] [--device cpu|cuda]
+    synth prior render RUN --identity I --expression E [--orbit N] [--size S] -o DIR
+    synth prior info RUN
+
+Bad input gets one line ``synth: error: ...`` and exit code 2, with nothing written; Ctrl-C
+during training writes a checkpoint and exits with 130 (``--resume`` continues exactly).
+Multi-GPU / multi-node: ``torchrun --nproc-per-node G -m prior.cli train ...``.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from synth.errors import SynthError
+
+app = typer.Typer(name="prior", help="Train the conditional NeRF face prior and render from it.",
+                  no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False)
+
+
+def _need_torch() -> None:
+    try:
+        import safetensors  # noqa: F401
+        import torch  # noqa: F401
+    except ImportError as e:
+        raise SynthError(f"the prior needs {e.name}, which is not installed", "synth prior",
+                         "install the prior extra: pip install -e '.[prior]'") from None
+
+
+@app.command("train")
+def train_cmd(
+    dataset: Path = typer.Argument(..., help="Dataset directory (the --out of synth render)."),
+    out: Path = typer.Option(..., "--out", "-o", help="Run directory (created; with --resume: continued)."),
+    preset: Optional[str] = typer.Option(None, "--preset", "-p", help="small (CPU, default) or paper."),
+    config: Optional[Path] = typer.Option(None, "--config", "-c", help="TOML file with [model] [sampling] [data] "
+                                                                         "[train] sections."),
+    set_: list[str] = typer.Option([], "--set", help="Override one key: section.key=value (repeatable)."),
+    steps: Optional[int] = typer.Option(None, "--steps", help="Total training steps (train.steps)."),
+    resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its newest checkpoint."),
+    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+) -> None:
+    """Train the prior on a rendered dataset."""
+    _need_torch()
+    from prior.train.loop import Trainer
+    from prior.train.run import prepare
+    from prior.train.setup import device_for, init_distributed, resolve_device, shutdown_distributed
+
+    dev = resolve_device(device)
+    dist = init_distributed(dev)
+    try:
+        setup = prepare(dataset, out, preset=preset, config_path=config, sets=set_, steps=steps, resume=resume)
+        trainer = Trainer(setup, device_for(dist, dev), dist)
+        rc = trainer.run()
+    finally:
+        shutdown_distributed()
+    if rc:
+        raise typer.Exit(rc)
+
+
+@app.command("render")
+def render_cmd(
+    run: Path = typer.Argument(..., help="Run directory of synth prior train."),
+    identity: int = typer.Option(..., "--identity", "-i", help="Dataset identity index (a trained identity)."),
+    expression: int = typer.Option(..., "--expression", "-e", help="Expression index of that identity."),
+    orbit: int = typer.Option(8, "--orbit", help="Views on a circle about the vertical axis."),
+    size: Optional[int] = typer.Option(None, "--size", help="Image size in pixels (square; default: the dataset's)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output directory."),
+    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+) -> None:
+    """Novel views of a training identity: colour, opacity and normals PNGs, depth EXR."""
+    _need_torch()
+    from prior.render_views import render_run
+    from prior.train.setup import resolve_device
+
+    files = render_run(run, identity, expression, out, orbit_views=orbit, size=size,
+                       device=str(resolve_device(device)))
+    print(f"wrote {len(files)} files to {out}")
+
+
+@app.command("info")
+def info_cmd(run: Path = typer.Argument(..., help="Run directory of synth prior train."),
+             as_json: bool = typer.Option(False, "--json", help="Print one JSON object.")) -> None:
+    """Config, steps, identities and the last losses of a run."""
+    _need_torch()
+    from prior.train.checkpoint import latest, list_checkpoints, load
+    from prior.train.logs import read_metrics
+
+    path = latest(run)
+    if path is None:
+        raise SynthError("no checkpoint in this run", str(run), "pass the --out directory of synth prior train")
+    ck = load(path)
+    metrics = read_metrics(run)
+    t = ck.config.train
+    info = {"run": str(run), "checkpoint": str(path), "step": ck.step, "steps": t.steps,
+            "checkpoints": [s for s, _ in list_checkpoints(run)], "dataset": ck.dataset,
+            "identities": ck.identities.identity_index.tolist(), "codes": ck.layout.to_dict(),
+            "rays_per_step": ck.config.rays_per_step, "last_losses": ck.losses,
+            "last_logged": metrics[-1] if metrics else None, "config": ck.config.to_dict()}
+    if as_json:
+        print(json.dumps(info))
+        return
+    m = ck.config.model
+    ident = info["identities"]
+    print(f"run         {run}\ncheckpoint  {path.name} (step {ck.step} of {t.steps}; kept: {info['checkpoints']})")
+    print(f"dataset     {ck.dataset}")
+    print(f"identities  {len(ident)}: {', '.join(map(str, ident[:10]))}{' ...' if len(ident) > 10 else ''}")
+    print(f"codes       beta {ck.layout.identity_size} + expression {ck.layout.expression_size} + joints "
+          f"{', '.join(ck.layout.joints)} (3 each) = {ck.layout.size}; latent w {m.latent_dim}")
+    print(f"model       proposal {m.proposal_depth}x{m.proposal_width}, nerf {m.nerf_depth}x{m.nerf_width}, "
+          f"samples {list(ck.config.sampling.samples_per_level)}")
+    print(f"batch       {t.identities_per_batch} x {t.views_per_identity} x {t.pixels_per_view} = "
+          f"{ck.config.rays_per_step} rays; background stage until step {t.background_steps}")
+    if ck.losses:
+        print("losses      " + "  ".join(f"{k} {v:.4g}" for k, v in ck.losses.items() if k != "step")
+              + f"  (step {ck.losses.get('step')})")
+    if metrics:
+        last = metrics[-1]
+        print(f"last log    step {last['step']}: loss {last['loss']:.4g}  psnr {last['psnr']:.2f} dB  "
+              f"{last['rays_per_s']:.0f} rays/s")
+
+
+def register(root: typer.Typer) -> None:
+    root.add_typer(app, name="prior")
+
+
+def main() -> int:
+    """``python -m prior.cli ...`` (for torchrun): the same commands and error handling as ``synth prior``."""
+    from synth.cli.main import main as synth_main
+
+    return synth_main(["prior", *sys.argv[1:]])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

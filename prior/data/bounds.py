@@ -1,0 +1,52 @@
+"""Ray bounds from each identity's bounding sphere.
+
+The frames record no bounding volume, so it is computed from the data: every foreground depth
+pixel (depth > 0, alpha > 0) of an identity's frames is back-projected along its ray (planar
+depth z = t * cos_z), and the sphere around those points (centre: the middle of their
+axis-aligned box; radius: the farthest point) is grown by ``margin`` (relative). Rays are cut
+to their intersection with that sphere; rays that miss it get ``near = far`` and are left out
+of the loss.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from synth.dataset.reader import rays
+
+
+def foreground_points(frame) -> np.ndarray:
+    """(M, 3) float64 world points of a frame's foreground depth pixels."""
+    fg = (frame.depth > 0) & (frame.alpha > 0) & np.isfinite(frame.depth)
+    rows, cols = np.nonzero(fg)
+    if rows.size == 0:
+        return np.zeros((0, 3))
+    o, d, cos_z = rays(frame, pixels=(rows, cols), dtype=np.float64)
+    t = frame.depth[rows, cols].astype(np.float64) / cos_z
+    return o + t[:, None] * d
+
+
+def bounding_sphere(points: np.ndarray, margin: float) -> tuple[np.ndarray, float]:
+    """Centre (middle of the axis-aligned box) and radius (farthest point, times 1 + margin,
+    plus 1 micrometre for float32 inputs) of a sphere holding every point."""
+    p = np.asarray(points, np.float64)
+    centre = 0.5 * (p.min(0) + p.max(0))
+    radius = float(np.sqrt(((p - centre) ** 2).sum(1).max()))
+    return centre, radius * (1.0 + margin) + 1e-6
+
+
+def intersect_sphere(origins: np.ndarray, directions: np.ndarray, centre: np.ndarray,
+                     radius: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    """near, far (N,) distances of unit rays through spheres (centre (N, 3) or (3,), radius (N,)
+    or scalar); ``near >= 0`` (an origin inside starts at 0); rays that miss get near = far = 0."""
+    oc = origins.astype(np.float64) - centre
+    d = directions.astype(np.float64)
+    b = (oc * d).sum(-1)
+    c = (oc * oc).sum(-1) - np.asarray(radius, np.float64) ** 2
+    disc = b * b - c
+    hit = disc > 0
+    s = np.sqrt(np.where(hit, disc, 0.0))
+    near = np.maximum(-b - s, 0.0)
+    far = np.maximum(-b + s, 0.0)
+    hit &= far > near
+    return np.where(hit, near, 0.0), np.where(hit, far, 0.0)

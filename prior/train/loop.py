@@ -1,0 +1,257 @@
+"""The training loop of the prior (Cafca Sec. 3.2): L1 + proposal loss, Adam with exponential
+learning-rate decay, per-MLP gradient clipping, the two background stages, checkpoints.
+
+Per step ``s`` (``train.steps`` in all): for each of ``grad_accum`` micro-batches, draw rays
+(:class:`prior.data.RaySampler`, seeded by (seed, s, micro, rank)), render them with
+stratified jitter from a generator seeded the same way, and back-propagate
+``(L1 + proposal_weight * L_prop) / grad_accum``. The L1 target is the premultiplied colour plus
+``(1 - alpha) * train.background`` while ``s < train.background_steps`` (stage "bg"), the
+premultiplied colour (over black) afterwards (stage "nobg"); the model never adds a
+background, so in stage "bg" empty space inside the bounds must get density. Rays that miss
+their identity's bounding sphere are left out of the L1 mean.
+
+Then the gradients are clipped per parameter group, checked (a non-finite loss or gradient
+stops the run with the last good checkpoint kept), and Adam steps. Under torchrun the model is
+wrapped in DDP and each rank draws from its own shard of identities. Ctrl-C finishes the
+current step, writes a checkpoint and exits with 130.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import signal
+import time
+
+import numpy as np
+import torch
+
+from prior import losses
+from prior.data.sampler import RaySampler
+from prior.render_views import render_image, scaled_camera, to_srgb8
+from prior.train import checkpoint as ckpt
+from prior.train.logs import RunLog
+from prior.train.optim import build_optimizer, clip_per_group, learning_rate, set_learning_rate
+from prior.train.run import RunSetup, write_run_files
+from prior.train.setup import Dist, build_model
+from synth.errors import SynthError
+
+#: first word of the seeds of the stratified-sampling generators
+JITTER_STREAM = 0x5A3F
+INTERRUPTED = 130
+
+
+def jitter_seed(seed: int, step: int, micro: int, rank: int) -> int:
+    return int(np.random.SeedSequence([JITTER_STREAM, seed, step, micro, rank]).generate_state(1, np.uint64)[0])
+
+
+class _StopFlag:
+    """SIGINT sets ``hit`` (the step in flight finishes); a second SIGINT interrupts at once."""
+
+    def __init__(self):
+        self.hit = False
+        self._old = None
+
+    def __enter__(self):
+        try:
+            self._old = signal.signal(signal.SIGINT, self._handle)
+        except ValueError:  # not the main thread: no handler
+            self._old = None
+        return self
+
+    def _handle(self, *_):
+        self.hit = True
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    def __exit__(self, *exc):
+        if self._old is not None:
+            signal.signal(signal.SIGINT, self._old)
+
+
+class Trainer:
+    def __init__(self, setup: RunSetup, device: torch.device, dist: Dist | None = None, *, tty=None,
+                 tensorboard: bool = True):
+        dist = dist or Dist()
+        self.s, self.cfg, self.dev, self.dist = setup, setup.cfg, device, dist
+        t, st = self.cfg.train, setup.store
+        per = dist.world * t.grad_accum
+        if t.identities_per_batch % per:
+            raise SynthError(f"train.identities_per_batch = {t.identities_per_batch} is not a multiple of ranks x "
+                             f"grad_accum = {per}", "config", "change identities_per_batch or grad_accum")
+        self.sampler = RaySampler(st, seed=t.seed, identities=t.identities_per_batch // per,
+                                  views=t.views_per_identity, pixels=t.pixels_per_view,
+                                  foreground_fraction=t.foreground_fraction, rank=dist.rank, world=dist.world)
+        self.model = build_model(self.cfg, st.layout.size, len(st.identities.identity_index), device)
+        self.opt = build_optimizer(self.model, t)
+        self.start, self.collapse_count = 0, 0
+        if setup.resume_from is not None:
+            rf = setup.resume_from
+            self.model.load_state_dict(rf.model_state)
+            state = ckpt.load_optimizer_state(rf)
+            self.opt.load_state_dict(state["optimizer"])
+            self.start = int(state["step"])
+            self.collapse_count = int(state["trainer"].get("collapse_count", 0))
+            torch.set_rng_state(state["torch_rng"])
+        self.fwd = self.ddp = self.model
+        if dist.enabled:
+            from torch.nn.parallel import DistributedDataParallel as DDP
+
+            # the predicted-normals head gets no gradient from L1 + proposal (fine-tuning trains it)
+            self.fwd = self.ddp = DDP(self.model, device_ids=[device.index] if device.type == "cuda" else None,
+                                      find_unused_parameters=True)
+        if t.compile:
+            self.fwd = torch.compile(self.fwd)
+        self.bg = torch.tensor(t.background, dtype=torch.float32, device=device)
+        self.last_saved = setup.resume_from.step if setup.resume_from is not None else None
+        self.losses: dict = {}
+        if dist.main:
+            write_run_files(setup, dist.world)
+        self.log = RunLog(setup.run_dir, total=t.steps, start=self.start, enabled=dist.main, tty=tty,
+                          tensorboard=tensorboard)
+
+    # ------------------------------------------------------------------ one step
+    def _tensors(self, b):
+        T = lambda a, dt=torch.float32: torch.as_tensor(a, dtype=dt).to(self.dev, non_blocking=True)  # noqa: E731
+        return (T(b.origins), T(b.directions), T(b.near), T(b.far), T(b.radii), T(b.codes),
+                T(b.latent_ids, torch.long), T(b.rgba))
+
+    def step(self, step: int) -> torch.Tensor:
+        """Forward and backward of every micro-batch of ``step``; returns (7,) statistics summed
+        over them: loss, L1, proposal loss (means), squared error, opacity and count of foreground
+        rays, count of valid rays (sums)."""
+        t = self.cfg.train
+        stage_bg = step < t.background_steps
+        acc_n = t.grad_accum
+        stats = torch.zeros(7, device=self.dev)  # loss, l1, prop, sq err sum, fg acc sum, fg rays, valid rays
+        # a 0-d tensor under torch.compile (a float would be a constant: one recompile per step)
+        frac = torch.tensor(step / t.steps, device=self.dev) if t.compile else step / t.steps
+        for micro in range(acc_n):
+            o, d, near, far, radii, codes, ids, rgba = self._tensors(self.sampler.batch(step, micro))
+            gen = torch.Generator(device=self.dev).manual_seed(jitter_seed(t.seed, step, micro, self.dist.rank))
+            sync = self.ddp.no_sync() if (self.dist.enabled and micro < acc_n - 1) else contextlib.nullcontext()
+            with sync:
+                with torch.autocast(self.dev.type, dtype=torch.bfloat16, enabled=t.bf16):
+                    out = self.fwd(o, d, near, far, codes, ids, radii=radii, train_frac=frac,
+                                   randomized=True, generator=gen)
+                alpha = rgba[:, 3]
+                target = rgba[:, :3] + (1 - alpha)[:, None] * self.bg if stage_bg else rgba[:, :3]
+                valid = (far > near).float()
+                l1 = losses.l1_loss(out["rgb"], target, valid)
+                prop = losses.proposal_loss(out["history"])
+                loss = l1 + t.proposal_weight * prop
+                (loss / acc_n).backward()
+            with torch.no_grad():
+                fg = valid * (alpha > 0.5).float()
+                se = (((out["rgb"].float() - target) ** 2).mean(-1) * valid).sum()
+                stats += torch.stack([loss.detach() / acc_n, l1.detach() / acc_n, prop.detach() / acc_n, se,
+                                      (out["acc"].float() * fg).sum(), fg.sum(), valid.sum()])
+        return stats
+
+    # ------------------------------------------------------------------ loop
+    def run(self, *, stop_at: int | None = None, deadline: float | None = None) -> int:
+        """Train from the start step to ``train.steps``; stop early with a checkpoint at step
+        ``stop_at`` or at the first step that ends after ``deadline`` (``time.perf_counter()``
+        seconds; benchmarks). Returns 0, or 130 when interrupted by SIGINT."""
+        t = self.cfg.train
+        if self.start == 0 and self.dist.main and self.last_saved is None:
+            self._save(0)  # a good checkpoint to fall back to from the first step on
+        window = (time.perf_counter(), self.start)
+        rays_step = self.cfg.rays_per_step
+        with _StopFlag() as stop:
+            try:
+                for step in range(self.start, t.steps):
+                    set_learning_rate(self.opt, learning_rate(step, t))
+                    stats = self.step(step)
+                    norms = clip_per_group(self.opt, t.grad_clip)
+                    flags = torch.stack([(~torch.isfinite(torch.stack([stats[0], *norms.values()]))).any().float(),
+                                         torch.tensor(float(stop.hit), device=self.dev)])
+                    if self.dist.enabled:
+                        torch.distributed.all_reduce(flags, op=torch.distributed.ReduceOp.MAX)
+                    bad, interrupted = flags.tolist()
+                    if bad:
+                        kept = f"the last good checkpoint (step {self.last_saved}) is kept" \
+                            if self.last_saved is not None else "no checkpoint was written"
+                        raise SynthError(f"training loss or gradient is not finite at step {step}", str(self.s.run_dir),
+                                         f"{kept}; lower train.lr_init or check the dataset")
+                    self.opt.step()
+                    self.opt.zero_grad(set_to_none=True)
+                    done = step + 1
+                    self.log.advance(done)
+                    if done % t.log_every == 0 or done == t.steps:
+                        window = self._log(done, stats, norms, window, rays_step)
+                    if self.dist.main and t.preview_every and done % t.preview_every == 0:
+                        self._preview(done)
+                    late = deadline is not None and time.perf_counter() > deadline
+                    if self.dist.enabled and deadline is not None:  # every rank stops at the same step
+                        late_t = torch.tensor(float(late), device=self.dev)
+                        torch.distributed.all_reduce(late_t, op=torch.distributed.ReduceOp.MAX)
+                        late = bool(late_t.item())
+                    stopping = bool(interrupted) or done == stop_at or late
+                    if done % t.checkpoint_every == 0 or done == t.steps or stopping:
+                        if self.dist.main:
+                            self._save(done)
+                    if stopping:
+                        if interrupted:
+                            self.log.message(f"interrupted: checkpoint of step {done} written; "
+                                             f"continue with --resume")
+                            return INTERRUPTED
+                        return 0
+            finally:
+                self.log.close()
+        return 0
+
+    def _log(self, done: int, stats, norms, window, rays_step):
+        s = stats.clone()
+        if self.dist.enabled:
+            torch.distributed.all_reduce(s)
+            s[:3] /= self.dist.world
+        loss, l1, prop, se, acc_sum, fg_n, valid_n = s.tolist()
+        mse = se / max(valid_n, 1)
+        acc_fg = acc_sum / fg_n if fg_n > 0 else float("nan")
+        now = time.perf_counter()
+        rate = (done - window[1]) * rays_step / max(now - window[0], 1e-9)
+        t = self.cfg.train
+        stage = "bg" if done - 1 < t.background_steps else "nobg"
+        self.losses = {"step": done, "loss": loss, "l1": l1, "proposal": prop,
+                       "psnr": -10 * math.log10(max(mse, 1e-12)), "acc_fg": acc_fg}
+        metrics = {**self.losses, "lr": self.opt.param_groups[0]["lr"], "rays_per_s": rate,
+                   "samples_per_s": rate * sum(self.cfg.sampling.samples_per_level), "stage": stage,
+                   **{f"grad_norm_{k}": float(v) for k, v in norms.items()}}
+        metrics.pop("step")
+        self.log.log(done, metrics)
+        if stage == "nobg" and fg_n > 0:
+            self.collapse_count = self.collapse_count + 1 if acc_fg < t.collapse_acc else 0
+            if self.collapse_count >= t.collapse_patience:
+                kept = f"step {self.last_saved}" if self.last_saved is not None else "none"
+                raise SynthError(f"the model collapsed: mean opacity over foreground pixels stayed below "
+                                 f"{t.collapse_acc} for {t.collapse_patience} logged steps (step {done})",
+                                 str(self.s.run_dir), f"last checkpoint kept: {kept}; start a new run with a longer "
+                                                      "background stage (train.background_steps) or a lower lr_init")
+        return time.perf_counter(), done
+
+    def _save(self, done: int) -> None:
+        t = self.cfg.train
+        ckpt.save(self.s.run_dir, done, self.model, self.opt, self.cfg, self.s.store.layout, self.s.store.identities,
+                  losses=self.losses, trainer_state={"collapse_count": self.collapse_count},
+                  dataset=str(self.s.dataset), keep=t.keep_checkpoints)
+        self.last_saved = done
+
+    def _preview(self, done: int) -> None:
+        """Prediction | ground truth of the first training view of up to 3 identities."""
+        from PIL import Image
+
+        st, t = self.s.store, self.cfg.train
+        H, W = st.size
+        self.model.eval()
+        try:
+            for m in range(min(3, len(st.identities.identity_index))):
+                n = int(np.nonzero((st.latent == m) & st.train)[0][0])
+                size = t.preview_size
+                K = scaled_camera(st.K[n], W, H, size)
+                img = render_image(self.model, K, st.c2w[n], size, size, st.codes[n], m, st.identities.centre[m],
+                                   float(st.identities.radius[m]), chunk=t.render_chunk, device=self.dev, bf16=t.bf16)
+                gt = Image.fromarray(to_srgb8(st.rgba[n, ..., :3].astype(np.float32))).resize((size, size))
+                self.log.image(f"preview/identity_{int(st.identities.identity_index[m])}",
+                               np.concatenate([to_srgb8(img["rgb"]), np.asarray(gt)], axis=1), done)
+        finally:
+            self.model.train()

@@ -1,0 +1,61 @@
+"""Polar coordinates on the eyeballs for the iris shader (numpy; the rig is
+``blender_scripts/assets/iris.py``).
+
+For each eyeball, with its centre fitted to the rest-pose sclera and its forward axis from
+the centre to the iris centroid, a vertex gets ``(rho cos phi, rho sin phi, rho)``: ``rho``
+is the angle from the forward axis divided by the limbus angle (0 at the pupil centre, 1 at
+the limbus) and ``phi`` the angle around the axis (mirrored on the left eye so that nasal
+and temporal sides match). Vertices off the eyeballs get 9 (far outside the iris).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _sphere_centre(P):
+    """Algebraic least-squares sphere centre, uncentred. ``synth.model.meshutil.fit_sphere``
+    (centred first, better conditioned) differs by up to 1e-4 in the coordinates, which would
+    change every rendered iris; this one is kept so the data stay as they are."""
+    A = np.c_[2 * P, np.ones(len(P))]
+    b = (P ** 2).sum(1)
+    x = np.linalg.lstsq(A, b, rcond=None)[0]
+    return x[:3]
+
+
+def eye_coordinates(data, rest: np.ndarray) -> tuple[np.ndarray, dict]:
+    """(V, 3) coordinates (see the module docstring) and, per eye ("l", "r"), the fitted
+    centre, forward axis and limbus angle (radians) for the frame JSON."""
+    V = np.asarray(rest, np.float64)
+    out = np.full((len(V), 3), 9.0)
+    info = {}
+    for side, s in (("l", 1.0), ("r", -1.0)):
+        eye = data.regions.get(f"eye_{side}")
+        sclera = data.regions.get(f"sclera_{side}", eye)
+        iris = data.regions.get(f"iris_{side}")
+        if eye is None or sclera is None:
+            continue
+        eye = np.asarray(eye, np.int64)
+        c = _sphere_centre(V[np.asarray(sclera, np.int64)])
+        if iris is not None:
+            f = V[np.asarray(iris, np.int64)].mean(0) - c
+        else:
+            f = np.array([0.0, -1.0, 0.0])
+        f /= np.linalg.norm(f)
+        u = np.cross(f, [0.0, 0.0, 1.0])
+        u /= np.linalg.norm(u)
+        w = np.cross(u, f)
+        q = V[eye] - c
+        q /= np.linalg.norm(q, axis=1, keepdims=True)
+        theta = np.arccos(np.clip(q @ f, -1, 1))
+        if iris is not None:
+            qi = V[np.asarray(iris, np.int64)] - c
+            qi /= np.linalg.norm(qi, axis=1, keepdims=True)
+            lim = float(np.arccos(np.clip(qi @ f, -1, 1)).max())
+        else:
+            lim = 0.5
+        rho = theta / lim
+        phi = np.arctan2(q @ w, s * (q @ u))
+        out[eye] = np.c_[rho * np.cos(phi), rho * np.sin(phi), rho]
+        info[side] = {"centre": c.round(6).tolist(), "forward": f.round(5).tolist(), "limbus_rad": round(lim, 5)}
+    return out, info

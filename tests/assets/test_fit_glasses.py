@@ -1,0 +1,130 @@
+"""Glasses: the contact solver (pure numpy, ``synth.assets.fit.glasses``) on the hard cases
+(the Blender rig: tests/blender/test_glasses.py).
+
+Contact is measured independently of the solver's own bookkeeping: distances with
+``trimesh.triangles.closest_point`` on candidate head triangles, the inside/outside side by
+ray parity (robust where the +-3 SD heads fold over themselves), on every vertex of the
+built geometry.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from synth.assets.fit.glasses.contact import head_surface
+from synth.assets.fit.glasses.front import build_front
+from synth.assets.fit.glasses.solve import FRAME_PARTS, fit_glasses
+from synth.assets.fit.glasses.spec import STYLES, frame_spec
+from tests.support import asset_scene
+
+PEN_MAX = 0.0005  # m
+NOSE_MAX = 0.002
+EAR_MAX = 0.004
+
+
+def _head(hm, case):
+    beta, psi, rot = asset_scene._codes(hm, case)
+    rest, verts, joints, lms = asset_scene._ctx_arrays(hm, beta, psi, rot)
+    return hm.data, verts, lms
+
+
+def contact_report(verts, triangles, regions, lms, frame_v, lateral):
+    """(max penetration, nose gap, ear gaps) of world vertices against the head."""
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    from synth.assets.fit.glasses.contact import HeadQuery, ear_rests, head_basis, nose_faces
+
+    T = np.asarray(triangles, np.int64)
+    tris = verts[T]
+    tree = cKDTree(tris.mean(1))
+    _, cand = tree.query(frame_v, k=24)
+    best = np.full(len(frame_v), np.inf)
+    for j in range(cand.shape[1]):
+        q = trimesh.triangles.closest_point(tris[cand[:, j]], frame_v)
+        best = np.minimum(best, np.linalg.norm(q - frame_v, axis=1))
+    ears = ear_rests(verts, T, regions)
+    B = head_basis(ears, lms["ibug68"])
+    hq = HeadQuery(verts, T, B, float(lms["ibug68"][27:31].mean(0) @ B[:, 0]))
+    inside = hq.inside(frame_v, lateral)
+    pen = float(np.max(np.where(inside, best, 0.0)))
+    # nose bridge: head faces near ibug 27-29
+    nose_f = nose_faces(verts, T, regions, lms["ibug68"])
+    ntree = cKDTree(verts[T[nose_f]].mean(1))
+    _, nc = ntree.query(frame_v, k=8)
+    nb = np.full(len(frame_v), np.inf)
+    for j in range(nc.shape[1]):
+        q = trimesh.triangles.closest_point(verts[T[nose_f[nc[:, j]]]], frame_v)
+        nb = np.minimum(nb, np.linalg.norm(q - frame_v, axis=1))
+    ear_gap = []
+    for name, side in (("ear_l", 1), ("ear_r", -1)):
+        ev = verts[np.asarray(regions[name])]
+        d = cKDTree(ev).query(frame_v[lateral])[0]
+        ear_gap.append(float(d.min()))
+    return pen, float(nb.min()), ear_gap
+
+
+def _lateral(frame_v, lens_v):
+    """Temple vertices (well behind the lenses) look sideways for the inside test."""
+    return frame_v[:, 1] > lens_v[:, 1].max() + 0.012
+
+
+# ----------------------------------------------------------------------------- pure numpy
+
+@pytest.mark.parametrize("case", ["id+3_brows"])
+def test_fit_all_styles_pure(default_head, case):
+    data, verts, lms = _head(default_head, case)
+    surf = head_surface(verts, data.triangles)
+    for style in STYLES:
+        spec = frame_spec(style, {}, np.random.default_rng(3))
+        fit = fit_glasses(verts, data.triangles, data.regions, lms, spec, surface=surf)
+        allv = np.concatenate([v for v, _ in fit.parts.values()])
+        assert np.isfinite(allv).all()
+        assert fit.info["nose_gap_m"] < NOSE_MAX, (style, fit.info)
+        assert fit.info["min_clearance_m"] > -PEN_MAX, (style, fit.info)
+        assert fit.info["ear_rest_offset_m"] < EAR_MAX, (style, fit.info)
+        assert 0.09 < min(fit.info["temple_length_m"]) and max(fit.info["temple_length_m"]) < 0.2
+
+
+def test_fit_deterministic_and_spec_from_params(default_head):
+    data, verts, lms = _head(default_head, "neutral")
+    spec = frame_spec("aviator", {"lens_width_m": 0.056, "lens_tint": 0.4, "frame_colour": "gold"},
+                         np.random.default_rng(5))
+    assert spec.double_bridge and spec.material == "metal" and spec.lens_w == 0.056 and spec.tint == 0.4
+    a = fit_glasses(verts, data.triangles, data.regions, lms, spec)
+    b = fit_glasses(verts, data.triangles, data.regions, lms, spec)
+    for k in a.parts:
+        np.testing.assert_array_equal(a.parts[k][0], b.parts[k][0])
+    with pytest.raises(ValueError):
+        frame_spec("monocle", {}, np.random.default_rng(0))
+
+
+@pytest.mark.slow
+def test_fit_contact_on_hard_cases(default_head):
+    """Every style built at one hard case (the rig's own parameters and generator) and re-fitted
+    at another, measured independently of the solver (``contact_report``)."""
+    hm = default_head
+    hard = asset_scene.CASES[1:]
+    results = {}
+    for i, style in enumerate(STYLES):
+        case, then = hard[i % len(hard)], hard[(i + 1) % len(hard)]
+        ctx = asset_scene.head_arrays(hm, case)
+        spec = frame_spec(style, {}, ctx.rng("glasses"))
+        front = build_front(spec)
+        for stage in (case, then):
+            if stage != case:
+                asset_scene.set_case_arrays(ctx, hm, stage)
+            fit = fit_glasses(ctx.vertices, ctx.data.triangles, ctx.data.regions, ctx.landmarks, spec, front=front)
+            fv = np.concatenate([fit.parts[k][0] for k in FRAME_PARTS if k in fit.parts])
+            lv = fit.parts["lens"][0]
+            assert np.isfinite(fv).all() and np.isfinite(lv).all()
+            allv = np.concatenate([fv, lv])
+            lat = np.concatenate([_lateral(fv, lv), np.zeros(len(lv), bool)])
+            pen, nose, ears = contact_report(ctx.vertices, ctx.data.triangles, ctx.data.regions, ctx.landmarks,
+                                             allv, lat)
+            results[(style, stage)] = (pen, nose, ears)
+            assert pen < PEN_MAX, (style, stage, pen)
+            assert nose < NOSE_MAX, (style, stage, nose)
+            assert max(ears) < EAR_MAX, (style, stage, ears)
+    print({k: tuple(np.round(np.r_[v[0], v[1], v[2]] * 1e3, 3)) for k, v in results.items()})

@@ -1,0 +1,146 @@
+"""The numpy side of the shader-layer rigs (no Blender): makeup and skin-detail masks
+(synth.assets.fit.masks) on the default head, and the iris's eye coordinates
+(synth.assets.fit.eyes) on synthetic eyeballs with a known answer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.distance import cdist
+
+from synth.assets.fit.eyes import eye_coordinates
+from synth.assets.fit.masks import (distance_to, feather, makeup_masks, region_mask, segment_distance,
+                                    skin_detail_mask, skin_only)
+from synth.model.meshutil import fit_sphere
+
+
+@pytest.fixture(scope="module")
+def head(default_head):
+    hm = default_head
+    d = hm.data
+    ev = hm.evaluate(np.zeros(d.identity_dims), np.zeros(d.expression_dims), np.zeros((hm.J, 3)))
+    return d, ev.vertices[0].astype(np.float64), ev.landmarks["ibug68"][0].astype(np.float64)
+
+
+# --------------------------------------------------------------------------- building blocks
+
+
+def test_feather_distance_and_segment_distance_against_brute_force():
+    d = np.array([-1.0, 0.0, 0.1, 0.2, 0.3, 0.5, 9.0])
+    np.testing.assert_allclose(feather(d, 0.1, 0.3), [1, 1, 1, 0.5, 0, 0, 0], atol=1e-12)
+    assert feather(np.array([0.5]), 0.5, 0.5)[0] == 1.0  # inner == outer: a step, no division by zero
+    rng = np.random.default_rng(0)
+    V, pts = rng.normal(size=(200, 3)), rng.normal(size=(30, 3))
+    np.testing.assert_allclose(distance_to(V, pts), cdist(V, pts).min(1))
+    assert np.isinf(distance_to(V, pts[:0])).all()
+    a, b = rng.normal(size=3), rng.normal(size=3)
+    dense = a + np.linspace(0, 1, 20001)[:, None] * (b - a)
+    np.testing.assert_allclose(segment_distance(V, a, b), cdist(V, dense).min(1), atol=1e-4)
+    np.testing.assert_allclose(segment_distance(V, a, a), np.linalg.norm(V - a, axis=1))  # zero-length segment
+
+
+# --------------------------------------------------------------------------- makeup and skin detail
+
+
+def test_makeup_masks(head):
+    data, V, lm = head
+    m1, m2 = makeup_masks(data, V, lm, extent=0.6, liner=0.6, wing=False)
+    assert m1.shape == m2.shape == (len(V), 4) and m1.min() >= 0 and m1.max() <= 1 and m2.min() >= 0
+    off_skin = ~skin_only(data, len(V))
+    assert not m1[off_skin].any() and not m2[off_skin, 0].any()
+    lips = region_mask(data.regions, ["lips"], len(V)) & ~off_skin
+    assert np.all(m1[lips, 0] == 1.0) and m1[:, 0].sum() < 3 * lips.sum()
+    assert not m2[:, 1].any() and not m2[:, 2:].any()  # no wing asked for
+    # shadow and liner sit above the eyes' corners, blush below them, on both sides
+    eyes_z = lm[36:48, 2].mean()
+    for col, above in ((1, True), (2, True), (3, False)):
+        sel = m1[:, col] > 0.5
+        assert sel.sum() > 10 and (np.all(V[sel, 2] > eyes_z - 0.004) if above else np.all(V[sel, 2] < eyes_z))
+        assert (V[sel, 0] > 0).any() and (V[sel, 0] < 0).any()
+    wider, _ = makeup_masks(data, V, lm, extent=1.0)
+    assert (wider[:, 1] > 0.5).sum() > (m1[:, 1] > 0.5).sum()
+    _, winged = makeup_masks(data, V, lm, wing=True)
+    assert (winged[:, 1] > 0.5).any()
+
+
+def test_makeup_falls_back_to_the_landmark_lips(head):
+    data, V, lm = head
+    from types import SimpleNamespace
+
+    no_lips = SimpleNamespace(regions={k: v for k, v in data.regions.items() if k != "lips"})
+    m1, _ = makeup_masks(no_lips, V, lm)
+    near = distance_to(V, lm[48:60]) < 0.0005
+    assert np.all(m1[near & skin_only(data, len(V)), 0] == 1.0)
+
+
+def test_skin_detail_mask(head):
+    data, V, lm = head
+    m = skin_detail_mask(data, V, lm)
+    assert m.shape == (len(V), 4) and m.min() >= 0 and m.max() <= 1
+    skin = skin_only(data, len(V))
+    assert not m[~skin].any()
+    np.testing.assert_array_equal(m[:, 3], region_mask(data.regions, ["beard"], len(V)) & skin)
+    assert m[np.argmin(np.linalg.norm(V - lm[30], axis=1)), 0] == 1.0  # the nose tip is in the cheeks+nose zone
+    forehead = m[:, 2] > 0.5
+    assert forehead.any() and np.all(V[forehead, 2] > lm[36:48, 2].mean() - 0.01)
+
+
+# --------------------------------------------------------------------------- eye coordinates
+
+
+def _eyeballs(centres, radius=0.012, limbus_deg=30.0, n=2000, seed=0):
+    """Two spherical eyeballs looking toward -Y; the iris is the cap within ``limbus_deg``."""
+    rng = np.random.default_rng(seed)
+    V, regions = [], {}
+    for side, c in zip("lr", centres):
+        d = rng.normal(size=(n, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        base = len(V) * n
+        V.append(np.asarray(c) + radius * d)
+        ang = np.degrees(np.arccos(np.clip(d @ [0.0, -1.0, 0.0], -1, 1)))
+        regions[f"eye_{side}"] = base + np.arange(n)
+        regions[f"iris_{side}"] = base + np.nonzero(ang <= limbus_deg)[0]
+    from types import SimpleNamespace
+
+    V = np.concatenate(V + [np.zeros((5, 3))])  # 5 vertices on no eye
+    return SimpleNamespace(regions=regions), V
+
+
+def test_eye_coordinates_on_synthetic_eyeballs():
+    centres = [(0.032, 0.0, 0.0), (-0.032, 0.0, 0.0)]
+    data, V = _eyeballs(centres)
+    out, info = eye_coordinates(data, V)
+    assert np.all(out[-5:] == 9.0)
+    for side, c in zip("lr", centres):
+        np.testing.assert_allclose(info[side]["centre"], c, atol=1e-6)
+        np.testing.assert_allclose(fit_sphere(V[data.regions[f"eye_{side}"]])[0], c, atol=1e-9)
+        e, i = data.regions[f"eye_{side}"], data.regions[f"iris_{side}"]
+        # the definition, from the true centre: axis to the iris centroid, limbus = widest iris angle
+        f = V[i].mean(0) - c
+        f /= np.linalg.norm(f)
+        q = (V[e] - c) / np.linalg.norm(V[e] - c, axis=1, keepdims=True)
+        ang = np.arccos(np.clip(q @ f, -1, 1))
+        limbus = np.arccos(np.clip(q[np.isin(e, i)] @ f, -1, 1)).max()
+        rho = out[e, 2]
+        np.testing.assert_allclose(rho, ang / limbus, atol=1e-5)
+        assert rho[np.isin(e, i)].max() == pytest.approx(1.0) and rho.min() < 0.05
+        np.testing.assert_allclose(np.hypot(out[e, 0], out[e, 1]), rho, atol=1e-12)
+        assert info[side]["limbus_rad"] == pytest.approx(limbus, abs=1e-5)  # rounded to 5 decimals
+    # phi is mirrored: a point toward +X (temporal on the left eye, nasal on the right) gets
+    # opposite cos(phi) signs on the two eyes, so temporal is cos(phi) < 0 on both
+    for side, sgn in (("l", -1.0), ("r", 1.0)):
+        e = data.regions[f"eye_{side}"]
+        lateral = e[(V[e, 0] - centres["lr".index(side)][0]) > 0.006]
+        lateral = lateral[out[lateral, 2] < 1.5]
+        assert np.sign(np.median(out[lateral, 0])) == sgn
+
+
+def test_eye_coordinates_without_iris_regions():
+    data, V = _eyeballs([(0.03, 0.0, 0.0), (-0.03, 0.0, 0.0)])
+    for s in "lr":
+        del data.regions[f"iris_{s}"]
+    out, info = eye_coordinates(data, V)
+    assert info["l"]["forward"] == [0.0, -1.0, 0.0] and info["l"]["limbus_rad"] == 0.5
+    del data.regions["eye_r"]
+    out, info = eye_coordinates(data, V)
+    assert set(info) == {"l"}

@@ -1,0 +1,114 @@
+"""Strand geometry in numpy (``synth.assets.fit.strands``, ``groom`` and the groom modules), no
+Blender: root sampling by area, the triangle-local attachment, the curve helpers against
+library oracles, and the grooms' counts and determinism on the default head. The Blender rigs
+(Curves objects, Geometry Nodes styling, renders) are tested in tests/test_assets_strands.py."""
+
+from __future__ import annotations
+
+import importlib
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from synth.assets.fit.groom import Groom, Styling, attach
+from synth.assets.fit.strands import Surface, arc_length, resample_fast, transport_frames
+from tests.support import asset_scene
+
+
+def _sphere_ctx(vertices=None):
+    s = trimesh.creation.icosphere(subdivisions=2, radius=0.1)
+    V = np.asarray(s.vertices if vertices is None else vertices, np.float64)
+    return SimpleNamespace(data=SimpleNamespace(triangles=np.asarray(s.faces, np.int64), regions={}), vertices=V)
+
+
+def test_roots_are_sampled_by_area():
+    """Two triangles, one nine times the area of the other: about 90 % of the roots land on it,
+    and every root is a convex combination of its triangle's corners."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [3, 0, 0], [0, 3, 0], [0, 0, 1]], np.float64)
+    T = np.array([[0, 1, 2], [0, 3, 4]], np.int64)
+    ctx = SimpleNamespace(data=SimpleNamespace(triangles=T, regions={}), vertices=V)
+    s = Surface(ctx)
+    tri, bary = s.sample(np.array([0, 1]), 20000, np.random.default_rng(4))
+    frac = np.mean(tri == 1)
+    assert abs(frac - 0.9) < 0.01  # 4 sigma of a binomial(20000, 0.9) is 0.0085
+    assert (bary >= 0).all() and np.allclose(bary.sum(1), 1.0)
+    p = s.points(tri, bary)
+    assert np.allclose(p[:, 2], 0.0) and (p[:, :2].sum(1) <= 3.0 * (tri == 1) + 1.0 * (tri == 0) + 1e-12).all()
+
+
+def test_attachment_reproduces_and_follows_a_rigid_motion():
+    ctx = _sphere_ctx()
+    s = Surface(ctx)
+    rng = np.random.default_rng(5)
+    tri, bary = s.sample(np.arange(len(s.T)), 50, rng)
+    root = s.points(tri, bary)
+    n = s.normals(tri, bary)
+    pts = root[:, None] + n[:, None] * np.linspace(0.0, 0.05, 6)[None, :, None]  # straight out of the sphere
+    g = Groom("hair", "test", s, pts.copy(), tri, bary, 0.0, Styling(), {}, None, 0.3)
+    placed, att = attach(g)
+    assert np.array_equal(placed[:, 0], root) and np.isneginf(att.clearance[:, 0]).all()
+    assert np.allclose(att.positions(ctx), placed, atol=1e-12)
+    R = Rotation.from_euler("xyz", [0.3, -0.5, 1.1]).as_matrix()
+    t = np.array([0.02, -0.01, 0.03])
+    moved = att.positions(_sphere_ctx(ctx.vertices @ R.T + t))
+    assert np.allclose(moved, placed @ R.T + t, atol=1e-12)
+
+
+def test_resample_and_frames_on_a_helix():
+    r, c = 0.01, 0.004  # radius, rise per radian: arc length = sqrt(r^2 + c^2) * t
+
+    def helix(t):
+        return np.stack([r * np.cos(t), r * np.sin(t), c * t], -1)
+
+    t = np.linspace(0.0, 4 * np.pi, 400)
+    P = helix(t)[None]
+    L = np.hypot(r, c) * t[-1]
+    assert arc_length(P)[0, -1] == pytest.approx(L, rel=1e-4)  # chord error of 400 samples: 4e-5
+    Q = resample_fast(P, np.array([L / 2]), 21)[0]
+    # equal arc-length steps on a helix are equal parameter steps: compare with the curve itself
+    assert np.allclose(Q, helix(np.linspace(0.0, t[-1] / 2, 21)), atol=2e-5)
+    tan, b1, b2 = transport_frames(P, np.array([[1.0, 0.0, 0.0]]))
+    for u, v in ((tan, b1), (tan, b2), (b1, b2)):
+        assert np.abs((u * v).sum(-1)).max() < 1e-9
+    assert np.allclose(np.linalg.norm(b1, axis=-1), 1.0)
+
+
+# --------------------------------------------------------------------------- the grooms on the default head
+
+SCALE = [("hair", "buzz_cut", {"length_m": 0.006}), ("beard", "stubble", {"length_m": 0.002}),
+         ("eyebrows", "natural", {}), ("eyelashes", "natural", {})]
+
+
+def _groom(hm, cls, sid, params, resolution=64, case="neutral", identity_index=0, run_seed=0):
+    ctx = asset_scene.head_arrays(hm, case, resolution, identity_index, run_seed)
+    g = importlib.import_module(f"synth.assets.fit.{cls}").groom(ctx, {"id": sid, "params": dict(params)})
+    return ctx, g
+
+
+@pytest.mark.slow
+def test_counts_grow_with_resolution(default_head):
+    for cls, sid, params in SCALE:
+        n = {}
+        for res in (64, 512):
+            _, g = _groom(default_head, cls, sid, params, resolution=res)
+            n[res] = (len(g.pts), g.info["guides"])
+        assert n[512][0] > 1.5 * n[64][0], (cls, n)
+        assert n[512][1] >= n[64][1], (cls, n)
+        if cls == "hair":
+            assert 100 <= n[64][1] <= 1000 and n[512][0] >= 5000
+
+
+@pytest.mark.parametrize("cls,sid,params", [("hair", "short_curly", {"curl": 0.8, "curl_radius_m": 0.004}),
+                                            ("beard", "goatee", {}), ("eyelashes", "mascara", {"clumping": 0.5})])
+def test_grooms_are_deterministic_and_attached(default_head, cls, sid, params):
+    ctx, a = _groom(default_head, cls, sid, params, case="id+3_jaw", identity_index=3, run_seed=11)
+    _, b = _groom(default_head, cls, sid, params, case="id+3_jaw", identity_index=3, run_seed=11)
+    _, c = _groom(default_head, cls, sid, params, case="id+3_jaw", identity_index=4, run_seed=11)
+    assert np.array_equal(a.pts, b.pts) and a.info == b.info
+    assert a.pts.shape != c.pts.shape or not np.array_equal(a.pts, c.pts)
+    pts, att = attach(a)
+    assert np.isfinite(pts).all()
+    assert np.array_equal(att.positions(ctx)[:, 0], pts[:, 0])  # roots stay on their triangles

@@ -1,0 +1,61 @@
+"""Garment and headwear rigs in Blender: the mesh object is the numpy shell (after build and
+after an expression change), materials carry the segmentation id, and a render shows them.
+The geometry itself is tested without Blender in tests/test_assets_fit_shells.py."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+pytestmark = [pytest.mark.blender, pytest.mark.slow]
+
+
+def test_rig_mesh_is_the_fitted_shell():
+    from tests.support import asset_scene
+    from blender_scripts.assets import garment, headwear
+    from synth.assets.fit.body import Body, fit_shell
+    from synth.assets.fit.garment import CLEARANCE, garment_shell
+
+    ctx, hm = asset_scene.head_context("id-3_brows", resolution=256, identity_index=2, run_seed=5)
+    entry = {"id": "hoodie", "params": {"hood_up": True}}
+    rig = garment.build(ctx, entry)
+    body = Body.of(ctx)
+    want = fit_shell(body, garment_shell(body, entry, ctx.rng("garment")), CLEARANCE)
+    got, faces = asset_scene.evaluated_mesh(rig.objects[0])
+    assert np.array_equal(got, want.P.astype(np.float32).astype(np.float64)) and np.array_equal(faces, want.F)
+    assert rig.record() == want.info and rig.record()["vertices"] == len(got)
+    asset_scene.set_case(ctx, hm, "id-3_jaw")
+    rig.update(ctx)
+    moved = want.follow(ctx.vertices, ctx.data.triangles)
+    assert np.array_equal(asset_scene.evaluated_mesh(rig.objects[0])[0], moved.astype(np.float32).astype(np.float64))
+    h = headwear.build(ctx, {"id": "baseball_cap", "params": {"brim_yaw_deg": 90.0}})
+    assert h.cls == "headwear" and len(h.objects) == 1 and h.record()["faces"] > 100
+
+
+def test_render_shows_clothing_and_headwear(tmp_path):
+    from tests.support import asset_scene
+    from blender_scripts import camera, passes, scene
+    from blender_scripts.assets import garment, headwear
+    from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
+    from synth.dataset.segmentation import CLASSES
+
+    ctx, _ = asset_scene.head_context("neutral")
+    g = garment.build(ctx, {"id": "sweater", "params": {"colour_hsv": "navy"}})
+    h = headwear.build(ctx, {"id": "beanie", "params": {"colour_hsv": "red"}})
+    assert all(m.pass_index == CLASSES["clothing"] for m in g.objects[0].data.materials)
+    assert all(m.pass_index == CLASSES["headwear"] for m in h.objects[0].data.materials)
+    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu"}, 48, 64)
+    scene.uniform_environment(1.0)
+    cam = camera.make_camera()
+    lm = ctx.landmarks["ibug68"]
+    target = 0.5 * (lm[39] + lm[42]) - np.array([0.0, 0.0, 0.06])
+    w2c = invert_rigid(orbit_camera_to_world(20.0, 5.0, 0.9, target))
+    camera.set_camera(cam, intrinsics(48, 64, 30.0, (0.0, 0.0)), w2c, 48, 64, 0.05, 10.0)
+    r = passes.render_view(tmp_path, 3)
+    seg = r["segmentation"]
+    assert (seg == CLASSES["clothing"]).sum() > 20
+    assert (seg == CLASSES["headwear"]).sum() > 20
+    assert (seg == CLASSES["skin"]).sum() > 20
+    assert np.isfinite(r["rgba"]).all()

@@ -1,0 +1,142 @@
+"""Shader-layer assets (makeup, iris, skin detail) and a glasses render: every id builds, and
+tiny Cycles renders change where they should (the iris colour model: tests/appearance/test_iris.py)."""
+
+from __future__ import annotations
+
+import importlib
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.support import asset_scene
+
+MANIFEST = Path(__file__).resolve().parents[2] / "assets_manifest"
+
+
+def _ids(cls):
+    return [a["id"] for a in tomllib.loads((MANIFEST / f"{cls}.toml").read_text())["assets"]]
+
+
+# ----------------------------------------------------------------------------- Blender
+
+W = H = 64
+
+
+def _render(ctx, tmp):
+    from blender_scripts import camera, passes, scene
+    from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
+
+    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu", "max_bounces": 4}, W, H)
+    scene.uniform_environment(1.0)
+    lm = ctx.landmarks["ibug68"]
+    target = 0.5 * (lm[39] + lm[42]) + np.array([0.0, 0.0, -0.025])
+    cam = camera.make_camera()
+    w2c = invert_rigid(orbit_camera_to_world(0.0, 0.0, 0.3, target))
+    K = intrinsics(W, H, 30.0, (0.0, 0.0))
+    camera.set_camera(cam, K, w2c, W, H, 0.05, 10.0)
+    r = passes.render_view(tmp, 3)
+    return r, K, w2c
+
+
+def _pixels(ctx, K, w2c, region):
+    from synth.conventions import project
+
+    uv, _ = project(K, w2c, ctx.vertices[np.asarray(ctx.data.regions[region])])
+    ij = np.floor(uv).astype(int)
+    ok = (ij[:, 0] >= 0) & (ij[:, 0] < W) & (ij[:, 1] >= 0) & (ij[:, 1] < H)
+    m = np.zeros((H, W), bool)
+    m[ij[ok, 1], ij[ok, 0]] = True
+    return m
+
+
+def _scene(assets: dict, tmp, case="neutral"):
+    from blender_scripts import assets as basset
+
+    ctx, hm = asset_scene.head_context(case)
+    rigs = basset.dress(ctx, assets)
+    r, K, w2c = _render(ctx, tmp)
+    return ctx, rigs, r, K, w2c
+
+
+@pytest.fixture(scope="module")
+def renders(tmp_path_factory):
+    pytest.importorskip("bpy")
+    tmp = tmp_path_factory.mktemp("shaders")
+    out = {}
+    out["base"] = _scene({}, tmp)
+    out["lipstick"] = _scene({"makeup": {"id": "lipstick", "params": {"lip_colour": "red", "gloss": 0.5,
+                                                                       "opacity": 1.0}}}, tmp)
+    out["blue"] = _scene({"iris": {"id": "blue", "params": {"melanin": 0.05, "stroma_scatter": 0.9,
+                                                             "limbal_ring": 0.5, "pupil_dilation": 0.3}}}, tmp)
+    out["dark"] = _scene({"iris": {"id": "dark_brown", "params": {"melanin": 0.95, "limbal_ring": 0.5,
+                                                                   "pupil_dilation": 0.3, "fibre_contrast": 0.2}}}, tmp)
+    out["glasses"] = _scene({"glasses": {"id": "rectangular", "params": {"frame_colour": "black",
+                                                                         "frame_material": "acetate"}}}, tmp)
+    return out
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_lipstick_changes_lip_pixels(renders):
+    ctx, _, base, K, w2c = renders["base"]
+    _, _, lip, _, _ = renders["lipstick"]
+    m = _pixels(ctx, K, w2c, "lips") & (base["segmentation"] == 1)
+    assert m.sum() >= 10
+    b, l = base["rgba"][m, :3].mean(0), lip["rgba"][m, :3].mean(0)
+    assert l[0] / l[1] > 1.3 * b[0] / b[1]  # redder lips
+    far = _pixels(ctx, K, w2c, "nose") & ~_pixels(ctx, K, w2c, "lips")
+    assert np.abs(base["rgba"][far, :3].mean(0) - lip["rgba"][far, :3].mean(0)).max() < 0.03
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_iris_melanin_changes_eye_pixels(renders):
+    ctx, _, blue, K, w2c = renders["blue"]
+    _, _, dark, _, _ = renders["dark"]
+    m = (_pixels(ctx, K, w2c, "iris_l") | _pixels(ctx, K, w2c, "iris_r")) & (blue["segmentation"] == 2)
+    assert m.sum() >= 2
+    b, d = blue["rgba"][m, :3].mean(0), dark["rgba"][m, :3].mean(0)
+    assert b[2] / max(b[0], 1e-6) > 1.2 * d[2] / max(d[0], 1e-6)  # bluer with little melanin
+    assert d.sum() < b.sum()
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_glasses_render_with_segmentation_id(renders):
+    _, _, base, _, _ = renders["base"]
+    _, rigs, gl, _, _ = renders["glasses"]
+    seg = gl["segmentation"]
+    assert (seg == 10).sum() >= 20
+    assert (base["segmentation"] == 10).sum() == 0
+    assert np.isfinite(gl["rgba"]).all()
+    assert rigs["glasses"].record()["nose_gap_m"] < 0.002
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_every_shader_layer_id_builds(tmp_path):
+    pytest.importorskip("bpy")
+    from synth.assets.classes import CLASSES
+
+    ctx, hm = asset_scene.head_context("id+3_jaw")
+    ctx.assets = {}
+    recs = []
+    for cls in [c.name for c in CLASSES.values() if c.shader_layer]:
+        mod = importlib.import_module(f"blender_scripts.assets.{CLASSES[cls].rig}")
+        for i in _ids(cls):
+            params = {"freckles": 0.5, "age_spots": 0.2, "oiliness": 0.4, "wrinkle_depth": 0.8} if cls == "skin" else {}
+            rig = mod.build(ctx, {"id": i, "params": params})
+            recs.append(rig.record())
+    assert len(recs) == len(_ids("skin")) + len(_ids("iris")) + len(_ids("makeup"))
+    for name in ("makeup_mask", "makeup_mask2", "iris_coord", "skin_mask"):
+        assert name in ctx.head.data.attributes
+    r, _, _ = _render(ctx, tmp_path)  # the stacked node trees compile and render finite
+    assert np.isfinite(r["rgba"]).all() and (r["segmentation"] == 1).sum() > 100
+    # stubble shadow chosen by the beard asset
+    ctx2, _ = asset_scene.head_context("neutral")
+    ctx2.assets = {"beard": {"id": "stubble"}}
+    rec = importlib.import_module("blender_scripts.assets.skin_detail").build(ctx2, {"id": "procedural_skin",
+                                                                                     "params": {}}).record()
+    assert rec["stubble_shadow"] > 0.5

@@ -1,0 +1,75 @@
+"""A stand-in for blender_scripts.worker that needs no bpy: it speaks the worker protocol
+(renderer_jobs.events) and misbehaves on request, for the local backend's tests.
+
+    python tests/support/fake_worker.py --dataset DIR --plan PLAN --shards a,b
+
+``DIR/behaviour.json`` maps a shard id to what the worker does with it:
+
+- ``ok`` (default): bpy-like noise on stdout, two ``frame`` events and a ``commit``;
+- ``crash``: a line on stderr, exit 1; ``crash_once``: the same the first time only
+  (``DIR/<shard>.crashed`` marks it), then ``ok``;
+- ``error``: an ``error`` event and exit 2, as the real worker does on a SynthError;
+- ``bad_event``: a line of another protocol version, then ``ok``;
+- ``hang``: start a ``sleep`` child in the same process group (its pid in
+  ``DIR/<shard>.child``), then wait for a signal; ``stubborn``: the same, ignoring SIGTERM.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+
+from renderer_jobs.events import Commit, Error, Frame, Start, emit  # noqa: E402
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--dataset", required=True)
+    ap.add_argument("--plan", required=True)
+    ap.add_argument("--shards", required=True)
+    args = ap.parse_args()
+    root = Path(args.dataset)
+    shards = args.shards.split(",")
+    what = json.loads((root / "behaviour.json").read_text())
+    emit(Start(shards=tuple(shards), pid=os.getpid(), host=platform.node()))
+    for shard in shards:
+        b = what.get(shard, "ok")
+        if b == "crash_once":
+            marker = root / f"{shard}.crashed"
+            b = "ok" if marker.exists() else "crash"
+            marker.touch()
+        if b == "crash":
+            print(f"Traceback: boom in {shard}", file=sys.stderr, flush=True)
+            return 1
+        if b == "error":
+            emit(Error(shard=args.shards, message=f"bad input for {shard}"))
+            print(f"synth worker: error: bad input for {shard}", file=sys.stderr, flush=True)
+            return 2
+        if b in ("hang", "stubborn"):
+            if b == "stubborn":
+                signal.signal(signal.SIGTERM, signal.SIG_IGN)
+            child = subprocess.Popen(["sleep", "600"])
+            (root / f"{shard}.child").write_text(str(child.pid))
+            while True:
+                time.sleep(1)
+        if b == "bad_event":
+            print('{"v": 99, "event": "frame"}', flush=True)
+        print("Fra:1 Mem:10.00M (Peak 12.00M) | Sample 1/4", flush=True)
+        for v in range(2):
+            emit(Frame(shard=shard, key=f"{shard}_v{v}", render_seconds=0.5))
+        print(f"worker: {shard}: 2 frames", file=sys.stderr, flush=True)
+        emit(Commit(shard=shard))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
