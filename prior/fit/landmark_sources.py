@@ -1,0 +1,155 @@
+"""Where 2D landmarks come from: synth frames (their JSON) or a real-photo detector.
+
+``json``: a synth frame's ``landmarks_2d`` (the exact projections of the model's ibug68
+landmarks) and ``landmarks_visible``; optional Gaussian noise (``noise_px`` per axis, from
+``seeds.generator(seed, FRAME, identity, expression, view)`` of the frame's own indices) and
+a sigma per point (``max(sigma_px, noise_px)``; hidden points unused, or with ``hidden_sigma_px``).
+The frame's camera is for evaluation only: K is passed on only when asked (``known_intrinsics``).
+
+``mediapipe``: the optional ``synth[fit]`` extra, ``mediapipe==0.10.21`` (the last wheel that
+bundles its face-mesh and selfie-segmentation models). Its 478 refined face-mesh points are
+mapped to model surface points by the correspondence in ``prior/fit/data/`` (docs/fitting.md:
+how it was derived and what is missing); the selfie segmentation gives foreground masks.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from prior.fit.landmarks_fit import Observations
+from synth import seeds
+from synth.errors import SynthError
+
+MEDIAPIPE_VERSION = "0.10.21"
+CORRESPONDENCE_DIR = Path(__file__).resolve().parent / "data"
+#: mediapipe's points at the two sides of the face: their distance is the image's scale
+FACE_SIDES = (234, 454)
+
+
+# --------------------------------------------------------------------------- synth frames
+
+
+def read_frames(paths) -> list:
+    """Frames (:class:`synth.dataset.reader.Frame`) from paths to their ``.json`` or ``.exr``."""
+    from synth.dataset.reader import read_frame
+
+    return [read_frame(Path(p).with_suffix(".json")) for p in paths]
+
+
+def frame_observations(frames, *, noise_px: float = 0.0, sigma_px: float = 1.0, seed: int = 0,
+                       hidden_sigma_px: float | None = None, known_intrinsics: bool = False) -> Observations:
+    """Observations (ibug68) from synth frames' JSON. All frames must have one image size."""
+    if not frames:
+        raise SynthError("no frames given", "landmarks", "pass at least one frame")
+    if noise_px < 0 or sigma_px <= 0:
+        raise SynthError(f"noise {noise_px} px and sigma {sigma_px} px must be >= 0 and > 0", "landmarks",
+                         "pass sensible pixel values")
+    sizes = {(f.width, f.height) for f in frames}
+    if len(sizes) > 1:
+        raise SynthError(f"images differ in size: {sorted(sizes)}", "landmarks",
+                         "fit images of one size (one camera, shared intrinsics)")
+    means, sigmas, Ks = [], [], []
+    for f in frames:
+        where = f"frame {f.key}"
+        try:
+            lm = np.asarray(f.meta["landmarks_2d"], np.float64)
+            vis = np.asarray(f.meta["landmarks_visible"], bool)
+        except KeyError as e:
+            raise SynthError(f"frame JSON has no {e}", where, "use frames rendered by synth") from None
+        if lm.ndim != 2 or lm.shape[1] != 2 or vis.shape != lm.shape[:1]:
+            raise SynthError(f"landmarks_2d {lm.shape} / landmarks_visible {vis.shape} are malformed", where,
+                             "use frames rendered by synth")
+        if noise_px > 0:
+            g = seeds.generator(seed, seeds.Stream.FRAME, f.identity_index, f.expression_index, f.view_index)
+            lm = lm + noise_px * g.standard_normal(lm.shape)
+        s = max(sigma_px, noise_px)
+        hidden = np.inf if hidden_sigma_px is None else hidden_sigma_px
+        means.append(lm)
+        sigmas.append(np.where(vis, s, hidden))
+        Ks.append(f.K)
+    (W, H), = sizes
+    return Observations(np.stack(means), np.stack(sigmas), W, H, np.stack(Ks) if known_intrinsics else None,
+                        landmark_set="ibug68")
+
+
+# --------------------------------------------------------------------------- mediapipe
+
+
+def require_mediapipe():
+    """The mediapipe module, or one SynthError line saying how to install it (for the CLI)."""
+    fix = f"install the fit extra: pip install 'synth[fit]' (mediapipe=={MEDIAPIPE_VERSION}; docs/fitting.md)"
+    try:
+        import mediapipe
+    except ImportError:
+        raise SynthError("the mediapipe landmark detector is not installed", "--landmarks mediapipe", fix) from None
+    version = getattr(mediapipe, "__version__", "?")
+    if version != MEDIAPIPE_VERSION:
+        raise SynthError(f"mediapipe {version} is installed; only {MEDIAPIPE_VERSION} bundles the face-mesh and "
+                         "selfie-segmentation models (later releases download them)", "--landmarks mediapipe", fix)
+    return mediapipe
+
+
+def model_key(model) -> str:
+    """Identifies a head model's topology and rest shape (what a correspondence depends on)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for a in (np.ascontiguousarray(model.triangles, np.int32), np.ascontiguousarray(model.template, np.float32)):
+        h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
+def load_correspondence(model) -> dict:
+    """The mediapipe -> model correspondence for this model: ``index`` (P,) mediapipe point
+    indices, ``triangles`` (P,), ``bary`` (P, 3), ``sigma_face`` (P,: the point's RMS residual
+    on the derivation renders in units of the face width) and the file's metadata."""
+    key = model_key(model)
+    path = CORRESPONDENCE_DIR / f"mediapipe-{key}.json"
+    if not path.is_file():
+        raise SynthError(f"no mediapipe landmark correspondence for head model '{model.name}' ({key})",
+                         "--landmarks mediapipe", "use --landmarks json, or derive one (docs/fitting.md)")
+    d = json.loads(path.read_text())
+    pts = d["points"]
+    return {**d, "index": np.array([p["mediapipe"] for p in pts], np.int64),
+            "triangles": np.array([p["triangle"] for p in pts], np.int64),
+            "bary": np.array([p["bary"] for p in pts], np.float64),
+            "sigma_face": np.array([p["sigma_face"] for p in pts], np.float64)}
+
+
+def mediapipe_observations(images, model, *, min_sigma_px: float = 1.0) -> tuple[Observations, list[np.ndarray]]:
+    """Observations from RGB photos ((H, W, 3) uint8, sRGB) by mediapipe's face mesh, and the
+    photos' foreground masks by its selfie segmentation ((H, W) float32 in [0, 1])."""
+    mp = require_mediapipe()
+    corr = load_correspondence(model)
+    sizes = {np.asarray(im).shape for im in images}
+    if len(sizes) != 1 or len(next(iter(sizes))) != 3:
+        raise SynthError(f"images must be RGB of one size, got {sorted(sizes)}", "--landmarks mediapipe",
+                         "resize or crop the photos to one size")
+    H, W, _ = next(iter(sizes))
+    points, masks = [], []
+    with mp.solutions.face_mesh.FaceMesh(static_image_mode=True, max_num_faces=1, refine_landmarks=True) as fm, \
+            mp.solutions.selfie_segmentation.SelfieSegmentation(model_selection=0) as seg:
+        for i, im in enumerate(images):
+            im = np.ascontiguousarray(im, np.uint8)
+            r = fm.process(im)
+            if not r.multi_face_landmarks:
+                raise SynthError("no face found", f"image {i}", "use photos with one clearly visible face")
+            points.append([[p.x * W, p.y * H] for p in r.multi_face_landmarks[0].landmark])
+            masks.append(np.asarray(seg.process(im).segmentation_mask, np.float32))
+    return mediapipe_points_observations(np.asarray(points), W, H, corr, min_sigma_px=min_sigma_px), masks
+
+
+def mediapipe_points_observations(points, width: int, height: int, corr: dict, *,
+                                  min_sigma_px: float = 1.0) -> Observations:
+    """Observations from detected face-mesh points (N, 478, 2) in pixels and a correspondence
+    (:func:`load_correspondence`). Each mapped point's sigma is its residual on the derivation
+    renders (``sigma_face``) times the detected face width (distance of points ``FACE_SIDES``),
+    and at least ``min_sigma_px``."""
+    pts = np.asarray(points, np.float64)
+    face_px = np.linalg.norm(pts[:, FACE_SIDES[1]] - pts[:, FACE_SIDES[0]], axis=-1)  # (N,)
+    sigma = np.maximum(min_sigma_px, corr["sigma_face"][None] * face_px[:, None])
+    return Observations(pts[:, corr["index"]], sigma, width, height, None, landmark_set="mediapipe",
+                        landmark_def=(corr["triangles"], corr["bary"]))

@@ -1,0 +1,225 @@
+"""Derive (and evaluate) the mapping of mediapipe's face-mesh points to head-model surface points.
+
+mediapipe needs protobuf<5, so it lives in its own environment; the steps alternate:
+
+    # 1. renders of the model (any synth dataset, faces roughly frontal), then PNGs + truth
+    .venv/bin/synth render -n 6 -e 1 -v 5 -p preview -o R --set render.resolution=[384,384] ...
+    .venv/bin/python scripts/mediapipe_correspondence.py export R WORK
+    # 2. detection, in an environment with mediapipe==0.10.21 (numpy and pillow suffice besides)
+    MPENV/bin/python scripts/mediapipe_correspondence.py detect WORK
+    # 3. the correspondence from identities < --train (prior/fit/data/mediapipe-<model key>.json)
+    .venv/bin/python scripts/mediapipe_correspondence.py derive WORK --train 4
+    # 4. fit the held-out identities with it and compare with the renders' cameras
+    .venv/bin/python scripts/mediapipe_correspondence.py evaluate WORK --train 4
+
+Derivation: for every training frame and detected point, the camera ray through the point
+is cast onto the posed model mesh of that frame (the frame JSON's codes; hair and clothes
+ignored): the front-most triangle containing the point in the image, with perspective-correct
+barycentric weights. Each hit (triangle, weights) is a candidate surface point; it is posed in
+every training frame and projected with that frame's camera, and the candidate with the
+smallest RMS distance to the detections, in units of each frame's face width (distance of
+points 234 and 454), is kept. That RMS ("sigma_face") becomes the point's sigma when fitting
+(times the detected face width). Points hit in fewer than half of the frames are left out.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+N_POINTS = 478  # face mesh with refined irises
+
+
+def detect(work: Path) -> None:
+    import mediapipe as mp
+    from PIL import Image
+
+    out = {}
+    with mp.solutions.face_mesh.FaceMesh(static_image_mode=True, max_num_faces=1, refine_landmarks=True) as fm:
+        for p in sorted((work / "png").glob("*.png")):
+            img = np.asarray(Image.open(p).convert("RGB"))
+            r = fm.process(img)
+            H, W = img.shape[:2]
+            out[p.stem] = None if not r.multi_face_landmarks else \
+                [[q.x * W, q.y * H] for q in r.multi_face_landmarks[0].landmark]
+    (work / "mediapipe.json").write_text(json.dumps({"mediapipe": mp.__version__, "points": out}))
+    print(f"{sum(v is not None for v in out.values())}/{len(out)} images with a face")
+
+
+# ---------------------------------------------------------------------------- project env
+
+
+def _setup_path() -> None:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def export(dataset: Path, work: Path) -> None:
+    _setup_path()
+    from PIL import Image
+
+    from synth.dataset.reader import iter_frames
+
+    (work / "png").mkdir(parents=True, exist_ok=True)
+    truth = {}
+    for fr in iter_frames(dataset):
+        rgb = fr.rgb_premultiplied + (1.0 - fr.alpha[..., None]) * 0.5  # over mid grey, linear
+        srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * np.clip(rgb, 0, None) ** (1 / 2.4) - 0.055)
+        Image.fromarray((np.clip(srgb, 0, 1) * 255 + 0.5).astype(np.uint8)).save(work / "png" / f"{fr.key}.png")
+        truth[fr.key] = {"identity_index": fr.identity_index, "K": fr.K.tolist(),
+                         "world_to_camera": fr.world_to_camera.tolist(), "width": fr.width, "height": fr.height,
+                         "identity": fr.meta["model"]["identity"], "expression": fr.meta["model"]["expression"],
+                         "joint_rotations": fr.meta["model"]["joint_rotations"]}
+    (work / "truth.json").write_text(json.dumps(truth))
+    print(f"exported {len(truth)} frames")
+
+
+def _load(work: Path):
+    truth = json.loads((work / "truth.json").read_text())
+    det = json.loads((work / "mediapipe.json").read_text())
+    return truth, det
+
+
+def _posed(hm, t: dict) -> np.ndarray:
+    rot = np.zeros((hm.J, 3))
+    for n, r in t["joint_rotations"].items():
+        rot[hm.joint_index[n]] = r
+    return hm.vertices(np.asarray(t["identity"]), np.asarray(t["expression"]), rot)[0].astype(np.float64)
+
+
+def cast(points: np.ndarray, V: np.ndarray, tris: np.ndarray, K: np.ndarray, w2c: np.ndarray):
+    """Front-most triangle under each image point: (tri (P,), bary (P, 3)), tri = -1 for none.
+    2D barycentrics of the projected triangle, made perspective-correct (weights / depth)."""
+    from synth.conventions import project
+
+    uv, z = project(K, w2c, V)
+    a, b, c = uv[tris[:, 0]], uv[tris[:, 1]], uv[tris[:, 2]]
+    za, zb, zc = z[tris[:, 0]], z[tris[:, 1]], z[tris[:, 2]]
+    den = (b[:, 1] - c[:, 1]) * (a[:, 0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (a[:, 1] - c[:, 1])
+    ok_t = (np.abs(den) > 1e-12) & (za > 0) & (zb > 0) & (zc > 0)
+    den = np.where(ok_t, den, 1.0)
+    out_t, out_b = np.full(len(points), -1), np.zeros((len(points), 3))
+    for i, p in enumerate(points):
+        l1 = ((b[:, 1] - c[:, 1]) * (p[0] - c[:, 0]) + (c[:, 0] - b[:, 0]) * (p[1] - c[:, 1])) / den
+        l2 = ((c[:, 1] - a[:, 1]) * (p[0] - c[:, 0]) + (a[:, 0] - c[:, 0]) * (p[1] - c[:, 1])) / den
+        l3 = 1.0 - l1 - l2
+        inside = ok_t & (l1 >= 0) & (l2 >= 0) & (l3 >= 0)
+        if not inside.any():
+            continue
+        idx = np.nonzero(inside)[0]
+        w = np.stack([l1[idx] / za[idx], l2[idx] / zb[idx], l3[idx] / zc[idx]], 1)
+        depth = 1.0 / w.sum(1)  # perspective-correct depth of the hit
+        k = int(np.argmin(depth))
+        out_t[i], out_b[i] = idx[k], w[k] / w[k].sum()
+    return out_t, out_b
+
+
+def derive(work: Path, train: int, out_dir: Path | None) -> Path:
+    _setup_path()
+    from prior.fit.landmark_sources import CORRESPONDENCE_DIR, model_key
+    from synth.conventions import project
+    from synth.model.default import load_default_model
+    from synth.model.head import HeadModel
+
+    model = load_default_model()
+    hm = HeadModel(model, np.float64)
+    tris = np.asarray(model.triangles, np.int64)
+    tmpl = np.asarray(model.template, np.float64)
+    truth, det = _load(work)
+    keys = [k for k, t in truth.items() if t["identity_index"] < train and det["points"].get(k)]
+    F = len(keys)
+    posed = [_posed(hm, truth[k]) for k in keys]
+    cams = [(np.asarray(truth[k]["K"]), np.asarray(truth[k]["world_to_camera"])) for k in keys]
+    det_px = np.asarray([det["points"][k] for k in keys])  # (F, 478, 2)
+    face_px = np.linalg.norm(det_px[:, 454] - det_px[:, 234], axis=-1)  # (F,) face width in pixels
+    hits_t = np.full((F, N_POINTS), -1)
+    hits_b = np.zeros((F, N_POINTS, 3))
+    for f in range(F):
+        hits_t[f], hits_b[f] = cast(det_px[f], posed[f], tris, *cams[f])
+    points = []
+    for j in range(N_POINTS):
+        ok = np.nonzero(hits_t[:, j] >= 0)[0]
+        if len(ok) < max(2, 0.5 * F):
+            continue
+        cand_t, cand_b = hits_t[ok, j], hits_b[ok, j]  # one candidate surface point per frame that hit
+        # each candidate's 2D residual in every training frame, in units of that frame's face width
+        res = np.empty((len(ok), F))
+        for f in range(F):
+            X = np.einsum("ck,ckd->cd", cand_b, posed[f][tris[cand_t]])
+            uv, _ = project(*cams[f], X)
+            res[:, f] = np.linalg.norm(uv - det_px[f, j], axis=-1) / face_px[f]
+        rms = np.sqrt(np.mean(res ** 2, axis=1))
+        c = int(np.argmin(rms))
+        points.append({"mediapipe": j, "triangle": int(cand_t[c]), "bary": [round(float(x), 6) for x in cand_b[c]],
+                       "sigma_face": round(float(rms[c]), 6), "frames": int(len(ok))})
+    doc = {"format": "synth-mediapipe-correspondence", "format_version": 1, "model": model.name,
+           "model_key": model_key(model), "mediapipe": det["mediapipe"],
+           "derivation": {"frames": len(keys), "identities": train, "script": "scripts/mediapipe_correspondence.py"},
+           "points": points}
+    path = (out_dir or CORRESPONDENCE_DIR) / f"mediapipe-{model_key(model)}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(doc, indent=0) + "\n")
+    sp = 100.0 * np.array([p["sigma_face"] for p in points])
+    print(f"{len(points)}/{N_POINTS} points mapped from {F} frames; RMS residual median {np.median(sp):.2f} %, "
+          f"90th percentile {np.percentile(sp, 90):.2f} % of the face width -> {path}")
+    return path
+
+
+def evaluate(work: Path, train: int) -> None:
+    """Fit each held-out identity's views with the mediapipe landmarks (K known, and unknown)."""
+    _setup_path()
+    from prior.fit.camera import relative_pose_errors
+    from prior.fit.landmark_sources import load_correspondence, mediapipe_points_observations
+    from prior.fit.landmarks_fit import fit_landmarks
+    from synth.model.default import load_default_model
+
+    model = load_default_model()
+    corr = load_correspondence(model)
+    truth, det = _load(work)
+    ids = sorted({t["identity_index"] for t in truth.values() if t["identity_index"] >= train})
+    print("| identity | views | K | rotation ° max | position cm max | RMSE px max | converged |")
+    print("|---|---|---|---|---|---|---|")
+    for i in ids:
+        keys = [k for k, t in truth.items() if t["identity_index"] == i and det["points"].get(k)]
+        t0 = truth[keys[0]]
+        pts = np.asarray([det["points"][k] for k in keys])
+        for known in (True, False):
+            obs = mediapipe_points_observations(pts, t0["width"], t0["height"], corr)
+            if known:
+                obs.K = np.stack([np.asarray(truth[k]["K"]) for k in keys])
+            fit = fit_landmarks(model, obs)
+            rot, pos = relative_pose_errors(fit.world_to_camera, np.stack([truth[k]["world_to_camera"] for k in keys]))
+            print(f"| {i} | {len(keys)} | {'known' if known else 'fitted'} | {rot.max():.2f} | {100 * pos.max():.1f} | "
+                  f"{fit.rmse_px.max():.2f} | {fit.converged} |")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    e = sub.add_parser("export")
+    e.add_argument("dataset", type=Path)
+    e.add_argument("work", type=Path)
+    d = sub.add_parser("detect")
+    d.add_argument("work", type=Path)
+    for name in ("derive", "evaluate"):
+        s = sub.add_parser(name)
+        s.add_argument("work", type=Path)
+        s.add_argument("--train", type=int, default=4, help="identities below this index derive the mapping")
+        if name == "derive":
+            s.add_argument("--out", type=Path, default=None, help="directory (default: prior/fit/data)")
+    a = ap.parse_args()
+    if a.cmd == "export":
+        export(a.dataset, a.work)
+    elif a.cmd == "detect":
+        detect(a.work)
+    elif a.cmd == "derive":
+        derive(a.work, a.train, a.out)
+    else:
+        evaluate(a.work, a.train)
+
+
+if __name__ == "__main__":
+    main()
