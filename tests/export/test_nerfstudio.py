@@ -1,14 +1,6 @@
-"""``synth export nerfstudio`` against nerfstudio's documented camera model (not installed).
-
-The oracle follows docs.nerf.studio, "Data conventions" (docs/quickstart/data_conventions.md
-in nerfstudio's repository): cameras in OpenGL axes (+X right, +Y up, looking down -Z),
-``transform_matrix`` camera-to-world whose columns are the camera's +X, +Y, +Z and position;
-intrinsics ``fl_x fl_y cx cy`` per frame or at the top of the file; pixel coordinates are pixel
-centres, "generating a ray for pixel (0, 0) will shoot the ray through the center of that pixel"
-(nerfstudio's ray generator adds 0.5 to the integer pixel index and then applies
-``((x - cx) / fx, -(y - cy) / fy, -1)``). Depth PNGs are read with ``depth_unit_scale_factor
-= 1e-3`` and are planar depth unless ``is_euclidean_depth``. Images are read with PIL.
-"""
+"""``synth export nerfstudio`` against nerfstudio's documented camera model (not installed):
+the oracle in tests/support/export_oracles.py, from docs.nerf.studio "Data conventions".
+Images are read back with PIL, as nerfstudio reads them."""
 
 from __future__ import annotations
 
@@ -24,33 +16,7 @@ from PIL import Image
 from synth.errors import SynthError
 from synth.export.nerfstudio import export_nerfstudio
 from tests.export.scene import GREY, marked_dataset, marked_pixels
-
-# ----------------------------------------------------------------------------- the oracle
-
-
-def ns_value(meta: dict, frame: dict, key: str):
-    """A frame's own value, else the file's (nerfstudio's dataparser reads them so)."""
-    return frame[key] if key in frame else meta[key]
-
-
-def ns_ray(meta: dict, frame: dict, col: int, row: int) -> tuple[np.ndarray, np.ndarray]:
-    """Origin and unit direction of the ray nerfstudio shoots for integer pixel (col, row)."""
-    fx, fy, cx, cy = (ns_value(meta, frame, k) for k in ("fl_x", "fl_y", "cx", "cy"))
-    c2w = np.asarray(frame["transform_matrix"], np.float64)
-    x, y = col + 0.5, row + 0.5
-    d_cam = np.array([(x - cx) / fx, -(y - cy) / fy, -1.0])
-    d = c2w[:3, :3] @ d_cam
-    return c2w[:3, 3], d / np.linalg.norm(d)
-
-
-def ns_project(meta: dict, frame: dict, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Continuous pixel coordinates (x, y) whose ray (as :func:`ns_ray` makes them, with the
-    +0.5 of pixel centres included) passes through world points X, and their planar depth."""
-    fx, fy, cx, cy = (ns_value(meta, frame, k) for k in ("fl_x", "fl_y", "cx", "cy"))
-    c2w = np.asarray(frame["transform_matrix"], np.float64)
-    p = (np.asarray(X, np.float64) - c2w[:3, 3]) @ c2w[:3, :3]  # world -> camera (R^T (X - o))
-    depth = -p[:, 2]
-    return np.stack([cx + fx * p[:, 0] / depth, cy - fy * p[:, 1] / depth], 1), depth
+from tests.support.export_oracles import ns_project, ns_ray, ns_value
 
 
 def test_oracle_projection_inverts_its_rays():

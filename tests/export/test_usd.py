@@ -1,6 +1,7 @@
 """``synth export usd``, read back with pxr: landmarks on the exported head mesh, projected
-through the exported camera by USD's own camera maths (GfCamera -> GfFrustum), land on the
-frame's landmarks_2d; stage metadata, segmentation subsets and refusals."""
+through the exported camera by USD's own camera maths (GfCamera -> GfFrustum; the oracle in
+tests/support/export_oracles.py), land on the frame's landmarks_2d; stage metadata,
+segmentation subsets and refusals."""
 
 from __future__ import annotations
 
@@ -17,41 +18,7 @@ from pxr import Usd, UsdGeom  # noqa: E402
 from synth.errors import SynthError  # noqa: E402
 from synth.export.usd import SEG_PRIMVAR, SUBSET_FAMILY, export_usd  # noqa: E402
 from tests.export.scene import model_dataset  # noqa: E402
-
-
-def usd_project(stage, cam_path: str, time: int, X: np.ndarray, width: int, height: int) -> np.ndarray:
-    """Pixel coordinates (top-left corner of the image at (0, 0)) of world points through a
-    UsdGeom.Camera at a time code, by USD's own maths: view and projection matrices of the
-    camera's GfFrustum (row vectors), NDC in [-1, 1] with y up."""
-    cam = UsdGeom.Camera(stage.GetPrimAtPath(cam_path))
-    fr = cam.GetCamera(Usd.TimeCode(time)).frustum
-    M = np.asarray(fr.ComputeViewMatrix()) @ np.asarray(fr.ComputeProjectionMatrix())
-    h = np.concatenate([X, np.ones((len(X), 1))], 1) @ M
-    ndc = h[:, :3] / h[:, 3:4]
-    return np.stack([(ndc[:, 0] + 1) / 2 * width, (1 - ndc[:, 1]) / 2 * height], 1)
-
-
-def mesh_landmarks(mesh, data, time: int) -> np.ndarray:
-    """The model's ibug68 landmarks on the exported head mesh's points at a time code."""
-    P = np.asarray(mesh.GetPointsAttr().Get(Usd.TimeCode(time)), np.float64)
-    tri, bary = data.landmarks["ibug68"]
-    return np.einsum("lkc,lk->lc", P[data.triangles[tri]], bary.astype(np.float64))
-
-
-def check_stage(stage, frames: dict[str, dict], data) -> float:
-    """Every frame's landmarks through its USD camera vs landmarks_2d; returns the worst error (px)."""
-    from synth.dataset.layout import parse_frame_key
-
-    worst = 0.0
-    for key, fj in frames.items():
-        i, e, v = parse_frame_key(key)
-        base = f"/World/id{i:06d}"
-        X = mesh_landmarks(UsdGeom.Mesh(stage.GetPrimAtPath(f"{base}/head")), data, e)
-        assert np.abs(X - np.asarray(fj["landmarks_3d"])).max() < 1e-6  # the head model, evaluated as rendered
-        uv = usd_project(stage, f"{base}/cameras/v{v:02d}", e, X, fj["image"]["width"], fj["image"]["height"])
-        err = np.abs(uv - np.asarray(fj["landmarks_2d"])).max()
-        worst = max(worst, float(err))
-    return worst
+from tests.support.export_oracles import check_stage  # noqa: E402
 
 
 @pytest.fixture(scope="module")
