@@ -15,7 +15,7 @@ from PIL import Image
 
 from synth.errors import SynthError
 from synth.export.nerfstudio import export_nerfstudio
-from tests.export.scene import GREY, marked_dataset, marked_pixels
+from tests.support.datasets import GREY, marked_dataset, marked_pixels
 from tests.support.export_oracles import ns_project, ns_ray, ns_value
 
 

@@ -17,7 +17,7 @@ from pxr import Usd, UsdGeom  # noqa: E402
 
 from synth.errors import SynthError  # noqa: E402
 from synth.export.usd import SEG_PRIMVAR, SUBSET_FAMILY, export_usd  # noqa: E402
-from tests.export.scene import model_dataset  # noqa: E402
+from tests.support.datasets import model_dataset  # noqa: E402
 from tests.support.export_oracles import check_stage  # noqa: E402
 
 

@@ -1,4 +1,5 @@
-"""Small committed datasets for the export and report tests, made without Blender.
+"""Small committed datasets for the export and report tests (tests/export, tests/report),
+made without Blender.
 
 - :func:`marked_dataset`: frames whose only covered pixels are the pixels the frame's own
   camera projects some 3D landmarks into (alpha 1, grey, depth = the landmark's z), at a
@@ -15,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from synth.appearance.skin import skin_albedo
 from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world, project
 from synth.dataset.exr import camera_attributes
 from synth.dataset.layout import frame_key, parse_frame_key, shard_name
@@ -30,9 +32,11 @@ def _camera(key: str, W: int, H: int, radius: float = 0.9, target=(0.0, 0.0, 0.0
     i, e, v = parse_frame_key(key)
     rng = np.random.default_rng([i, e, v, 7])
     K = intrinsics(W, H, 38.0, rng.uniform(-2.0, 2.0, 2))
-    c2w = orbit_camera_to_world(rng.uniform(-70, 70), rng.uniform(-30, 30), radius, target, rng.uniform(-10, 10))
+    az, el = rng.uniform(-70, 70), rng.uniform(-30, 30)
+    c2w = orbit_camera_to_world(az, el, radius, target, rng.uniform(-10, 10))
     return {"K": K, "world_to_camera": invert_rigid(c2w), "camera_to_world": c2w, "width": W, "height": H,
-            "near": 0.05, "far": 10.0, "azimuth_deg": 0.0, "elevation_deg": 0.0, "radius_m": radius}
+            "near": 0.05, "far": 10.0, "azimuth_deg": az, "elevation_deg": el, "radius_m": radius,
+            "target": list(target)}
 
 
 def _with_camera(fj: dict, cam: dict, lm3: np.ndarray) -> dict:
@@ -121,10 +125,16 @@ def model_dataset(root: Path, identities: int = 1, expressions: int = 2, views: 
         ev = hm.evaluate(beta, psi, rot)
         fj = fake_frames.frame_json(key, size)
         fj["model"] = {"name": data.name, "sha256": sha, "identity": beta.tolist(), "expression": psi.tolist(),
-                       "expression_preset": None, "expression_kind": "neutral" if e == 0 else "random",
+                       "expression_preset": "smile" if e == 1 else None,
+                       "expression_kind": ["neutral", "preset", "random"][min(e, 2)],
                        "joint_rotations": {n: rot[j].tolist() for n, j in hm.joint_index.items()},
                        "pose": None, "head_pose": ev.joint_transforms[0, hm.joint_index["head"]].astype(np.float64)}
         fj["assets"]["hair"] = {"id": "short", "generator": "procedural:hair_strands", "params": {}, "build": {}}
+        if i % 2:
+            fj["assets"]["glasses"] = {"id": "round", "generator": "procedural:glasses_frame", "params": {},
+                                       "build": {}}
+        melanin = 0.05 + 0.1 * i
+        fj["skin"] = {"melanin": melanin, "albedo_linear_srgb": list(skin_albedo(melanin, 0.02))}
         fj = _with_camera(fj, _camera(key, size, size), ev.landmarks["ibug68"][0].astype(np.float64))
         return fake_frames.pixels(key, size), fj
 
