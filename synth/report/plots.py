@@ -38,59 +38,75 @@ def _empty(ax, what: str) -> None:
     ax.set_yticks([])
 
 
-def identity_codes(c) -> bytes:
-    plt = _plt()
-    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.4))
-    X = c.identity_codes
-    if len(X):
-        a.hist(np.linalg.norm(X, axis=1), bins=max(5, min(40, len(X) // 3 or 1)), color="#4878a8")
-        a.set_xlabel("|identity code| (model code units)")
-        a.set_ylabel("identities")
-        if X.shape[1] >= 2:
-            b.scatter(X[:, 0], X[:, 1], s=10, alpha=0.6, color="#4878a8")
-            b.set_xlabel("component 1")
-            b.set_ylabel("component 2")
-            b.set_aspect("equal", adjustable="datalim")
-        else:
-            _empty(b, "second component")
-    else:
-        _empty(a, "identities")
-        _empty(b, "identities")
-    a.set_title("identity code norms")
-    b.set_title("first two identity components")
+def _done(fig, titles: dict, empty: str | None = None) -> bytes:
+    """Title the axes (axis -> title), mark them all empty when ``empty`` names what is missing,
+    and return the PNG."""
+    for ax, title in titles.items():
+        if empty:
+            _empty(ax, empty)
+        ax.set_title(title)
     return _png(fig)
+
+
+def _bins(n: int) -> int:
+    return max(5, min(40, n // 3))
+
+
+def _bars(ax, labels, values, colour) -> None:
+    """Vertical bars with the labels under them, turned."""
+    x = np.arange(len(labels))
+    ax.bar(x, values, color=colour)
+    ax.set_xticks(x)
+    ax.set_xticklabels(labels, rotation=90, fontsize=6)
+
+
+def _barh(ax, labels, values, colours, fontsize: int = 7) -> None:
+    """Horizontal bars, first label on top."""
+    y = np.arange(len(labels))
+    ax.barh(y, values, color=colours)
+    ax.set_yticks(y)
+    ax.set_yticklabels(labels, fontsize=fontsize)
+    ax.invert_yaxis()
+
+
+def identity_codes(c) -> bytes:
+    fig, (a, b) = _plt().subplots(1, 2, figsize=(9, 3.4))
+    X = c.identity_codes
+    titles = {a: "identity code norms", b: "first two identity components"}
+    if not len(X):
+        return _done(fig, titles, "identities")
+    a.hist(np.linalg.norm(X, axis=1), bins=_bins(len(X)), color="#4878a8")
+    a.set_xlabel("|identity code| (model code units)")
+    a.set_ylabel("identities")
+    if X.shape[1] >= 2:
+        b.scatter(X[:, 0], X[:, 1], s=10, alpha=0.6, color="#4878a8")
+        b.set_xlabel("component 1")
+        b.set_ylabel("component 2")
+        b.set_aspect("equal", adjustable="datalim")
+    else:
+        _empty(b, "second component")
+    return _done(fig, titles)
 
 
 def expressions(c) -> bytes:
-    plt = _plt()
-    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 3.6), gridspec_kw={"width_ratios": [3, 1.3]})
+    fig, (a, b) = _plt().subplots(1, 2, figsize=(12, 3.6), gridspec_kw={"width_ratios": [3, 1.3]})
     E = c.expression_codes
-    if len(E):
-        rate = (np.abs(E) > 1e-6).mean(axis=0)
-        a.bar(np.arange(len(rate)), rate, color="#6a9f58")
-        a.set_xticks(np.arange(len(rate)))
-        a.set_xticklabels(c.expression_names, rotation=90, fontsize=6)
-        a.set_ylabel("fraction of expressions")
-        labels = [f"kind: {k}" for k in sorted(c.expression_kinds)] + sorted(c.expression_presets)
-        counts = [c.expression_kinds[k] for k in sorted(c.expression_kinds)] + \
-                 [c.expression_presets[k] for k in sorted(c.expression_presets)]
-        b.barh(np.arange(len(labels)), counts, color=["#888888"] * len(c.expression_kinds)
-               + ["#6a9f58"] * len(c.expression_presets))
-        b.set_yticks(np.arange(len(labels)))
-        b.set_yticklabels(labels, fontsize=7)
-        b.invert_yaxis()
-        b.set_xlabel("expressions")
-    else:
-        _empty(a, "expressions")
-        _empty(b, "expressions")
-    a.set_title("expression components: how often active")
-    b.set_title("kinds and presets")
-    return _png(fig)
+    titles = {a: "expression components: how often active", b: "kinds and presets"}
+    if not len(E):
+        return _done(fig, titles, "expressions")
+    rate = (np.abs(E) > 1e-6).mean(axis=0)
+    _bars(a, c.expression_names, rate, "#6a9f58")
+    a.set_ylabel("fraction of expressions")
+    kinds, presets = sorted(c.expression_kinds), sorted(c.expression_presets)
+    _barh(b, [f"kind: {k}" for k in kinds] + presets,
+          [c.expression_kinds[k] for k in kinds] + [c.expression_presets[k] for k in presets],
+          ["#888888"] * len(kinds) + ["#6a9f58"] * len(presets))
+    b.set_xlabel("expressions")
+    return _done(fig, titles)
 
 
 def cameras(c) -> bytes:
-    plt = _plt()
-    fig = plt.figure(figsize=(11, 3.8))
+    fig = _plt().figure(figsize=(11, 3.8))
     a = fig.add_subplot(1, 2, 1, projection="mollweide")
     b = fig.add_subplot(1, 2, 2)
     if c.azimuth_deg.size:
@@ -99,10 +115,9 @@ def cameras(c) -> bytes:
         a.tick_params(labelsize=6)
     else:
         _empty(a, "views")
-    a.set_title("viewpoints (azimuth, elevation; 0 = frontal)", fontsize=10)
     ang = c.smallest_angle_deg[np.isfinite(c.smallest_angle_deg)]
     if ang.size:
-        b.hist(ang, bins=max(5, min(40, ang.size // 3 or 1)), color="#b05a3c")
+        b.hist(ang, bins=_bins(ang.size), color="#b05a3c")
         if c.min_separation_deg is not None:
             b.axvline(c.min_separation_deg, color="k", ls="--", lw=1, label=f"minimum {c.min_separation_deg:g} deg")
             b.legend(fontsize=8)
@@ -110,8 +125,7 @@ def cameras(c) -> bytes:
         b.set_ylabel("expressions")
     else:
         _empty(b, "expressions with two views")
-    b.set_title("view separation")
-    return _png(fig)
+    return _done(fig, {a: "viewpoints (azimuth, elevation; 0 = frontal)", b: "view separation"})
 
 
 def assets(c) -> bytes:
@@ -130,11 +144,8 @@ def assets(c) -> bytes:
             items = sorted(((str(k) if k is not None else "(none)"), v) for k, v in cnt.items())
             items.sort(key=lambda kv: -kv[1])
             items = items[:8]
-            ax.barh(np.arange(len(items)), [v for _, v in items],
-                    color=["#bbbbbb" if k == "(none)" else "#7a5aa8" for k, _ in items])
-            ax.set_yticks(np.arange(len(items)))
-            ax.set_yticklabels([k for k, _ in items], fontsize=7)
-            ax.invert_yaxis()
+            _barh(ax, [k for k, _ in items], [v for _, v in items],
+                  ["#bbbbbb" if k == "(none)" else "#7a5aa8" for k, _ in items])
             ax.tick_params(axis="x", labelsize=7)
         present = sum(v for k, v in cnt.items() if k is not None)
         ax.set_title(f"{cls} ({present}/{total})", fontsize=9)
@@ -161,23 +172,19 @@ def skin_ita(c) -> bytes:
 
 
 def render_times(c) -> bytes:
-    plt = _plt()
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.2))
+    fig, (a, b) = _plt().subplots(1, 2, figsize=(10, 3.2))
     fs = np.array(list(c.render.get("frame_seconds", {}).values()))
     ss = c.render.get("shard_seconds", {})
     if fs.size:
-        a.hist(fs, bins=max(5, min(40, fs.size // 3 or 1)), color="#4a9a9a")
+        a.hist(fs, bins=_bins(fs.size), color="#4a9a9a")
         a.set_xlabel("seconds in Cycles")
         a.set_ylabel("frames")
     else:
         _empty(a, "render logs")
-    a.set_title("render time per frame")
     if ss:
         names, vals = list(ss), np.array(list(ss.values()))
         if len(names) <= 30:
-            b.bar(np.arange(len(names)), vals, color="#4a9a9a")
-            b.set_xticks(np.arange(len(names)))
-            b.set_xticklabels(names, rotation=90, fontsize=6)
+            _bars(b, names, vals, "#4a9a9a")
             b.set_ylabel("seconds")
         else:
             b.hist(vals, bins=30, color="#4a9a9a")
@@ -185,8 +192,7 @@ def render_times(c) -> bytes:
             b.set_ylabel("shards")
     else:
         _empty(b, "render logs")
-    b.set_title("render time per shard")
-    return _png(fig)
+    return _done(fig, {a: "render time per frame", b: "render time per shard"})
 
 
 def failures(c) -> bytes:
@@ -196,10 +202,7 @@ def failures(c) -> bytes:
     labels = ["runs", "attempts", "retried batches", "failed attempts", "error events"]
     vals = [r.get("runs", 0), r.get("attempts", 0), r.get("retried_batches", 0), r.get("failed_attempts", 0),
             len(r.get("errors", []))]
-    ax.barh(np.arange(len(labels)), vals, color=["#888888", "#888888", "#d08c3c", "#c0392b", "#c0392b"])
-    ax.set_yticks(np.arange(len(labels)))
-    ax.set_yticklabels(labels)
-    ax.invert_yaxis()
+    _barh(ax, labels, vals, ["#888888", "#888888", "#d08c3c", "#c0392b", "#c0392b"], fontsize=9)
     for i, v in enumerate(vals):
         ax.text(v, i, f" {v}", va="center", fontsize=8)
     ax.set_title("render attempts, retries and failures")
