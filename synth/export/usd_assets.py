@@ -45,13 +45,16 @@ def _entry(record: dict) -> dict:
     return {k: v for k, v in record.items() if k != "build"}
 
 
-def _shell(cls: str, data, rest: HeadPose, poses: list[HeadPose], record: dict, run_seed: int, identity: int):
+def _shell(module: str, cls: str, data, rest: HeadPose, poses: list[HeadPose], record: dict, run_seed: int,
+           identity: int):
+    """A fitted shell (``synth.assets.fit.<module>``: ``<module>_shell`` and ``CLEARANCE``), as
+    ``blender_scripts/assets/garment.py`` builds it."""
+    import importlib
+
     from synth.assets.fit.body import Body, fit_shell
 
-    if cls == "garment":
-        from synth.assets.fit.garment import CLEARANCE, garment_shell as make
-    else:
-        from synth.assets.fit.headwear import CLEARANCE, headwear_shell as make
+    fit = importlib.import_module(f"synth.assets.fit.{module}")
+    make, CLEARANCE = getattr(fit, f"{module}_shell"), fit.CLEARANCE
     body = Body(rest.vertices, data.triangles, data.regions, rest.landmarks["ibug68"])
     fitted = fit_shell(body, make(body, _entry(record), rig_rng(run_seed, identity, cls)), CLEARANCE)
     built = record.get("build") or {}
@@ -76,7 +79,7 @@ def _close(a, b, atol: float = 1e-5) -> bool:
     return a == b
 
 
-def _glasses(data, rest: HeadPose, poses: list[HeadPose], record: dict, run_seed: int, identity: int):
+def _glasses(cls: str, data, rest: HeadPose, poses: list[HeadPose], record: dict, run_seed: int, identity: int):
     from synth.assets.fit.glasses.front import build_front
     from synth.assets.fit.glasses.solve import FRAME_PARTS, fit_glasses
     from synth.assets.fit.glasses.spec import frame_spec
@@ -100,6 +103,14 @@ def _glasses(data, rest: HeadPose, poses: list[HeadPose], record: dict, run_seed
     return [frame, lenses], None
 
 
+#: procedural generator -> how its geometry is rebuilt (synth.assets.classes lists the generators)
+REBUILD = {
+    "garment_shell": lambda *a: _shell("garment", *a),
+    "headwear_shell": lambda *a: _shell("headwear", *a),
+    "glasses_frame": _glasses,
+}
+
+
 def asset_meshes(data, rest: HeadPose, poses: list[HeadPose], assets: dict, run_seed: int | None,
                  identity: int) -> tuple[list[AssetMesh], dict[str, str]]:
     """(meshes, skipped class -> why) for the frame JSON's ``assets`` record of one identity;
@@ -115,13 +126,12 @@ def asset_meshes(data, rest: HeadPose, poses: list[HeadPose], assets: dict, run_
             skipped[cls] = "from an external pack (its mesh lives in a .blend file)"
         elif CLASSES[cls].shader_layer:
             skipped[cls] = "a shader layer on the head (no geometry of its own)"
-        elif cls not in ("garment", "headwear", "glasses"):
-            skipped[cls] = "strands styled by Blender's Geometry Nodes at render time (not rebuilt)"
+        elif gen.removeprefix("procedural:") not in REBUILD:
+            skipped[cls] = "made in Blender (strands: styled by Geometry Nodes at render time); not rebuilt"
         elif run_seed is None:
             skipped[cls] = "the plan (DIR/plan) is missing, so the rig's seed is unknown"
         else:
-            out, why = (_glasses(data, rest, poses, rec, run_seed, identity) if cls == "glasses"
-                        else _shell(cls, data, rest, poses, rec, run_seed, identity))
+            out, why = REBUILD[gen.removeprefix("procedural:")](cls, data, rest, poses, rec, run_seed, identity)
             if out is None:
                 skipped[cls] = why
             else:

@@ -62,7 +62,7 @@ def test_stage_metadata_and_time_samples(exported):
     fj = _frames(ds)["id000000_ex01_v03"]
     assert tuple(cam.GetClippingRangeAttr().Get(1)) == pytest.approx((fj["camera"]["near"], fj["camera"]["far"]))
     assert cam.GetHorizontalApertureAttr().Get(1) == pytest.approx(0.36)
-    assert summary["identities"][0]["skipped"]["hair"].startswith("strands")
+    assert summary["identities"][0]["skipped"]["hair"].startswith("made in Blender")
 
 
 def test_segmentation_subsets_partition_the_head(exported):
