@@ -13,7 +13,7 @@ export_app = typer.Typer(help="Write a dataset in other tools' formats (docs/exp
 
 @export_app.command("nerfstudio")
 def nerfstudio_cmd(
-    directory: Path = typer.Argument(..., help="Dataset directory (committed shards are exported) or a shard directory."),
+    directory: Path = typer.Argument(..., help="Dataset directory (its committed shards) or one shard directory."),
     out: Path = typer.Option(..., "--out", "-o", help="nerfstudio data folder to create (new or empty)."),
     identity: Optional[int] = typer.Option(None, "--identity", "-i", min=0, help="Only this identity index."),
     expression: Optional[int] = typer.Option(None, "--expression", "-e", min=0, help="Only this expression index."),

@@ -343,4 +343,5 @@ def pixel_defects(px: dict) -> list[str]:
 
 
 __all__ = ["CHANNELS", "REC709_CHROMATICITIES", "HALF_MAX", "BACKGROUND_DEPTH", "camera_attributes",
-           "encode_frame_exr", "read_camera_attributes", "write_frame_exr", "read_frame_exr", "decode_frame_exr", "read_frame_exr_header", "pixel_defects"]
+           "encode_frame_exr", "read_camera_attributes", "write_frame_exr", "read_frame_exr", "decode_frame_exr",
+           "read_frame_exr_header", "pixel_defects"]

@@ -41,18 +41,14 @@ from synth.export.select import select_frames
 from synth.export.usd_assets import HeadPose, asset_meshes
 from synth.io import loads_json, sha256_file
 
+try:  # the `export` extra; export_usd says how to install it
+    from pxr import Gf, Sdf, Usd, UsdGeom, Vt
+except ImportError:  # pragma: no cover - depends on the environment
+    Usd = None
+
 SUFFIXES = (".usd", ".usda", ".usdc")
 SUBSET_FAMILY = "synthSegmentation"
 SEG_PRIMVAR = "synth:segmentationId"
-
-
-def _pxr():
-    try:
-        from pxr import Gf, Sdf, Usd, UsdGeom, Vt
-    except ImportError:
-        raise SynthError("the USD export needs the usd-core package", "synth export usd",
-                         "install the export extra: pip install 'synth-faces[export]' (or usd-core)") from None
-    return Gf, Sdf, Usd, UsdGeom, Vt
 
 
 def _resolve_model(root: Path, model_path, frames: list[dict]):
@@ -86,19 +82,19 @@ def _resolve_model(root: Path, model_path, frames: list[dict]):
     return read_model(path), (plan.seed if plan is not None else None)
 
 
-def _set_mesh(UsdGeom, Vt, mesh, counts, indices, time=None) -> None:
+def _set_mesh(mesh, counts, indices, time=None) -> None:
     t = () if time is None else (time,)
     mesh.GetFaceVertexCountsAttr().Set(Vt.IntArray.FromNumpy(np.asarray(counts, np.int32)), *t)
     mesh.GetFaceVertexIndicesAttr().Set(Vt.IntArray.FromNumpy(np.asarray(indices, np.int32)), *t)
 
 
-def _set_points(UsdGeom, Vt, geom, points, time) -> None:
+def _set_points(geom, points, time) -> None:
     pts = Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(points, np.float32))
     geom.GetPointsAttr().Set(pts, time)
     geom.GetExtentAttr().Set(UsdGeom.PointBased.ComputeExtent(pts), time)
 
 
-def _new_mesh(UsdGeom, Sdf, Vt, stage, path: str, seg_ids):
+def _new_mesh(stage, path: str, seg_ids):
     mesh = UsdGeom.Mesh.Define(stage, path)
     for make in (mesh.CreatePointsAttr, mesh.CreateExtentAttr, mesh.CreateFaceVertexCountsAttr,
                  mesh.CreateFaceVertexIndicesAttr):
@@ -114,10 +110,10 @@ def _new_mesh(UsdGeom, Sdf, Vt, stage, path: str, seg_ids):
     return mesh
 
 
-def _head(UsdGeom, Sdf, Vt, stage, path: str, data):
+def _head(stage, path: str, data):
     off, idx, cls, _ = polygon_classes(data)
-    mesh = _new_mesh(UsdGeom, Sdf, Vt, stage, path, cls)
-    _set_mesh(UsdGeom, Vt, mesh, np.diff(off), idx)
+    mesh = _new_mesh(stage, path, cls)
+    _set_mesh(mesh, np.diff(off), idx)
     for cid in sorted(set(cls.tolist())):
         faces = Vt.IntArray.FromNumpy(np.flatnonzero(cls == cid).astype(np.int32))
         sub = UsdGeom.Subset.CreateGeomSubset(mesh, NAMES[cid], UsdGeom.Tokens.face, faces, SUBSET_FAMILY,
@@ -126,13 +122,13 @@ def _head(UsdGeom, Sdf, Vt, stage, path: str, data):
     return mesh
 
 
-def _camera(UsdGeom, Gf, stage, path: str):
+def _camera(stage, path: str):
     cam = UsdGeom.Camera.Define(stage, path)
     cam.CreateProjectionAttr().Set(UsdGeom.Tokens.perspective)
     return cam, cam.AddTransformOp()
 
 
-def _set_camera(Gf, cam, op, meta: dict, time) -> None:
+def _set_camera(cam, op, meta: dict, time) -> None:
     c = meta["camera"]
     p = usd_camera_params(c["K"], c["width"], c["height"])
     cam.GetFocalLengthAttr().Set(p["focalLength"], time)
@@ -170,7 +166,9 @@ def _first_committed(root: Path) -> str:
 def export_usd(source, out, *, shard: str | None = None, model=None, assets: bool = True) -> dict:
     """Write shard ``shard`` (default: the first committed) of dataset ``source`` as a USD
     stage at ``out`` (.usdc binary, .usda text or .usd). Returns a summary."""
-    Gf, Sdf, Usd, UsdGeom, Vt = _pxr()
+    if Usd is None:
+        raise SynthError("the USD export needs the usd-core package", "synth export usd",
+                         "install the export extra: pip install '.[export]' (usd-core)")
     from synth.model.head import HeadModel
 
     root, out = Path(source), Path(out)
@@ -205,8 +203,7 @@ def export_usd(source, out, *, shard: str | None = None, model=None, assets: boo
             "synth:shard": shard, "synth:model": data.name, "synth:timeCode": "expression index",
             "synth:segmentationClasses": {name: int(cid) for cid, name in NAMES.items()}}
         for ident, exprs_of in sorted(by_identity.items()):
-            summary["identities"].append(_identity(Gf, Sdf, Usd, UsdGeom, Vt, stage, hm, data, ident, exprs_of,
-                                                   run_seed if assets else None, assets))
+            summary["identities"].append(_identity(stage, hm, data, ident, exprs_of, run_seed, assets))
         stage.GetRootLayer().Save()
         os.replace(tmpdir / out.name, out)
     finally:
@@ -214,26 +211,27 @@ def export_usd(source, out, *, shard: str | None = None, model=None, assets: boo
     return summary
 
 
-def _identity(Gf, Sdf, Usd, UsdGeom, Vt, stage, hm, data, ident: int, exprs_of: dict, run_seed, assets: bool) -> dict:
+def _identity(stage, hm, data, ident: int, exprs_of: dict, run_seed, assets: bool) -> dict:
     base = f"/World/id{ident:06d}"
     UsdGeom.Xform.Define(stage, base)
     first = {e: next(iter(views.values())) for e, views in exprs_of.items()}
     rest, poses = _poses(hm, first)
-    head = _head(UsdGeom, Sdf, Vt, stage, f"{base}/head", data)
+    head = _head(stage, f"{base}/head", data)
     lms = UsdGeom.Points.Define(stage, f"{base}/landmarks_ibug68")
     lms.CreatePointsAttr()
     lms.CreateExtentAttr()
     lms.CreateWidthsAttr().Set(Vt.FloatArray([0.002]))
+    lms.SetWidthsInterpolation(UsdGeom.Tokens.constant)
     for e, pose in poses.items():
         t = Usd.TimeCode(e)
-        _set_points(UsdGeom, Vt, head, pose.vertices, t)
-        _set_points(UsdGeom, Vt, lms, pose.landmarks["ibug68"], t)
+        _set_points(head, pose.vertices, t)
+        _set_points(lms, pose.landmarks["ibug68"], t)
     cams = {}
     for e, views in sorted(exprs_of.items()):
         for v, meta in sorted(views.items()):
             if v not in cams:
-                cams[v] = _camera(UsdGeom, Gf, stage, f"{base}/cameras/v{v:02d}")
-            _set_camera(Gf, *cams[v], meta, Usd.TimeCode(e))
+                cams[v] = _camera(stage, f"{base}/cameras/v{v:02d}")
+            _set_camera(*cams[v], meta, Usd.TimeCode(e))
     record = {"identity": ident, "expressions": sorted(exprs_of), "views": sorted(cams), "assets": [], "skipped": {}}
     if assets:
         order = sorted(poses)
@@ -241,10 +239,10 @@ def _identity(Gf, Sdf, Usd, UsdGeom, Vt, stage, hm, data, ident: int, exprs_of: 
                                        ident)
         UsdGeom.Scope.Define(stage, f"{base}/assets")
         for m in meshes:
-            mesh = _new_mesh(UsdGeom, Sdf, Vt, stage, f"{base}/assets/{m.name}", m.segmentation_id)
+            mesh = _new_mesh(stage, f"{base}/assets/{m.name}", m.segmentation_id)
             for e, pts, faces in zip(order, m.points, m.faces):
-                _set_mesh(UsdGeom, Vt, mesh, np.full(len(faces), 3), faces.reshape(-1), Usd.TimeCode(e))
-                _set_points(UsdGeom, Vt, mesh, pts, Usd.TimeCode(e))
+                _set_mesh(mesh, np.full(len(faces), 3), faces.reshape(-1), Usd.TimeCode(e))
+                _set_points(mesh, pts, Usd.TimeCode(e))
             record["assets"].append(m.name)
         record["skipped"] = skipped
         stage.GetPrimAtPath(base).SetCustomDataByKey("synth:assetsNotExported", dict(skipped))

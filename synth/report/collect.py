@@ -66,7 +66,8 @@ class Collected:
                             "activation_rate": {n: float(r) for n, r in zip(self.expression_names, act.mean(axis=0))}
                             if act.size else {}},
             "cameras": {"frames": int(self.azimuth_deg.size), "azimuth_deg": q(self.azimuth_deg),
-                        "elevation_deg": q(self.elevation_deg), "smallest_pairwise_angle_deg": q(self.smallest_angle_deg),
+                        "elevation_deg": q(self.elevation_deg),
+                        "smallest_pairwise_angle_deg": q(self.smallest_angle_deg),
                         "min_separation_deg": self.min_separation_deg},
             "assets": {cls: {"present": sum(v for k, v in c.items() if k is not None) / max(n_id, 1),
                              "styles": {str(k): v for k, v in sorted(c.items(), key=lambda kv: -kv[1]) if k is not None}}
