@@ -16,6 +16,8 @@ def report_cmd(
     output: Optional[Path] = typer.Option(None, "-o", "--output", help="HTML file to write "
                                           "(default: DIR/report.html)."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON (no HTML unless -o is given)."),
+    max_shards: Optional[int] = typer.Option(None, "--max-shards", min=1, help="Read only the first N committed "
+                                             "shards (a sample of a large dataset; progress counts all)."),
 ) -> None:
     """Identity and expression codes, viewpoints and their separation, asset and style
     frequencies, skin ITA, render time per frame and shard, failures and retries, and a
@@ -25,7 +27,7 @@ def report_cmd(
     if not directory.is_dir():
         raise SynthError("dataset directory not found", str(directory), "pass the --out directory of `synth render`")
     out = output if output is not None or as_json else directory / "report.html"
-    summary = write_report(directory, out)
+    summary = write_report(directory, out, max_shards=max_shards)
     if as_json:
         typer.echo(json.dumps(summary, indent=1))
         return

@@ -42,6 +42,7 @@ class Collected:
     ita_deg: np.ndarray  # (identities,)
     visible_landmarks: np.ndarray  # (frames,) fraction of the 68 marked visible
     render: dict = field(default_factory=dict)  # from the logs (synth.report.logs)
+    read: dict = field(default_factory=dict)  # what was read: {"shards", "frames"} (all committed, or a sample)
 
     def summary(self) -> dict:
         """The JSON report: counts, distributions as quantiles, frequency tables."""
@@ -56,7 +57,7 @@ class Collected:
         n_id = len(self.identity_codes)
         act = np.abs(self.expression_codes) > 1e-6
         return {
-            "format": REPORT_FORMAT, "dataset": self.root, "progress": self.progress,
+            "format": REPORT_FORMAT, "dataset": self.root, "progress": self.progress, "read": self.read,
             "identities": {"count": n_id, "code_norm": q(np.linalg.norm(self.identity_codes, axis=1)),
                            "first_components": [q(self.identity_codes[:, k]) for k in
                                                 range(min(3, self.identity_codes.shape[1] if n_id else 0))]},
@@ -124,13 +125,15 @@ def _smallest_angle(cams: list[dict]) -> float:
     return float(np.degrees(np.arccos(cos[iu].max())))
 
 
-def collect(root, *, progress=None) -> Collected:
-    """Read a dataset (committed shards only) into a :class:`Collected`."""
+def collect(root, *, max_shards: int | None = None, progress=None) -> Collected:
+    """Read a dataset (committed shards only; the first ``max_shards`` of them when given) into
+    a :class:`Collected`. The progress counts always cover the whole dataset."""
     from synth.report.logs import render_log_stats
 
     root = Path(root)
     ds = load_dataset(root)
-    refs = list_frames(root) if ds.committed_shards() else []
+    committed = sorted(ds.committed_shards())
+    refs = list_frames(root, shards=committed[:max_shards]) if committed else []
     ident_codes, ident_seen = {}, {}
     expr_rows, expr_seen = [], set()
     kinds, presets = Counter(), Counter()
@@ -175,4 +178,5 @@ def collect(root, *, progress=None) -> Collected:
         expression_presets=presets, azimuth_deg=np.array(az), elevation_deg=np.array(el),
         smallest_angle_deg=np.array([_smallest_angle(v) for _, v in sorted(views_of.items())]),
         assets=assets, ita_deg=np.array([ita[i] for i in sorted(ita)]), visible_landmarks=np.array(vis),
-        render=render_log_stats(root / LOGS_DIR, committed={r.key: r.shard for r in refs}))
+        render=render_log_stats(root / LOGS_DIR, committed={r.key: r.shard for r in refs}),
+        read={"shards": len({r.shard for r in refs}), "frames": len(refs)})

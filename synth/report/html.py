@@ -49,13 +49,14 @@ def contact_sheet_png(root: Path, shards: int = 8) -> bytes | None:
         return p.read_bytes()
 
 
-def write_report(root, out=None) -> dict:
-    """Collect ``root``, write the page to ``out`` (atomically) when given; returns the JSON summary."""
+def write_report(root, out=None, *, max_shards: int | None = None) -> dict:
+    """Collect ``root`` (the first ``max_shards`` committed shards when given), write the page to
+    ``out`` (atomically) when given; returns the JSON summary."""
     from synth.errors import SynthError
     from synth.io import atomic_write_bytes
     from synth.report.collect import collect
 
-    collected = collect(root)
+    collected = collect(root, max_shards=max_shards)
     summary = collected.summary()
     if out is not None:
         page = render_html(collected, summary, contact_sheet_png(Path(root)))
@@ -76,6 +77,7 @@ def render_html(collected, summary: dict, sheet: bytes | None) -> str:
              "<p class=\"muted\">Committed shards only; a dataset still rendering reports what is committed. "
              "The same numbers as JSON: <code>synth report DIR --json</code>.</p>",
              _table([("shards committed", f"{p['shards_committed']} / {p['shards_planned']}"),
+                     ("read for this report", f"{s['read']['frames']} frames of {s['read']['shards']} shards"),
                      ("frames committed", f"{p['frames_committed']} / {p['frames_planned']}"),
                      ("staged (in progress)", f"{p['frames_staged']} frames in {p['shards_staged']} shards"),
                      ("identities", s["identities"]["count"]), ("expressions", s["expressions"]["count"]),

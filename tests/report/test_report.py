@@ -64,7 +64,11 @@ def test_summary_matches_the_frames(dataset):
     itas = sorted(float(individual_typology_angle(skin_albedo(0.05 + 0.1 * i, 0.02))) for i in range(3))
     assert s["skin_ita_deg"]["min"] == pytest.approx(itas[0]) and s["skin_ita_deg"]["max"] == pytest.approx(itas[2])
     assert s["render"]["attempts"] == 0 and s["render"]["frame_seconds"] is None  # no logs
+    assert s["read"] == {"shards": 3, "frames": 36}
     json.dumps(s, allow_nan=False)
+    sample = write_report(dataset, max_shards=2)
+    assert sample["read"] == {"shards": 2, "frames": 24} and sample["identities"]["count"] == 2
+    assert sample["progress"] == s["progress"]
 
 
 def test_in_progress_and_logs(tmp_path):
