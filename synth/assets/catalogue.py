@@ -1,4 +1,4 @@
-"""The asset catalogue (``assets_manifest/``): reading and checking it.
+"""The asset catalogue (``synth/assets_manifest/``, package data): reading and checking it.
 
 One TOML file per registered class (``hair.toml``, ``glasses.toml``, ...; the classes are
 :data:`synth.assets.classes.NAMES`) holds the class's ``presence`` probability and its
@@ -35,7 +35,7 @@ MAX_PARAMETERS = 14
 
 
 def default_manifest_dir() -> Path:
-    return Path(__file__).resolve().parents[2] / "assets_manifest"
+    return Path(__file__).resolve().parents[1] / "assets_manifest"  # package data: in the wheel too
 
 
 @lru_cache(maxsize=1)
