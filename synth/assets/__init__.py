@@ -2,7 +2,7 @@
 
 - :mod:`synth.assets.classes`: THE registry of asset classes (name, seed slot, segmentation
   id, rig module, build order, generators, pack anchor);
-- :mod:`synth.assets.catalogue`: reading and checking ``synth/assets_manifest/`` (stops at the
+- :mod:`synth.assets.catalogue`: reading and checking ``assets_manifest/`` (stops at the
   first defect; used at plan time);
 - :mod:`synth.assets.packs`: the checks on external ``.blend`` packs (plan time, validation
   and the rig use the same functions);

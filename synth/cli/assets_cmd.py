@@ -8,7 +8,7 @@ from typing import Any, Optional
 
 import typer
 
-assets_app = typer.Typer(help="Inspect and check the asset catalogue (synth/assets_manifest/, docs/assets.md).",
+assets_app = typer.Typer(help="Inspect and check the asset catalogue (assets_manifest/, docs/assets.md).",
                          no_args_is_help=True)
 
 
@@ -47,7 +47,7 @@ def format_parameter(name: str, spec: dict) -> str:
 def list_cmd(
     cls: Optional[str] = typer.Option(None, "--class", help="Only this asset class."),
     manifest_dir: Optional[Path] = typer.Option(None, "--manifest-dir", "-d",
-                                                help="Catalogue folder (default: synth/assets_manifest/, "
+                                                help="Catalogue folder (default: assets_manifest/, "
                                                      "installed with the package)."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
@@ -90,7 +90,7 @@ def list_cmd(
 @assets_app.command("validate")
 def validate_cmd(
     manifest_dir: Optional[Path] = typer.Option(None, "--manifest-dir", "-d",
-                                                help="Catalogue folder (default: synth/assets_manifest/, "
+                                                help="Catalogue folder (default: assets_manifest/, "
                                                      "installed with the package)."),
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
 ) -> None:

@@ -58,7 +58,7 @@ def test_generators_packs_and_rig_modules():
     assert set(classes.PACK_ANCHORS) == {c.name for c in CLASSES.values() if not c.shader_layer}
     for c in CLASSES.values():
         assert (ROOT / "blender_scripts" / "assets" / f"{c.rig}.py").is_file(), c.rig
-        assert (ROOT / "synth" / "assets_manifest" / f"{c.name}.toml").is_file(), c.name
+        assert (ROOT / "assets_manifest" / f"{c.name}.toml").is_file(), c.name
 
 
 @pytest.mark.parametrize("field,value", [("slot", 3), ("build", 0), ("record", 9), ("pack_anchor", "chin")])

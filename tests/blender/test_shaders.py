@@ -12,7 +12,7 @@ import pytest
 
 from tests.support import asset_scene
 
-MANIFEST = Path(__file__).resolve().parents[2] / "synth" / "assets_manifest"
+MANIFEST = Path(__file__).resolve().parents[2] / "assets_manifest"
 
 
 def _ids(cls):

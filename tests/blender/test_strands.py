@@ -79,7 +79,7 @@ def head_distance(ctx, points, exact: bool = False):
 
 
 def _manifest(cls):
-    with open(ROOT / "synth" / "assets_manifest" / f"{cls}.toml", "rb") as f:
+    with open(ROOT / "assets_manifest" / f"{cls}.toml", "rb") as f:
         return tomllib.load(f)["assets"]
 
 
