@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import platform
+import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -19,7 +20,7 @@ from synth.dataset.frame_json import check_frame_json, jsonable
 from synth.dataset.index import update_index
 from synth.dataset.layout import MANIFEST_FILE, SHARD_FORMAT, frame_files, lease_path, shard_dir, staging_dir, utc_now
 from synth.dataset.lease import DEFAULT_TTL_S, Lease, LeaseBusy
-from synth.dataset.tarshard import check_shard_format, commit_tar, committed_forms
+from synth.dataset.tarshard import check_shard_format, committed_forms, place_tar_shard
 from synth.errors import SynthError
 from synth.io import (atomic_write_bytes, atomic_write_json, dumps_json, file_digest, fsync_dir, is_temp_name,
                       loads_json, sha256_bytes)
@@ -214,7 +215,7 @@ class StagingShard:
         equal the plan's), fsyncs every file, writes ``manifest.json`` (frames, sha256 and size of
         every file, plan hash, versions, plus ``manifest_extra`` such as seeds), renames the
         staging directory to ``shards/<id>`` and updates the index. A tar shard is written as
-        ``shards/<id>.tar`` and ``shards/<id>.tar.json`` instead (:func:`synth.dataset.tarshard.commit_tar`).
+        ``shards/<id>.tar`` and ``shards/<id>.tar.json`` instead (:meth:`_commit_tar`).
         Nothing is committed when anything is missing.
         """
         self._need_lock()
@@ -256,7 +257,7 @@ class StagingShard:
         except (TypeError, ValueError) as e:
             raise SynthError(f"manifest_extra is not JSON-serialisable: {e}", where, "pass plain data") from None
         if self.shard_format == "tar":  # one tar and its manifest instead of a directory
-            return commit_tar(self, manifest, durable=durable)
+            return self._commit_tar(manifest, durable)
         atomic_write_bytes(self.dir / MANIFEST_FILE, data, durable=durable)
         for name in list(files) + [MANIFEST_FILE]:
             os.chmod(self.dir / name, 0o444)  # read-only by convention (and by mode)
@@ -277,5 +278,27 @@ class StagingShard:
             fsync_dir(self.dir.parent)
         update_index(self.root, self.plan_hash, durable=durable)
         self.close()  # anyone who takes the lease now sees the committed shard
+        manifest["manifest_sha256"] = sha256_bytes(data)
+        return manifest
+
+    def _commit_tar(self, manifest: dict, durable: bool) -> dict:
+        """The tar form of the commit (:func:`synth.dataset.tarshard.place_tar_shard`); the
+        staging directory is removed after the commit point."""
+        if committed_forms(self.root, self.shard_id):
+            raise ShardCommitted(f"shard {self.shard_id} is already committed", str(self.target),
+                                 "committed shards are never modified")
+
+        def lease_check() -> None:  # broken by another host after a missed heartbeat: let it commit
+            if not self._lease.held():
+                raise ShardBusy(f"shard {self.shard_id}: this process's claim was broken by another process; "
+                                "not committed", str(self.dir), "the other process finishes the shard")
+
+        data = place_tar_shard(self.dir, self.root, self.shard_id, manifest, check=lease_check, durable=durable)
+        self._committed = True
+        shutil.rmtree(self.dir, ignore_errors=True)
+        if durable:
+            fsync_dir(self.dir.parent)
+        update_index(self.root, self.plan_hash, durable=durable)
+        self.close()
         manifest["manifest_sha256"] = sha256_bytes(data)
         return manifest

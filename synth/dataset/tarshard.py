@@ -32,7 +32,6 @@ headers, ``..`` or absolute names) is refused before its data is read.
 from __future__ import annotations
 
 import os
-import shutil
 import stat
 import tarfile
 from collections.abc import Callable, Iterator
@@ -41,7 +40,7 @@ from typing import IO, NamedTuple
 
 from synth.dataset.layout import FRAME_KEY_RE, MANIFEST_FILE, SHARD_ID_RE, SHARDS_DIR, check_shard_id
 from synth.errors import SynthError
-from synth.io import atomic_place, atomic_write_bytes, dumps_json, file_digest, fsync_dir, is_temp_name
+from synth.io import atomic_place, atomic_write_bytes, dumps_json, file_digest, is_temp_name
 
 SHARD_FORMATS = ("dir", "tar")
 TAR_SUFFIX = ".tar"
@@ -166,19 +165,16 @@ def write_tar(fileobj: IO[bytes], members: list[tuple[str, Path]]) -> dict[str, 
     return offsets
 
 
-def commit_tar(st, manifest: dict, *, durable: bool = True) -> dict:
-    """Commit staging shard ``st`` (a :class:`synth.dataset.staging.StagingShard` whose frames
-    are complete and whose ``manifest`` lists them) as ``shards/<id>.tar`` plus its manifest.
-    Returns the manifest as written (with ``manifest_sha256``)."""
-    from synth.dataset.index import update_index
-    from synth.dataset.staging import ShardBusy, ShardCommitted
-    from synth.io import sha256_bytes
-
-    root, sid = st.root, st.shard_id
-    tp, mp = tar_path(root, sid), tar_manifest_path(root, sid)
+def place_tar_shard(src_dir: Path, root: Path, shard_id: str, manifest: dict, *, check: Callable[[], None],
+                    durable: bool = True) -> bytes:
+    """Commit the staged files listed in ``manifest["files"]`` (in ``src_dir``) as a tar shard:
+    write ``shards/<id>.tar`` under a temporary name, fsync it, call ``check()`` (the caller's
+    last check, e.g. that it still holds the shard's lease; an exception aborts and leaves
+    nothing), rename it into place, then write ``shards/<id>.tar.json`` atomically: the commit
+    point. Fills in the manifest's member offsets and ``container``; returns the manifest's
+    bytes. The caller refuses an already committed shard first and removes its staging after."""
+    tp, mp = tar_path(root, shard_id), tar_manifest_path(root, shard_id)
     tp.parent.mkdir(exist_ok=True)
-    if committed_forms(root, sid):
-        raise ShardCommitted(f"shard {sid} is already committed", str(tp.parent), "committed shards are never modified")
     for n in os.listdir(tp.parent):  # temp tars of this shard left by a killed commit (we hold the lease)
         if is_temp_name(n) and n.startswith(f".{tp.name}."):
             os.unlink(tp.parent / n)
@@ -187,15 +183,13 @@ def commit_tar(st, manifest: dict, *, durable: bool = True) -> dict:
 
     def fill(tmp: Path) -> None:
         with open(tmp, "xb") as f:
-            offsets = write_tar(f, [(n, st.dir / n) for n in names])
+            offsets = write_tar(f, [(n, Path(src_dir) / n) for n in names])
         os.chmod(tmp, MEMBER_MODE)
         digest, size = file_digest(tmp, sync=durable)
         container.update(format=CONTAINER_FORMAT, file=tp.name, sha256=digest, bytes=size)
         for n in names:
             manifest["files"][n]["offset"] = offsets[n]
-        if not st._lease.held():  # broken by another host after a missed heartbeat: let it commit
-            raise ShardBusy(f"shard {sid}: this process's claim was broken by another process; not committed",
-                            str(st.dir), "the other process finishes the shard")
+        check()
 
     # replaces the orphan tar of a killed commit, never a committed one (that has a manifest)
     atomic_place(tp, fill, durable=durable, sync_file=False)
@@ -203,14 +197,7 @@ def commit_tar(st, manifest: dict, *, durable: bool = True) -> dict:
     data = dumps_json(manifest)
     atomic_write_bytes(mp, data, durable=durable)  # the commit point
     os.chmod(mp, MEMBER_MODE)
-    st._committed = True
-    shutil.rmtree(st.dir, ignore_errors=True)
-    if durable:
-        fsync_dir(st.dir.parent)
-    update_index(root, st.plan_hash, durable=durable)
-    st.close()
-    manifest["manifest_sha256"] = sha256_bytes(data)
-    return manifest
+    return data
 
 
 # --------------------------------------------------------------------------- reading

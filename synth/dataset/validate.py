@@ -26,6 +26,7 @@ from synth.dataset.frame_json import validate_frame_json
 from synth.dataset.index import ManifestError, parse_manifest, read_index
 from synth.dataset.layout import MANIFEST_FILE, SHARDS_DIR, STAGING_DIR, frame_files
 from synth.dataset.shards import load_dataset
+from synth.dataset.tar_validate import check_tar_shard
 from synth.dataset.tarshard import shard_entries, tar_manifest_path
 from synth.errors import SynthError
 from synth.io import is_temp_name, loads_json, sha256_bytes, sha256_file
@@ -126,10 +127,14 @@ def validate_shard(root: str, shard: str, expected_keys: list[str] | None, quick
     """Check one committed shard (a directory, or a tar: :mod:`synth.dataset.tar_validate`);
     returns (defects, warnings, frames checked)."""
     d = Path(root) / SHARDS_DIR / shard
-    if not d.is_dir() and os.path.lexists(tar_manifest_path(root, shard)):
-        from synth.dataset.tar_validate import validate_tar_shard
-
-        return validate_tar_shard(root, shard, expected_keys, quick, index_entry, has_index)
+    if not d.is_dir() and os.path.lexists(tar_manifest_path(root, shard)):  # a tar shard
+        m, defects, warnings = check_manifest(tar_manifest_path(root, shard), shard, expected_keys, index_entry,
+                                              has_index)
+        if m is None:
+            return defects, warnings, 0
+        found, checked = check_tar_shard(root, shard, m, quick,
+                                         lambda k, j, e: defects.extend(check_frame_data(shard, k, j, e)))
+        return defects + [Defect(shard, k, kind, msg) for k, kind, msg in found], warnings, checked
     m, defects, warnings = check_manifest(d / MANIFEST_FILE, shard, expected_keys, index_entry, has_index)
     if m is None:
         return defects, warnings, 0
