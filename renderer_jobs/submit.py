@@ -180,7 +180,7 @@ def render_plan(out: Path, plan_dir: Path, backend: Backend, shards_per_worker: 
     from synth.plan.io import load_plan
 
     plan = load_plan(plan_dir)
-    ds = open_dataset(out, plan.plan_hash, plan.expected(),
+    ds = open_dataset(out, plan.plan_hash, plan.expected(), shard_format=plan.shard_format,
                       meta={"plan_dir": os.path.relpath(plan_dir, out), "run_seed": plan.seed,
                             "render": plan.render_settings(), "model": plan.header["model"]})
     pending = ds.pending_shards()

@@ -1,6 +1,7 @@
 """``DIR/index.json``: the committed shards, derived from their manifests.
 
-The index is a cache, never the truth: the truth is ``shards/*/manifest.json``. It is updated
+The index is a cache, never the truth: the truth is the manifests (``shards/*/manifest.json``,
+and ``shards/*.tar.json`` of tar shards, :mod:`synth.dataset.tarshard`). It is updated
 after each commit under the dataset lock (so commits from several processes never lose each
 other's entries) by reconciling it with the directory listing, and it can be rebuilt from the
 files at any time (:func:`rebuild_index`). A kill -9 between a commit's rename and the index
@@ -9,11 +10,10 @@ update leaves a stale index that the next :func:`update_index` repairs.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
-from synth.dataset.layout import (INDEX_FILE, INDEX_FORMAT, LOCK_FILE, MANIFEST_FILE, SHARD_FORMAT, SHARDS_DIR,
-                                  SHARD_ID_RE, flock)
+from synth.dataset.layout import INDEX_FILE, INDEX_FORMAT, LOCK_FILE, MANIFEST_FILE, SHARD_FORMAT, flock
+from synth.dataset.tarshard import manifest_paths
 from synth.io import atomic_write_json, loads_json, sha256_bytes
 
 
@@ -43,8 +43,13 @@ def parse_manifest(data: bytes, shard_id: str) -> dict:
 
 def index_entry(shard_dir: Path) -> dict:
     """Read ``shard_dir/manifest.json`` into an index entry; raises OSError/ManifestError."""
-    data = (shard_dir / MANIFEST_FILE).read_bytes()
-    m = parse_manifest(data, shard_dir.name)
+    return manifest_index_entry(Path(shard_dir) / MANIFEST_FILE, Path(shard_dir).name)
+
+
+def manifest_index_entry(manifest: Path, shard_id: str) -> dict:
+    """The index entry of one manifest (a directory's or a tar shard's); raises OSError/ManifestError."""
+    data = Path(manifest).read_bytes()
+    m = parse_manifest(data, shard_id)
     return {"frames": len(m["frames"]), "bytes": sum(e["bytes"] for e in m["files"].values()),
             "manifest_sha256": sha256_bytes(data), "manifest_bytes": len(data), "committed": m.get("created")}
 
@@ -60,34 +65,27 @@ def read_index(root: Path) -> dict | None:
     return idx
 
 
-def _shard_dirs(root: Path) -> list[str]:
-    try:
-        names = os.listdir(Path(root) / SHARDS_DIR)
-    except FileNotFoundError:
-        return []
-    return sorted(n for n in names if SHARD_ID_RE.match(n) and (Path(root) / SHARDS_DIR / n).is_dir())
-
-
 def reconcile(root: Path, idx: dict | None, plan_hash: str) -> tuple[dict, bool]:
     """Bring ``idx`` in line with the files: add shards missing from it, drop vanished ones."""
     root = Path(root)
     changed = idx is None or idx.get("plan_hash") != plan_hash
     shards = {} if changed else dict(idx["shards"])
-    on_disk = _shard_dirs(root)
+    on_disk: dict[str, Path] = {}
+    for name, mp in manifest_paths(root):  # directories and tar shards; a shard in both forms: the directory
+        on_disk.setdefault(name, mp)
     for name in set(shards) - set(on_disk):
         del shards[name]
         changed = True
-    for name in on_disk:
-        d = root / SHARDS_DIR / name
+    for name, mp in on_disk.items():
         ent = shards.get(name)
         if ent is not None:
             try:
-                if (d / MANIFEST_FILE).stat().st_size == ent.get("manifest_bytes"):
+                if mp.stat().st_size == ent.get("manifest_bytes"):
                     continue
             except OSError:
                 pass
         try:
-            new = index_entry(d)
+            new = manifest_index_entry(mp, name)
         except (OSError, ManifestError):
             new = None  # not a committed shard (no valid manifest): not indexed; validate reports it
         if new != ent:

@@ -34,11 +34,12 @@ from pathlib import Path
 import synth
 from synth.dataset.index import ManifestError, parse_manifest, read_index, update_index
 from synth.dataset.frame_json import jsonable
-from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, LOCK_FILE, LOGS_DIR, MANIFEST_FILE,
+from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, LOCK_FILE, LOGS_DIR,
                                   SHARDS_DIR, STAGING_DIR, check_shard_id, flock, lease_path, shard_dir, staging_dir,
                                   utc_now)
 from synth.dataset.lease import DEFAULT_TTL_S, Holder, read_holder
 from synth.dataset.staging import ShardBusy, ShardCommitted, StagingShard
+from synth.dataset.tarshard import check_shard_format, manifest_file, manifest_paths
 from synth.errors import SynthError
 from synth.io import atomic_write_json, is_temp_name, loads_json
 
@@ -89,6 +90,8 @@ class Dataset:
         self.info = info
         self.plan_hash: str = info["plan_hash"]
         self.expected: dict[str, list[str]] = {k: list(v) for k, v in info["expected"].items()}
+        #: How new commits store a shard: "dir" or "tar" (readers accept both forms).
+        self.shard_format: str = info.get("shard_format", "dir")
         self.writable = writable
 
     # -- paths -------------------------------------------------------------------------------
@@ -104,18 +107,13 @@ class Dataset:
 
         A manifest whose size matches the index entry is trusted (it was parsed when indexed;
         committed shards never change); any other is parsed. Directories without a valid
-        manifest are not committed (``synth validate`` reports them).
+        manifest are not committed (``synth validate`` reports them). Tar shards
+        (``shards/<id>.tar.json``) count as well as directories.
         """
-        base = self.root / SHARDS_DIR
-        try:
-            names = sorted(os.listdir(base))
-        except FileNotFoundError:
-            return set()
         idx = read_index(self.root)
         known = idx["shards"] if idx and idx.get("plan_hash") == self.plan_hash else {}
         out = set()
-        for name in names:
-            mp = base / name / MANIFEST_FILE
+        for name, mp in manifest_paths(self.root):
             try:
                 size = mp.stat().st_size
             except OSError:
@@ -137,11 +135,12 @@ class Dataset:
         return [s for s in self.expected if s not in done]
 
     def read_manifest(self, shard_id: str) -> dict:
-        p = self.shard_dir(shard_id) / MANIFEST_FILE
+        p = manifest_file(self.root, check_shard_id(shard_id))
         try:
             return parse_manifest(p.read_bytes(), shard_id)
         except FileNotFoundError:
-            raise SynthError(f"shard {shard_id} is not committed", str(p.parent), "render it first") from None
+            raise SynthError(f"shard {shard_id} is not committed", str(self.shard_dir(shard_id)), "render it first") \
+                from None
         except ManifestError as e:
             raise SynthError(str(e), str(p), "run `synth validate`; re-render the shard into a new --out") from None
 
@@ -162,7 +161,7 @@ class Dataset:
         if shard_id not in self.expected:
             raise SynthError(f"shard {shard_id} is not in this dataset's plan", str(self.root),
                              "use a shard id from the plan")
-        st = StagingShard(self.root, self.plan_hash, shard_id, self.expected[shard_id], lease_ttl)
+        st = StagingShard(self.root, self.plan_hash, shard_id, self.expected[shard_id], lease_ttl, self.shard_format)
         st._open()
         return st
 
@@ -196,12 +195,15 @@ class Dataset:
         return f"Dataset({str(self.root)!r}, plan_hash={self.plan_hash[:12]}..., shards={len(self.expected)})"
 
 
-def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], meta: dict | None = None) -> Dataset:
+def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], meta: dict | None = None, *,
+                 shard_format: str | None = None) -> Dataset:
     """Create the dataset directory for a plan, or reopen it to resume.
 
     - ``plan_hash``: a stable hash of the plan (``synth plan`` records it in its plan.json).
     - ``expected``: shard id -> the frame keys planned for that shard.
     - ``meta``: JSON-able facts recorded once in dataset.json (plan path, config, versions).
+    - ``shard_format``: ``"dir"`` or ``"tar"`` (``dataset.shard_format``), recorded in
+      dataset.json; ``None``: as recorded there (``"dir"`` for a new dataset).
 
     Refuses (:class:`SynthError`) a directory that holds a dataset from another plan, and a
     non-empty directory that is not a dataset. Safe when several workers open it at once.
@@ -210,6 +212,8 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
     if not isinstance(plan_hash, str) or not plan_hash:
         raise SynthError("plan hash is empty", str(root), "pass the plan's hash")
     exp = _normalise_expected(expected)
+    if shard_format is not None:
+        check_shard_format(shard_format, str(root))
     if root.exists() and not root.is_dir():
         raise SynthError("output path exists and is not a directory", str(root), "choose a directory for --out")
     try:
@@ -227,6 +231,9 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
             if info["expected"] != exp:
                 raise SynthError("dataset.json's expected shards differ from this plan's although the hashes match",
                                  str(root / DATASET_FILE), "the plan hash must cover the shard layout; use a new --out")
+            if shard_format is not None and info.get("shard_format", "dir") != shard_format:
+                raise SynthError(f"{root} stores shards as {info.get('shard_format', 'dir')!r}, not {shard_format!r}",
+                                 str(root / DATASET_FILE), "use a new --out, or the dataset's shard format")
         else:
             leftovers = [n for n in os.listdir(root) if is_temp_name(n)]  # a creation killed half-way
             others = sorted(n for n in os.listdir(root)
@@ -243,6 +250,7 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
                 "python": platform.python_version(),
                 "num_shards": len(exp),
                 "num_frames": sum(len(v) for v in exp.values()),
+                "shard_format": shard_format or "dir",
                 "meta": jsonable(meta or {}),
                 "expected": exp,
             }

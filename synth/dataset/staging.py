@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import platform
+import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from synth.dataset.frame_json import check_frame_json, jsonable
 from synth.dataset.index import update_index
 from synth.dataset.layout import MANIFEST_FILE, SHARD_FORMAT, frame_files, lease_path, shard_dir, staging_dir, utc_now
 from synth.dataset.lease import DEFAULT_TTL_S, Lease, LeaseBusy
+from synth.dataset.tarshard import check_shard_format, committed_forms, place_tar_shard
 from synth.errors import SynthError
 from synth.io import (atomic_write_bytes, atomic_write_json, dumps_json, file_digest, fsync_dir, is_temp_name,
                       loads_json, sha256_bytes)
@@ -34,7 +36,8 @@ class ShardCommitted(SynthError):
     """The shard is already committed; committed shards are never modified."""
 
 
-_RESERVED_MANIFEST = {"format", "shard_id", "plan_hash", "frames", "files", "created", "synth_version", "writer"}
+_RESERVED_MANIFEST = {"format", "shard_id", "plan_hash", "frames", "files", "created", "synth_version", "writer",
+                      "container"}
 
 
 def _writer_versions() -> dict:
@@ -52,12 +55,13 @@ class StagingShard:
     """One shard being rendered: ``.staging/<id>/`` plus the lease ``.staging/<id>.lease``
     (:mod:`synth.dataset.lease`: a claim that holds across hosts sharing the dataset).
 
-    Made by ``Dataset.staging`` (the dataset root, its plan hash, the shard's planned keys and
-    the lease's ttl).
+    Made by ``Dataset.staging`` (the dataset root, its plan hash, the shard's planned keys, the
+    lease's ttl and the dataset's shard format: ``"dir"`` or ``"tar"``, :mod:`synth.dataset.tarshard`).
     """
 
     def __init__(self, root: Path, plan_hash: str, shard_id: str, expected_keys: Sequence[str],
-                 lease_ttl: float = DEFAULT_TTL_S):
+                 lease_ttl: float = DEFAULT_TTL_S, shard_format: str = "dir"):
+        self.shard_format = check_shard_format(shard_format)
         self.root = Path(root)
         self.plan_hash = plan_hash
         self.shard_id = shard_id
@@ -83,7 +87,7 @@ class StagingShard:
             busy.holder = e.holder
             raise busy from None
         try:
-            if self.target.exists():
+            if committed_forms(self.root, self.shard_id):
                 raise ShardCommitted(f"shard {self.shard_id} is already committed", str(self.target),
                                      "committed shards are never modified; skip it")
             self.dir.mkdir(exist_ok=True)
@@ -210,8 +214,9 @@ class StagingShard:
         Checks that exactly the planned frames are present (``expected_keys``, when given, must
         equal the plan's), fsyncs every file, writes ``manifest.json`` (frames, sha256 and size of
         every file, plan hash, versions, plus ``manifest_extra`` such as seeds), renames the
-        staging directory to ``shards/<id>`` and updates the index. Nothing is committed when
-        anything is missing.
+        staging directory to ``shards/<id>`` and updates the index. A tar shard is written as
+        ``shards/<id>.tar`` and ``shards/<id>.tar.json`` instead (:meth:`_commit_tar`).
+        Nothing is committed when anything is missing.
         """
         self._need_lock()
         where = str(self.dir)
@@ -234,7 +239,7 @@ class StagingShard:
                              "remove them (only KEY.exr and KEY.json belong to a shard)")
         files = {}
         for name in sorted(wanted):
-            digest, size = file_digest(self.dir / name, sync=durable)
+            digest, size = file_digest(self.dir / name, sync=durable and self.shard_format == "dir")
             files[name] = {"sha256": digest, "bytes": size}
         manifest = {
             "format": SHARD_FORMAT,
@@ -251,6 +256,8 @@ class StagingShard:
             data = dumps_json(manifest)
         except (TypeError, ValueError) as e:
             raise SynthError(f"manifest_extra is not JSON-serialisable: {e}", where, "pass plain data") from None
+        if self.shard_format == "tar":  # one tar and its manifest instead of a directory
+            return self._commit_tar(manifest, durable)
         atomic_write_bytes(self.dir / MANIFEST_FILE, data, durable=durable)
         for name in list(files) + [MANIFEST_FILE]:
             os.chmod(self.dir / name, 0o444)  # read-only by convention (and by mode)
@@ -271,5 +278,27 @@ class StagingShard:
             fsync_dir(self.dir.parent)
         update_index(self.root, self.plan_hash, durable=durable)
         self.close()  # anyone who takes the lease now sees the committed shard
+        manifest["manifest_sha256"] = sha256_bytes(data)
+        return manifest
+
+    def _commit_tar(self, manifest: dict, durable: bool) -> dict:
+        """The tar form of the commit (:func:`synth.dataset.tarshard.place_tar_shard`); the
+        staging directory is removed after the commit point."""
+        if committed_forms(self.root, self.shard_id):
+            raise ShardCommitted(f"shard {self.shard_id} is already committed", str(self.target),
+                                 "committed shards are never modified")
+
+        def lease_check() -> None:  # broken by another host after a missed heartbeat: let it commit
+            if not self._lease.held():
+                raise ShardBusy(f"shard {self.shard_id}: this process's claim was broken by another process; "
+                                "not committed", str(self.dir), "the other process finishes the shard")
+
+        data = place_tar_shard(self.dir, self.root, self.shard_id, manifest, check=lease_check, durable=durable)
+        self._committed = True
+        shutil.rmtree(self.dir, ignore_errors=True)
+        if durable:
+            fsync_dir(self.dir.parent)
+        update_index(self.root, self.plan_hash, durable=durable)
+        self.close()
         manifest["manifest_sha256"] = sha256_bytes(data)
         return manifest

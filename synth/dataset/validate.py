@@ -26,6 +26,8 @@ from synth.dataset.frame_json import validate_frame_json
 from synth.dataset.index import ManifestError, parse_manifest, read_index
 from synth.dataset.layout import MANIFEST_FILE, SHARDS_DIR, STAGING_DIR, frame_files
 from synth.dataset.shards import load_dataset
+from synth.dataset.tar_validate import check_tar_shard
+from synth.dataset.tarshard import shard_entries, tar_manifest_path
 from synth.errors import SynthError
 from synth.io import is_temp_name, loads_json, sha256_bytes, sha256_file
 
@@ -70,14 +72,25 @@ class Report:
 
 
 def _check_frame(shard_dir: Path, shard: str, key: str) -> list[Defect]:
-    out: list[Defect] = []
     exr, js = frame_files(key)
+    try:
+        jb = (shard_dir / js).read_bytes()
+    except FileNotFoundError:
+        jb = None  # reported as a missing file
+    except OSError as e:
+        return [Defect(shard, key, "json", f"{js} cannot be read: {e}")]
+    return check_frame_data(shard, key, jb, shard_dir / exr if (shard_dir / exr).exists() else None)
+
+
+def check_frame_data(shard: str, key: str, json_bytes: bytes | None, exr) -> list[Defect]:
+    """The defects of one frame from its JSON's bytes and its EXR (a path or bytes); ``None``
+    for a file that is missing (reported elsewhere)."""
+    out: list[Defect] = []
+    exr_name, js = frame_files(key)
     fj = None
     try:
-        fj = loads_json((shard_dir / js).read_bytes())
-    except FileNotFoundError:
-        pass  # reported as a missing file
-    except (ValueError, UnicodeDecodeError, OSError) as e:
+        fj = loads_json(json_bytes) if json_bytes is not None else None
+    except (ValueError, UnicodeDecodeError) as e:
         out.append(Defect(shard, key, "json", f"{js} does not parse: {e}"))
     if fj is not None:
         errs = validate_frame_json(fj)
@@ -87,10 +100,10 @@ def _check_frame(shard_dir: Path, shard: str, key: str) -> list[Defect]:
             out.append(Defect(shard, key, "json", f"{js}: ... and {len(errs) - 5} more schema error(s)"))
         if isinstance(fj, dict) and fj.get("frame_id") != key:
             out.append(Defect(shard, key, "json", f"{js}: frame_id is {fj.get('frame_id')!r}"))
-    if not (shard_dir / exr).exists():
+    if exr is None:
         return out
     try:
-        px = read_frame_exr(shard_dir / exr, verify=True)
+        px = read_frame_exr(exr, verify=True, where=f"{shard}/{exr_name}" if isinstance(exr, bytes) else None)
     except SynthError as e:
         out.append(Defect(shard, key, "exr", e.what))
         return out
@@ -111,33 +124,21 @@ def _check_frame(shard_dir: Path, shard: str, key: str) -> list[Defect]:
 
 def validate_shard(root: str, shard: str, expected_keys: list[str] | None, quick: bool,
                    index_entry: dict | None, has_index: bool = True) -> tuple[list[Defect], list[Defect], int]:
-    """Check one committed shard; returns (defects, warnings, frames checked)."""
+    """Check one committed shard (a directory, or a tar: :mod:`synth.dataset.tar_validate`);
+    returns (defects, warnings, frames checked)."""
     d = Path(root) / SHARDS_DIR / shard
-    defects: list[Defect] = []
-    warnings: list[Defect] = []
-    try:
-        mbytes = (d / MANIFEST_FILE).read_bytes()
-        m = parse_manifest(mbytes, shard)
-    except FileNotFoundError:
-        return [Defect(shard, None, "manifest", "no manifest.json: not a committed shard (leftover or damaged)")], [], 0
-    except (OSError, ManifestError) as e:
-        return [Defect(shard, None, "manifest", str(e))], [], 0
-    if index_entry is None and has_index:
-        warnings.append(Defect(shard, None, "index", "not in index.json (stale index; the next render repairs it)"))
-    elif index_entry is not None and index_entry.get("manifest_sha256") != sha256_bytes(mbytes):
-        defects.append(Defect(shard, None, "manifest", "manifest.json changed after commit (sha256 differs from "
-                                                       "index.json)"))
-    frames = m["frames"]
-    if expected_keys is not None:
-        exp = set(expected_keys)
-        for k in sorted(exp - set(frames)):
-            defects.append(Defect(shard, k, "missing-frame", "planned frame not in the manifest"))
-        for k in sorted(set(frames) - exp):
-            defects.append(Defect(shard, k, "extra-frame", "frame not in the plan"))
-    listed = dict(m["files"])
-    want_files = {n for k in frames for n in frame_files(k)}
-    for n in sorted(want_files - set(listed)):
-        defects.append(Defect(shard, n.rsplit(".", 1)[0], "manifest", f"{n} not listed in the manifest"))
+    if not d.is_dir() and os.path.lexists(tar_manifest_path(root, shard)):  # a tar shard
+        m, defects, warnings = check_manifest(tar_manifest_path(root, shard), shard, expected_keys, index_entry,
+                                              has_index)
+        if m is None:
+            return defects, warnings, 0
+        found, checked = check_tar_shard(root, shard, m, quick,
+                                         lambda k, j, e: defects.extend(check_frame_data(shard, k, j, e)))
+        return defects + [Defect(shard, k, kind, msg) for k, kind, msg in found], warnings, checked
+    m, defects, warnings = check_manifest(d / MANIFEST_FILE, shard, expected_keys, index_entry, has_index)
+    if m is None:
+        return defects, warnings, 0
+    frames, listed = m["frames"], dict(m["files"])
     try:
         on_disk = set(os.listdir(d)) - {MANIFEST_FILE}
     except OSError as e:
@@ -162,7 +163,39 @@ def validate_shard(root: str, shard: str, expected_keys: list[str] | None, quick
     return defects, warnings, checked
 
 
-def _staging_warnings(root: Path) -> list[Defect]:
+def check_manifest(mp: Path, shard: str, expected_keys: list[str] | None, index_entry: dict | None,
+                   has_index: bool) -> tuple[dict | None, list[Defect], list[Defect]]:
+    """Read and check a shard's manifest against the index and the plan: (the manifest, or
+    None when unusable; defects; warnings)."""
+    defects: list[Defect] = []
+    warnings: list[Defect] = []
+    try:
+        mbytes = mp.read_bytes()
+        m = parse_manifest(mbytes, shard)
+    except FileNotFoundError:
+        return None, [Defect(shard, None, "manifest", f"no {mp.name}: not a committed shard (leftover or damaged)")], []
+    except (OSError, ManifestError) as e:
+        return None, [Defect(shard, None, "manifest", str(e))], []
+    if index_entry is None and has_index:
+        warnings.append(Defect(shard, None, "index", "not in index.json (stale index; the next render repairs it)"))
+    elif index_entry is not None and index_entry.get("manifest_sha256") != sha256_bytes(mbytes):
+        defects.append(Defect(shard, None, "manifest", f"{mp.name} changed after commit (sha256 differs from "
+                                                       "index.json)"))
+    frames = m["frames"]
+    if expected_keys is not None:
+        exp = set(expected_keys)
+        for k in sorted(exp - set(frames)):
+            defects.append(Defect(shard, k, "missing-frame", "planned frame not in the manifest"))
+        for k in sorted(set(frames) - exp):
+            defects.append(Defect(shard, k, "extra-frame", "frame not in the plan"))
+    listed = m["files"]
+    want_files = {n for k in frames for n in frame_files(k)}
+    for n in sorted(want_files - set(listed)):
+        defects.append(Defect(shard, n.rsplit(".", 1)[0], "manifest", f"{n} not listed in the manifest"))
+    return m, defects, warnings
+
+
+def _staging_warnings(root: Path, committed: set[str] = frozenset()) -> list[Defect]:
     out = []
     st = root / STAGING_DIR
     if not st.is_dir():
@@ -171,7 +204,10 @@ def _staging_warnings(root: Path) -> list[Defect]:
         p = st / n
         if p.is_dir():
             files = [f for f in os.listdir(p)]
-            if files:
+            if n in committed:  # a tar commit killed after its commit point, before removing the staging
+                out.append(Defect(n, None, "staging", f".staging/{n} is a leftover of the committed shard "
+                                                      "(safe to delete)"))
+            elif files:
                 nj = sum(f.endswith(".json") for f in files)
                 out.append(Defect(n, None, "staging", f"uncommitted work: {nj} frame JSON(s), {len(files)} file(s) "
                                                       "in .staging (resume the render to finish it)"))
@@ -193,10 +229,16 @@ def validate_dataset(root, *, quick: bool = False, partial: bool = False, jobs: 
     rep = Report(root=str(root), hashed=not quick)
     rep.shards_expected = len(ds.expected)
     rep.frames_expected = sum(len(v) for v in ds.expected.values())
-    try:
-        on_disk = sorted(n for n in os.listdir(root / SHARDS_DIR) if (root / SHARDS_DIR / n).is_dir())
-    except FileNotFoundError:
-        on_disk = []
+    ents = shard_entries(root)  # directories and tar shards (synth.dataset.tarshard)
+    on_disk = sorted(set(ents.dirs) | set(ents.tars))
+    for s in sorted(set(ents.dirs) & set(ents.tars)):
+        rep.defects.append(Defect(s, None, "unexpected-shard", f"committed twice: shards/{s}/ and shards/{s}.tar.json "
+                                                               "(the directory is read; remove one)"))
+    for s in ents.orphans:
+        rep.warnings.append(Defect(s, None, "staging", f"shards/{s}.tar has no manifest: a commit was interrupted "
+                                                       "(not committed; the next render replaces it)"))
+    for n in ents.temps:
+        rep.warnings.append(Defect(None, None, "staging", f"leftover temporary file shards/{n} (safe to delete)"))
     idx = read_index(root)
     if idx is None and on_disk:
         rep.warnings.append(Defect(None, None, "index", "index.json missing or unreadable (rebuildable from the "
@@ -213,7 +255,7 @@ def validate_dataset(root, *, quick: bool = False, partial: bool = False, jobs: 
                 Defect(s, None, "missing-shard", f"planned shard not committed ({len(ds.expected[s])} frames)"))
     for s in on_disk:
         if s not in ds.expected:
-            rep.defects.append(Defect(s, None, "unexpected-shard", "shard directory not in the plan"))
+            rep.defects.append(Defect(s, None, "unexpected-shard", "shard not in the plan"))
     # without an index (warned above) there is nothing to compare manifests with
     args = [(str(root), s, ds.expected.get(s), quick, entries.get(s), idx is not None) for s in on_disk]
     results = []
@@ -234,5 +276,5 @@ def validate_dataset(root, *, quick: bool = False, partial: bool = False, jobs: 
         rep.warnings.extend(warns)
         rep.frames_checked += n
         rep.shards_checked += 1
-    rep.warnings.extend(_staging_warnings(root))
+    rep.warnings.extend(_staging_warnings(root, set(on_disk)))
     return rep
