@@ -222,12 +222,17 @@ def ibug68_weights(model, k: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return idx, w, res
 
 
+def _srgb8(fr) -> np.ndarray:
+    """(H, W, 3) uint8 sRGB of a frame composited over mid grey."""
+    rgb = fr.rgb_premultiplied + (1.0 - fr.alpha[..., None]) * 0.5  # linear
+    srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * np.clip(rgb, 0, None) ** (1 / 2.4) - 0.055)
+    return (np.clip(srgb, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
 def _png(fr, path: Path) -> None:
     from PIL import Image
 
-    rgb = fr.rgb_premultiplied + (1.0 - fr.alpha[..., None]) * 0.5  # over mid grey, linear
-    srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * np.clip(rgb, 0, None) ** (1 / 2.4) - 0.055)
-    Image.fromarray((np.clip(srgb, 0, 1) * 255 + 0.5).astype(np.uint8)).save(path)
+    Image.fromarray(_srgb8(fr)).save(path)
 
 
 def judge(args) -> dict:
@@ -328,13 +333,7 @@ def sheet(args) -> dict:
             a = abs(c["azimuth_deg"]) + abs(c["elevation_deg"])
             if fr.identity_index < args.identities and a < best.get(fr.identity_index, (1e9, None))[0]:
                 best[fr.identity_index] = (a, fr)
-        tiles = []
-        for i in sorted(best):
-            fr = best[i][1]
-            rgb = fr.rgb_premultiplied + (1.0 - fr.alpha[..., None]) * 0.5
-            srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * np.clip(rgb, 0, None) ** (1 / 2.4) - 0.055)
-            tiles.append((np.clip(srgb, 0, 1) * 255 + 0.5).astype(np.uint8))
-        rows.append(np.concatenate(tiles, axis=1))
+        rows.append(np.concatenate([_srgb8(best[i][1]) for i in sorted(best)], axis=1))
     w = min(r.shape[1] for r in rows)
     Image.fromarray(np.concatenate([r[:, :w] for r in rows], axis=0)).save(args.out)
     return {}

@@ -59,11 +59,16 @@ def test_degenerate_inputs():
     assert not occluding_points(np.full((2, 3, 3), -0.01), cam, V, F[:0]).any()
 
 
+def _neutral(hm):
+    """Vertices and ibug68 landmarks of the mean identity, neutral expression, no rotation."""
+    d = hm.data
+    ev = hm.evaluate(np.zeros(d.identity_dims), np.zeros(d.expression_dims), np.zeros((hm.J, 3)))
+    return ev.vertices[0].astype(np.float64), ev.landmarks["ibug68"][0].astype(np.float64)
+
+
 def test_inner_face_excludes_the_forehead_and_the_rest_of_the_head(default_head):
     data = default_head.data
-    ev = default_head.evaluate(np.zeros(data.identity_dims), np.zeros(data.expression_dims),
-                               np.zeros((default_head.J, 3)))
-    verts, lm = ev.vertices[0].astype(np.float64), ev.landmarks["ibug68"][0].astype(np.float64)
+    verts, lm = _neutral(default_head)
     tri = inner_face_triangles(data, verts, lm)
     assert 0 < len(tri) < len(data.triangles) // 3
     z = verts[tri][..., 2]
@@ -79,9 +84,7 @@ def test_inner_face_excludes_the_forehead_and_the_rest_of_the_head(default_head)
 
 def test_centre_of_the_face_lies_between_the_outer_eye_corners(default_head):
     data = default_head.data
-    ev = default_head.evaluate(np.zeros(data.identity_dims), np.zeros(data.expression_dims),
-                               np.zeros((default_head.J, 3)))
-    verts, lm = ev.vertices[0].astype(np.float64), ev.landmarks["ibug68"][0].astype(np.float64)
+    verts, lm = _neutral(default_head)
     inner = inner_face_triangles(data, verts, lm)
     centre = inner_face_triangles(data, verts, lm, centre_only=True)
     assert 0 < len(centre) < len(inner)
