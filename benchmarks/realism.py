@@ -236,11 +236,12 @@ def _png(fr, path: Path) -> None:
 
 
 def judge(args) -> dict:
+    from synth.appearance.skin import individual_typology_angle, ita_category
     from synth.dataset.reader import iter_frames
     from synth.model.default import load_default_model
 
     idx, w, res = ibug68_weights(load_default_model())
-    truth = {}
+    truth, cats = {}, {}
     with tempfile.TemporaryDirectory(prefix="synth-judge-") as d:
         png = Path(d) / "png"
         png.mkdir()
@@ -249,12 +250,14 @@ def judge(args) -> dict:
                 _png(fr, png / f"{fr.key}.png")
                 lm = np.asarray(fr.meta["landmarks_2d"], np.float64)
                 truth[fr.key] = lm
+                alb = (fr.meta.get("skin") or {}).get("albedo_linear_srgb")
+                cats[fr.key] = int(ita_category(individual_typology_angle(np.asarray(alb)))) if alb else -1
         subprocess.run([args.mp_python, str(ROOT / "benchmarks" / "mediapipe_judge.py"), str(png), f"{d}/mp.json"],
                        check=True, env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
         det = json.loads(Path(f"{d}/mp.json").read_text())["images"]
     n = len(truth)
     n_det = sum(det[k]["detected"] for k in truth)
-    nme68, nme7 = [], []
+    nme68, nme7, per = [], [], {}
     for key, lm in truth.items():
         mesh = det[key]["mesh"]
         if mesh is None:
@@ -264,6 +267,7 @@ def judge(args) -> dict:
         mapped = np.einsum("lk,lkc->lc", w, P[idx])
         nme68.append(np.linalg.norm(mapped - lm, axis=1).mean() / iod)
         nme7.append(np.mean([np.linalg.norm(P[a] - lm[b]) for a, b in SEVEN]) / iod)
+        per[key] = {"nme68": nme68[-1], "nme7": nme7[-1], "ita_category": cats[key], "iod_px": float(iod)}
     n_mesh = len(nme68)
     print(f"\n### mediapipe {json.dumps(args.dataset)} (|azimuth| <= {args.max_azimuth} deg)\n")
     print("| frames | face detected | face mesh | NME68 median | NME68 mean | 7-point median | 7-point mean |")
@@ -271,7 +275,11 @@ def judge(args) -> dict:
     print(f"| {n} | {n_det}/{n} | {n_mesh}/{n} | {np.median(nme68):.1%} | {np.mean(nme68):.1%} | "
           f"{np.median(nme7):.1%} | {np.mean(nme7):.1%} |")
     print(f"\nmapping residual on the template: median {np.median(res) * 1000:.1f} mm, max {res.max() * 1000:.1f} mm\n")
-    return {"frames": n, "detected": n_det, "mesh": n_mesh, "nme68": nme68, "nme7": nme7,
+    print("| ITA category of the albedo | " + " | ".join(CATS) + " |\n|---|" + "---:|" * 6)
+    by = [[v["nme68"] for v in per.values() if v["ita_category"] == k] for k in range(6)]
+    print("| frames with a mesh | " + " | ".join(str(len(b)) for b in by) + " |")
+    print("| NME68 median | " + " | ".join(f"{np.median(b):.1%}" if b else "-" for b in by) + " |\n")
+    return {"frames": n, "detected": n_det, "mesh": n_mesh, "nme68": nme68, "nme7": nme7, "per_frame": per,
             "mapping": {"mediapipe": idx.tolist(), "weights": np.round(w, 4).tolist(), "residual_m": res.tolist()}}
 
 
