@@ -53,7 +53,15 @@ class CameraConfig:
                                           "+ toward the subject's left", (-360.0, 360.0))
     elevation_deg: tuple[float, float] = _f((-45.0, 70.0), "elevation range; +90 = above the head",
                                             (-90.0, 90.0))
-    radius_m: tuple[float, float] = _f((0.9, 1.3), "distance from the look-at target (metres)", (1e-3, 1e3))
+    radius_m: tuple[float, float] = _f((0.9, 1.3), "distance from the look-at target (metres) when "
+                                       "camera.distance = 'range'", (1e-3, 1e3))
+    distance: str = _f("fit", "'fit': per view, the distance at which the head's bounding sphere fills "
+                       "camera.head_fill of the half field of view (shorter image side); 'range': drawn "
+                       "from camera.radius_m", choices=("fit", "range"))
+    head_fill: tuple[float, float] = _f((0.75, 0.95), "with distance = 'fit': the head sphere's angular "
+                                        "radius over the half field of view, drawn uniformly", (0.05, 1.0))
+    head_margin_m: float = _f(0.03, "added to the radius of each head's bounding sphere (expressions, "
+                              "the jaw), besides the reach of its planned hair and headwear", (0.0, 1.0))
     elevation_sampling: str = _f("area", "'area': uniform over the sphere patch; 'angle': uniform in "
                                  "elevation degrees", choices=("area", "angle"))
     min_separation_deg: float = _f(25.0, "minimum angle between the viewing directions of two views of "
@@ -65,9 +73,10 @@ class CameraConfig:
                                (0.01, 179.0))
     near_m: float = _f(0.05, "near clipping distance (metres)", (1e-6, 1e6))
     far_m: float = _f(10.0, "far clipping distance (metres)", (1e-6, 1e6))
-    target: str = _f("eyes", "look-at point: 'eyes' = midpoint of the four eye corners (ibug68), "
+    target: str = _f("head", "look-at point: 'head' = centre of the identity's head bounding box (neck "
+                     "and shoulders excluded), 'eyes' = midpoint of the four eye corners (ibug68), "
                      "'landmarks' = centroid of all ibug68 landmarks, 'origin' = world origin",
-                     choices=("eyes", "landmarks", "origin"))
+                     choices=("head", "eyes", "landmarks", "origin"))
     target_offset_m: tuple[float, float, float] = _f((0.0, 0.0, 0.0), "added to the look-at point (world)",
                                                      (-10.0, 10.0))
     roll_deg: tuple[float, float] = _f((0.0, 0.0), "camera roll about the optical axis", (-180.0, 180.0))
@@ -128,6 +137,16 @@ class AssetsConfig:
 
 
 @dataclass(frozen=True)
+class SkinConfig:
+    ita_weights: tuple[float, ...] = _f((1.0, 1.0, 1.0, 1.0, 1.0, 1.0), "relative probability of the six ITA "
+                                        "skin-tone categories, lightest first: very light (> 55 deg), light "
+                                        "(41-55), intermediate (28-41), tan (10-28), brown (-30-10), dark "
+                                        "(< -30); uniform in ITA within a category", (0.0, 1e6))
+    ita_limits_deg: tuple[float, float] = _f((-55.0, 62.0), "ITA range of all skin tones: the low end of "
+                                             "'dark', the high end of 'very light'", (-80.0, 80.0))
+
+
+@dataclass(frozen=True)
 class LightingConfig:
     environment: str = _f("uniform", "'uniform' (paper: one uniform well-lit environment) or 'hdri'",
                           choices=("uniform", "hdri"))
@@ -159,6 +178,7 @@ class Config:
     identity: IdentityConfig = field(default_factory=IdentityConfig)
     expression: ExpressionConfig = field(default_factory=ExpressionConfig)
     assets: AssetsConfig = field(default_factory=AssetsConfig)
+    skin: SkinConfig = field(default_factory=SkinConfig)
     lighting: LightingConfig = field(default_factory=LightingConfig)
     render: RenderConfig = field(default_factory=RenderConfig)
 
@@ -195,6 +215,13 @@ def check_cross(cfg: Config, where: str) -> None:
     if e.neutral_weight + e.preset_weight + e.random_weight <= 0:
         raise ConfigError("config values expression.*_weight are all zero", where,
                           "give neutral_weight, preset_weight or random_weight a positive value")
+    w, lim = cfg.skin.ita_weights, cfg.skin.ita_limits_deg
+    if len(w) != 6 or sum(w) <= 0:
+        raise ConfigError(f"config value skin.ita_weights = {list(w)} must hold 6 weights, not all zero", where,
+                          "give one weight per ITA category, lightest first, e.g. [1, 1, 1, 1, 1, 1]")
+    if not (lim[0] < -30.0 and lim[1] > 55.0):
+        raise ConfigError(f"config value skin.ita_limits_deg = {list(lim)} must reach below -30 and above 55",
+                          where, "widen it, e.g. [-55, 62] (use skin.ita_weights to drop a category)")
     if cfg.lighting.environment == "hdri" and not cfg.lighting.hdri_files:
         raise ConfigError("config value lighting.hdri_files is empty but lighting.environment = 'hdri'", where,
                           "list environment maps in lighting.hdri_files or use environment = 'uniform'")

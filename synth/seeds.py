@@ -54,6 +54,7 @@ class Stream(enum.IntEnum):
     FRAME = 6  # the per-frame render seed
     LIGHTING = 7
     ASSET_GEOMETRY = 8  # per-identity, per-class geometry randomness of asset rigs (strand roots, ...)
+    SKIN = 9  # per-identity skin tone (the ITA target, synth.plan.skin)
 
 
 def check_seed(seed: int) -> int:

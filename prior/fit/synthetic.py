@@ -56,7 +56,8 @@ class Scene:
 def make_scene(model: HeadModelData, seed: int, identity_index: int, azimuths_deg=(0.0, 45.0, -45.0),
                resolution: int = 512, jitter_deg: float = 5.0, landmark_set: str = "ibug68",
                head: HeadModel | None = None) -> Scene:
-    cfg = load_config(overrides=["expression.neutral_weight=0"]).resolved()
+    # the eye target keeps these scenes (and docs/fitting.md's figures) as they were before the head framing
+    cfg = load_config(overrides=["expression.neutral_weight=0", 'camera.target="eyes"']).resolved()
     head = head or HeadModel(model, np.float64)
     i = np.array([identity_index])
     beta = sample_identities(seed, i, prior_of(model), truncation_radius(model.identity_dims, cfg.identity))[0]

@@ -116,3 +116,23 @@ def sample_lighting(seed: int, identity: int, lighting) -> dict[str, Any]:
     lo, hi = lighting.hdri_rotation_deg
     return {"environment": "hdri", "file": f, "rotation_deg": round(float(lo + rng.random() * (hi - lo)), 8),
             "strength": lighting.strength}
+
+
+#: How far each hair parameter lets the hair reach beyond the scalp, as (fraction of it, cap in
+#: metres): long hair falls along the head, so only part of its length widens the silhouette.
+_REACH = {"length_m": (0.6, 0.08), "top_length_m": (0.6, 0.08), "tail_length_m": (0.6, 0.08),
+          "bun_radius_m": (2.0, 0.1), "volume_radius_m": (1.0, 0.1)}
+#: Headwear (a brim, a pompom) reaches this far beyond the skull.
+HEADWEAR_REACH_M = 0.03
+
+
+def hair_reach_m(assets: list[dict[str, Any]]) -> np.ndarray:
+    """(N,) rough reach (metres) of each identity's hair and headwear beyond the head, from the
+    planned parameters (:data:`_REACH`, the largest term counts): room the camera framing
+    leaves around the head."""
+    out = np.zeros(len(assets))
+    for n, a in enumerate(assets):
+        prm = (a.get("hair") or {}).get("params", {})
+        r = [min(f * float(prm[k]), cap) for k, (f, cap) in _REACH.items() if isinstance(prm.get(k), (int, float))]
+        out[n] = max(r, default=0.0) + (HEADWEAR_REACH_M if a.get("headwear") else 0.0)
+    return out

@@ -121,6 +121,7 @@ class Views:
     azimuth_deg: np.ndarray  # (P, V)
     elevation_deg: np.ndarray
     radius_m: np.ndarray
+    radius_u: np.ndarray  # (P, V) the uniform behind radius_m (camera.distance = 'fit' maps it to a fill)
     candidates: np.ndarray  # (P,) candidates drawn, all tries
     restarts: np.ndarray  # (P,)
     filled: np.ndarray | None = None  # (P,) bool, only with strict=False: the expression got all views
@@ -189,7 +190,7 @@ def sample_views(seed: int, identity: np.ndarray, expression: np.ndarray, n_view
     # unused slots hold the zero vector (dot 0 passes when the angle is <= 90 deg); else mask
     mask_slots = cos_min < 0.0
     per_try = max(1, camera.max_candidates // (camera.restarts + 1))
-    az, el, rad = np.zeros((P, V)), np.zeros((P, V)), np.zeros((P, V))
+    az, el, rad, ru = np.zeros((P, V)), np.zeros((P, V)), np.zeros((P, V)), np.zeros((P, V))
     # accepted directions, float32: cosines are compared with a margin that covers its rounding
     dx, dy, dz = (np.zeros((V, P), dt) for _ in range(3))
     cos_chk = dt(cos_min - _COS_MARGIN) if dt is np.float32 else cos_min
@@ -226,6 +227,7 @@ def sample_views(seed: int, identity: np.ndarray, expression: np.ndarray, n_view
         slot = cnt0[rows] + (np.cumsum(acc, axis=1)[rows, cols] - 1)
         p = active[rows]
         az[p, slot], el[p, slot], rad[p, slot] = c_az[rows, cols], c_el[rows, cols], c_r[rows, cols]
+        ru[p, slot] = u[rows, cols, 2]
         dx[slot, p], dy[slot, p], dz[slot, p] = cx[rows, cols], cy[rows, cols], cz[rows, cols]
         # candidates consumed: up to the one that completed the set, else all considered, so
         # the counts (and where a restart begins) never depend on the batch size
@@ -255,7 +257,24 @@ def sample_views(seed: int, identity: np.ndarray, expression: np.ndarray, n_view
             try_start[j] = drawn[j]
         active = active[(count[active] < V) & ~failed[active]]
         batch = _BATCH if active.size > P // 8 else 4 * _BATCH
-    return Views(az, el, rad, drawn, restarts, None if strict else ~failed)
+    return Views(az, el, rad, ru, drawn, restarts, None if strict else ~failed)
+
+
+def fit_distances(head_radius: np.ndarray, u: np.ndarray, camera, fov_deg: float, resolution) -> np.ndarray:
+    """Camera distances at which spheres of ``head_radius`` (metres) centred on the look-at point
+    have the angular radius ``fill * half_fov``, with ``fill = head_fill[0] + u * (head_fill[1] -
+    head_fill[0])`` and half_fov the half field of view of the shorter image side. Raises
+    SynthError when a distance falls outside (near_m, far_m)."""
+    W, H = resolution
+    half_h = np.deg2rad(fov_deg) / 2.0
+    half = min(half_h, float(np.arctan(np.tan(half_h) * H / W)))
+    f0, f1 = camera.head_fill
+    d = head_radius / np.sin((f0 + np.asarray(u) * (f1 - f0)) * half)
+    if d.size and not (d.min() > camera.near_m and d.max() < camera.far_m):
+        raise SynthError(f"fitting the head into the frame needs camera distances {d.min():.3g}-{d.max():.3g} m, "
+                         f"outside near_m {camera.near_m} .. far_m {camera.far_m}", "camera.distance = 'fit'",
+                         "change camera.head_fill, the field of view, near_m / far_m, or use distance = 'range'")
+    return d
 
 
 def min_pairwise_angle_deg(azimuth_deg: np.ndarray, elevation_deg: np.ndarray) -> np.ndarray:

@@ -60,12 +60,15 @@ def landmark_basis(model: HeadModelData, landmark_set: str = "ibug68") -> tuple[
 
 
 def look_at_targets(model: HeadModelData, codes: np.ndarray, mode: str, offset) -> np.ndarray:
-    """(N, 3) look-at points: 'eyes' (midpoint of the four eye corners), 'landmarks'
-    (centroid of all ibug68 landmarks) or 'origin'; plus ``offset``."""
+    """(N, 3) look-at points: 'head' (centre of the head's bounding box, :func:`head_spheres`),
+    'eyes' (midpoint of the four eye corners), 'landmarks' (centroid of all ibug68 landmarks)
+    or 'origin'; plus ``offset``."""
     codes = np.atleast_2d(np.asarray(codes, np.float64))
     off = np.asarray(offset, np.float64)
     if mode == "origin":
         return np.zeros((codes.shape[0], 3)) + off
+    if mode == "head":
+        return head_spheres(model, codes, 0.0)[0] + off
     t, B = landmark_basis(model)
     if mode == "eyes":
         if t.shape[0] <= max(EYE_CORNERS):
@@ -77,3 +80,40 @@ def look_at_targets(model: HeadModelData, codes: np.ndarray, mode: str, offset) 
     t0 = t[sel].mean(axis=0)
     Bt = B[:, sel].mean(axis=1)  # (Ki, 3)
     return t0 + codes @ Bt + off
+
+
+#: Regions of the head (the bust's neck and shoulders excluded) whose extent bounds the head.
+_NOT_HEAD = ("neck", "shoulders")
+
+
+def _extreme_vertices(model: HeadModelData) -> np.ndarray:
+    """Indices of head vertices on the convex hull of the template or of the template moved by
+    +-3 SD along any one identity direction: the candidates for a head's extreme points."""
+    from scipy.spatial import ConvexHull
+
+    skin = model.regions.get("skin")
+    idx = np.arange(model.template.shape[0]) if skin is None else np.asarray(skin, np.int64)
+    drop = np.concatenate([np.asarray(model.regions[r], np.int64) for r in _NOT_HEAD if r in model.regions] or
+                          [np.zeros(0, np.int64)])
+    idx = np.setdiff1d(idx, drop)
+    t = model.template[idx].astype(np.float64)
+    B = model.identity_basis[:, idx].astype(np.float64) * model.identity_scale.astype(np.float64)[:, None, None]
+    keep = set(ConvexHull(t).vertices.tolist())
+    for k in range(B.shape[0]):
+        for s in (-3.0, 3.0):
+            keep.update(ConvexHull(t + s * B[k]).vertices.tolist())
+    return idx[np.array(sorted(keep), np.int64)]
+
+
+def head_spheres(model: HeadModelData, codes: np.ndarray, margin_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per identity, the neutral head's bounding sphere: centres (N, 3) = the centre of the
+    axis-aligned box of its extreme vertices, radii (N,) = their largest distance from it plus
+    ``margin_m`` (room for hair volume, expressions and the jaw)."""
+    codes = np.atleast_2d(np.asarray(codes, np.float64))
+    v = _extreme_vertices(model)
+    t = model.template[v].astype(np.float64)
+    B = model.identity_basis[:, v].astype(np.float64) * model.identity_scale.astype(np.float64)[:, None, None]
+    pts = t[None] + np.einsum("nk,kvc->nvc", codes, B)  # (N, n, 3)
+    centre = 0.5 * (pts.min(axis=1) + pts.max(axis=1))
+    radius = np.linalg.norm(pts - centre[:, None], axis=-1).max(axis=1) + float(margin_m)
+    return centre, radius

@@ -22,7 +22,7 @@ from synth.dataset.layout import frame_key, shard_name
 from synth.errors import SynthError
 from synth.model.format import HeadModelData
 from synth.plan import assets as assets_mod
-from synth.plan import cameras, expressions, identities, parallel
+from synth.plan import cameras, expressions, identities, parallel, skin
 
 
 def check_counts(cfg: Config, first_identity: int, n_identities: int) -> None:
@@ -71,7 +71,15 @@ def sample_plan(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: i
     ids = np.arange(first_identity, first_identity + n_identities, dtype=np.int64)
     radius = identities.truncation_radius(model.identity_dims, cfg.identity)
     codes = identities.sample_identities(seed, ids, identities.prior_of(model), radius)
-    targets = identities.look_at_targets(model, codes, cam.target, cam.target_offset_m)
+    assets = assets_mod.sample_assets_batch(seed, ids, catalogue, cfg.assets.disabled_classes)
+    skin.apply_skin_tones(seed, ids, assets, cfg.skin)
+    if cam.target == "head" or cam.distance == "fit":  # one hull search for both
+        head_c, head_r = identities.head_spheres(model, codes, cam.head_margin_m)
+        head_r = head_r + assets_mod.hair_reach_m(assets)
+    if cam.target == "head":
+        targets = head_c + np.asarray(cam.target_offset_m, np.float64)
+    else:
+        targets = identities.look_at_targets(model, codes, cam.target, cam.target_offset_m)
     ii = np.repeat(ids, E)
     ee = np.tile(np.arange(E, dtype=np.int64), n_identities)
     em = expressions.resolve(model.expression_names, cfg.expression)
@@ -79,6 +87,9 @@ def sample_plan(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: i
     if ii.size > 64:  # fail fast: a hopeless request shows on a few expressions (same result as below)
         cameras.sample_views(seed, ii[:16], ee[:16], V, cam)
     views = cameras.sample_views(seed, ii, ee, V, cam)
+    if cam.distance == "fit":
+        views.radius_m = cameras.fit_distances(np.repeat(head_r, E)[:, None], views.radius_u, cam,
+                                               cfg.fov_deg, cfg.render.resolution)
     vv = np.arange(V, dtype=np.int64)[None, :]
     extra = seeds.uniforms(seed, seeds.Stream.CAMERA_EXTRA, ii[:, None], ee[:, None], vv, n=3)
     roll = cam.roll_deg[0] + extra[..., 0] * (cam.roll_deg[1] - cam.roll_deg[0])
@@ -89,8 +100,6 @@ def sample_plan(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: i
     c2w = orbit_camera_to_world(views.azimuth_deg, views.elevation_deg, views.radius_m, tgt, roll)
     w2c = invert_rigid(c2w)
     fseeds = seeds.frame_seeds(seed, ii[:, None], ee[:, None], vv)
-    disabled = cfg.assets.disabled_classes
-    assets = assets_mod.sample_assets_batch(seed, ids, catalogue, disabled)
     lighting = [assets_mod.sample_lighting(seed, int(i), cfg.lighting) for i in ids]
     return PlanArrays(ids, codes, targets, assets, lighting, expr, em, views, roll, K, c2w, w2c, fseeds, W, H)
 

@@ -75,12 +75,24 @@ def test_frames_carry_opencv_cameras_that_look_at_the_face(plan20):
             uv, z = project(K, w2c, np.array([c["target"]]))
             assert np.allclose(uv[0], [128.0, 128.0], atol=1e-4) and np.isclose(z[0], c["radius_m"], atol=1e-6)
             assert c["near"] < z[0] < c["far"] and 0 <= f["seed"] < 2**31
-    # the target is between the eyes of this identity's neutral head
+    # the target is the centre of this identity's neutral head (its bounding box, brute force
+    # over every head vertex), and the distance fits the head's bounding sphere into the frame
     from synth.model.head import HeadModel
 
     m = plan.model_data()
-    lm = HeadModel(m).landmarks(np.array(ident["identity_code"]), np.zeros(m.expression_dims))[0]
-    assert np.allclose(ident["target"], lm[[36, 39, 42, 45]].mean(0), atol=1e-5)
+    v = HeadModel(m, np.float64).vertices(np.array(ident["identity_code"]), np.zeros(m.expression_dims))[0]
+    head = np.setdiff1d(m.regions.get("skin", np.arange(len(v))),
+                        np.concatenate([m.regions.get(r, np.zeros(0, int)) for r in ("neck", "shoulders")]))
+    box = 0.5 * (v[head].min(0) + v[head].max(0))
+    assert np.allclose(ident["target"], box, atol=1e-4)
+    from synth.plan.assets import hair_reach_m
+
+    r = np.linalg.norm(v[head] - box, axis=1).max() + 0.03 + hair_reach_m([ident["assets"]])[0]  # + head_margin_m
+    half = np.arctan(128.0 / K[0, 0])
+    for e in ident["expressions"]:
+        for f in e["frames"]:
+            fill = np.arcsin(r / f["camera"]["radius_m"]) / half
+            assert 0.75 - 1e-3 <= fill <= 0.95 + 1e-3  # camera.head_fill
 
 
 def test_header_summary_and_reader(plan20, toy):
@@ -241,7 +253,7 @@ def test_asset_sampling_respects_rules_weights_and_ranges():
         if p["beard"] and p["hair"]:
             assert p["beard"]["params"]["colour"] == p["hair"]["params"]["colour"]
         sk = p["skin"]["params"]
-        assert 0.01 <= sk["melanin"] <= 0.45 and 0.002 <= sk["haemoglobin"] <= 0.07
+        assert "melanin" not in sk and 0.005 <= sk["haemoglobin"] <= 0.05  # melanin: synth.plan.skin
         assert isinstance(sk["detail_variant"], int) and 0 <= sk["detail_variant"] <= 63
     glasses = np.mean([p["glasses"] is not None for p in picks])
     assert abs(glasses - cat.classes["glasses"]["presence"]) < 0.03

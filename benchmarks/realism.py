@@ -1,0 +1,386 @@
+"""Realism measurements (issue 13, part A). Prints Markdown tables for docs/realism.md.
+
+    .venv/bin/python benchmarks/realism.py skin [--identities 200 --seed 0] [--frames DATASET ...]
+    .venv/bin/python benchmarks/realism.py framing DATASET [DATASET ...]
+    .venv/bin/python benchmarks/realism.py hair [--identities 12 --seed 0]
+    .venv/bin/python benchmarks/realism.py judge DATASET --mp-python MPENV/bin/python [--max-azimuth 45]
+    .venv/bin/python benchmarks/realism.py timing DATASET [DATASET ...]
+
+skin: the ITA histogram (six categories) and the CIELAB range of the skin albedo of the planned
+  identities (``synth.appearance.skin.skin_albedo``, what the worker gives the shader); with
+  ``--frames``, the same figures for the mean skin-class pixel of each rendered frame whose camera
+  is within 30 degrees of frontal (uniform environment), next to its albedo.
+framing: the fraction of frames in which head classes touch the left, right or top image
+  border: eyes, mouth, teeth, hair, beard, brows, lashes, glasses, headwear anywhere on those
+  borders, or skin on the top row or on the side columns above the chin (ibug68 point 8; skin
+  below it is neck and bust).
+hair: strands in front of the inner face (synth.assets.fit.occlusion) for the planned hair of
+  identities that have hair, seen from cameras at azimuth 0, +-30, +-45 (elevation 0).
+judge: mediapipe 0.10.21 (its own environment; benchmarks/mediapipe_judge.py) on the frames
+  whose camera azimuth is within --max-azimuth, composited over mid grey: face-detection
+  rate, face-mesh rate, and the error of its points against the frame's ``landmarks_2d``,
+  normalised by the inter-ocular distance (outer eye corners, ibug 36-45): 68-point NME (its
+  mesh mapped to ibug68, :func:`ibug68_weights`) and the 7-point error of the issue's reference
+  (eye corners, nose tip, mouth corners).
+timing: Cycles seconds per frame (the worker's frame events).
+plot-skin OUT --inputs A.json B.json --labels before after: ITA histogram and L*-b* plot.
+sheet OUT DATASET ...: the most frontal frame of the first identities, one row per dataset.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+CATS = ("very light", "light", "intermediate", "tan", "brown", "dark")
+HEAD_NOT_SKIN = (2, 3, 4, 5, 6, 7, 8, 10, 11)  # synth.dataset.segmentation.CLASSES, skin = 1
+#: the issue's 7-point reference: mediapipe index -> ibug68 index
+SEVEN = ((33, 36), (133, 39), (362, 42), (263, 45), (1, 30), (61, 48), (291, 54))
+
+
+def _lab_table(lab: np.ndarray, ita: np.ndarray) -> None:
+    from synth.appearance.skin import ita_category
+
+    h = np.bincount(ita_category(ita), minlength=6)
+    print("| " + " | ".join(CATS) + " |\n|" + "---:|" * 6)
+    print("| " + " | ".join(str(int(x)) for x in h) + " |\n")
+    print("| | min | median | max |\n|---|---:|---:|---:|")
+    for k, name in enumerate(("L*", "a*", "b*")):
+        print(f"| {name} | {lab[:, k].min():.1f} | {np.median(lab[:, k]):.1f} | {lab[:, k].max():.1f} |")
+    print(f"| ITA | {ita.min():.1f} | {np.median(ita):.1f} | {ita.max():.1f} |\n")
+
+
+def skin(args) -> dict:
+    from synth.appearance.skin import cielab, individual_typology_angle, skin_albedo
+    from synth.assets.catalogue import load_catalogue
+    from synth.config import load_config
+    from synth.plan.assets import sample_assets_batch
+
+    ids = np.arange(args.identities)
+    cfg = load_config()
+    assets = sample_assets_batch(args.seed, ids, load_catalogue(None))
+    try:
+        from synth.plan.skin import apply_skin_tones
+        apply_skin_tones(args.seed, ids, assets, cfg.skin)
+    except ImportError:  # before the skin-tone sampling existed
+        pass
+    alb = np.array([skin_albedo(a["skin"]["params"]["melanin"], a["skin"]["params"]["haemoglobin"]) for a in assets])
+    lab, ita = cielab(alb), individual_typology_angle(alb)
+    print(f"\n### Skin albedo of {len(ids)} planned identities (seed {args.seed})\n")
+    _lab_table(lab, ita)
+    out = {"albedo": {"lab": lab.tolist(), "ita": ita.tolist()}}
+    if args.frames:
+        rows = _skin_pixels(args.frames)
+        if rows:
+            a, p = np.array([r[0] for r in rows]), np.array([r[1] for r in rows])
+            ita_a, ita_p = individual_typology_angle(a), individual_typology_angle(p)
+            print(f"### Mean skin pixel of {len(rows)} near-frontal frames (uniform environment)\n")
+            _lab_table(cielab(p), ita_p)
+            print(f"ITA of the mean skin pixel vs ITA of the albedo: correlation "
+                  f"{np.corrcoef(ita_a, ita_p)[0, 1]:.3f}, median difference {np.median(ita_p - ita_a):+.1f} deg, "
+                  f"category agreement {np.mean(_cat(ita_a) == _cat(ita_p)):.0%}\n")
+            out["pixels"] = {"albedo_ita": ita_a.tolist(), "pixel_ita": ita_p.tolist(), "pixel_lab": cielab(p).tolist()}
+    return out
+
+
+def _cat(ita):
+    from synth.appearance.skin import ita_category
+
+    return ita_category(ita)
+
+
+def _skin_pixels(sources) -> list:
+    from synth.dataset.reader import iter_frames
+
+    rows = []
+    for src in sources:
+        for fr in iter_frames(src):
+            c = fr.meta["camera"]
+            if abs(c["azimuth_deg"]) > 30 or abs(c["elevation_deg"]) > 30 or fr.meta.get("skin") is None:
+                continue
+            m = (fr.segmentation == 1) & (fr.alpha > 0.99)
+            # the face only: rows above the chin (ibug 8), so neck and bust do not count
+            chin = float(np.asarray(fr.meta["landmarks_2d"])[8, 1])
+            m[int(np.clip(chin, 0, fr.height)):] = False
+            if m.sum() < 20:
+                continue
+            rows.append((fr.meta["skin"]["albedo_linear_srgb"], fr.rgb[m].mean(axis=0)))
+    return rows
+
+
+def touches_border(seg: np.ndarray, chin_y: float) -> bool:
+    """Head classes on the left, right or top border (see the module doc)."""
+    top, left, right = seg[0], seg[:, 0], seg[:, -1]
+    if np.isin(np.concatenate([top, left, right]), HEAD_NOT_SKIN).any() or (top == 1).any():
+        return True
+    above = slice(0, int(np.clip(np.floor(chin_y), 0, seg.shape[0])))
+    return bool((left[above] == 1).any() or (right[above] == 1).any())
+
+
+def framing(args) -> dict:
+    from synth.dataset.reader import iter_frames
+
+    out = {}
+    print("\n| dataset | frames | head at the border | fraction | any skin counted (neck, bust) |")
+    print("|---|---:|---:|---:|---:|")
+    for src in args.datasets:
+        flags, loose = [], []
+        for fr in iter_frames(src):
+            flags.append(touches_border(fr.segmentation, float(np.asarray(fr.meta["landmarks_2d"])[8, 1])))
+            loose.append(touches_border(fr.segmentation, fr.height))
+        out[src] = {"frames": len(flags), "touching": int(sum(flags)), "touching_any_skin": int(sum(loose))}
+        print(f"| {src} | {len(flags)} | {sum(flags)} | {np.mean(flags):.1%} | {np.mean(loose):.1%} |")
+    return out
+
+
+def hair(args) -> dict:
+    import importlib
+
+    from blender_scripts.assets import HeadContext
+    from synth.assets.catalogue import load_catalogue
+    from synth.assets.fit.occlusion import inner_face_triangles, strands_in_front_of_face
+    from synth.config import load_config
+    from synth.conventions import spherical_offset
+    from synth.model.default import load_default_model
+    from synth.model.head import HeadModel
+    from synth.plan import identities
+    from synth.plan.assets import sample_assets_batch
+
+    model = load_default_model()
+    hm = HeadModel(model, np.float64)
+    cfg = load_config()
+    ids = np.arange(args.identities)
+    codes = identities.sample_identities(args.seed, ids, identities.prior_of(model),
+                                         identities.truncation_radius(model.identity_dims, cfg.identity))
+    assets = sample_assets_batch(args.seed, ids, load_catalogue(None))
+    az = np.array([0.0, -30.0, 30.0, -45.0, 45.0])
+    print(f"\n### Hair strands in front of the inner face (seed {args.seed}, 64 px strand density)\n")
+    print("| identity | style | strands | in front of the inner face, az 0 / -30 / +30 / -45 / +45 | "
+          "of its centre (eyes, nose, mouth) |\n|---:|---|---:|---|---|")
+    rows = []
+    for n, i in enumerate(ids.tolist()):
+        entry = assets[n].get("hair")
+        if entry is None:
+            continue
+        ev = hm.evaluate(codes[n], np.zeros(model.expression_dims), np.zeros((hm.J, 3)))
+        verts = ev.vertices[0]
+        ctx = HeadContext(data=model, head=None, materials={}, rest_vertices=verts, vertices=verts,
+                          joint_transforms=ev.joint_transforms[0], joint_index=dict(hm.joint_index),
+                          landmarks={k: v[0] for k, v in ev.landmarks.items()}, resolution=64, identity_index=i,
+                          run_seed=args.seed, assets=assets[n])
+        g = importlib.import_module("synth.assets.fit.hair").groom(ctx, entry)
+        lm = ev.landmarks["ibug68"][0]
+        cams = 0.5 * (lm[36] + lm[45]) + 1.0 * spherical_offset(az, np.zeros_like(az))
+        r = strands_in_front_of_face(g.pts, cams, verts, inner_face_triangles(model, verts, lm))
+        rc = strands_in_front_of_face(g.pts, cams, verts, inner_face_triangles(model, verts, lm, centre_only=True))
+        rows.append({"identity": i, "style": entry["id"], "strands": len(g.pts), "in_front": r["strands"].tolist(),
+                     "in_front_centre": rc["strands"].tolist()})
+        print(f"| {i} | {entry['id']} | {len(g.pts)} | {' / '.join(str(x) for x in r['strands'])} | "
+              f"{' / '.join(str(x) for x in rc['strands'])} |")
+    views = sum(len(r["in_front"]) for r in rows)
+    bad = sum(int(x > 0) for r in rows for x in r["in_front"])
+    bad_c = sum(int(x > 0) for r in rows for x in r["in_front_centre"])
+    print(f"\nviews with any strand in front of the inner face: {bad}/{views}; of its centre: {bad_c}/{views}\n")
+    return {"rows": rows, "views": views, "views_with_strands_in_front": bad, "views_centre": bad_c}
+
+
+def ibug68_weights(model, k: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The mediapipe -> ibug68 mapping: each ibug68 point as a convex combination of the k
+    mediapipe points (refined iris points excluded: they follow the gaze) whose model surface
+    points (prior/fit/data correspondence) lie nearest to it on the template, with weights
+    (non-negative, summing to one) that best reproduce it. Returns (68, k) mediapipe indices,
+    (68, k) weights and the (68,) residual distances on the template (metres)."""
+    from scipy.optimize import nnls
+
+    from prior.fit.landmark_sources import load_correspondence
+
+    c = load_correspondence(model)
+    T = model.template.astype(np.float64)
+    keep = c["index"] < 468
+    pos = np.einsum("pkc,pk->pc", T[model.triangles[c["triangles"][keep]]], c["bary"][keep])
+    mp_idx = c["index"][keep]
+    tri, bary = model.landmarks["ibug68"]
+    ib = np.einsum("lkc,lk->lc", T[model.triangles[tri]], bary.astype(np.float64))
+    idx, w, res = np.zeros((68, k), np.int64), np.zeros((68, k)), np.zeros(68)
+    for j in range(68):
+        near = np.argsort(np.linalg.norm(pos - ib[j], axis=1))[:k]
+        A = np.vstack([pos[near].T, 10.0 * np.ones(k)])  # the last row asks for sum(w) = 1
+        w[j] = nnls(A, np.concatenate([ib[j], [10.0]]))[0]
+        idx[j] = mp_idx[near]
+        res[j] = np.linalg.norm(pos[near].T @ w[j] - ib[j])
+    return idx, w, res
+
+
+def _srgb8(fr) -> np.ndarray:
+    """(H, W, 3) uint8 sRGB of a frame composited over mid grey."""
+    rgb = fr.rgb_premultiplied + (1.0 - fr.alpha[..., None]) * 0.5  # linear
+    srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * np.clip(rgb, 0, None) ** (1 / 2.4) - 0.055)
+    return (np.clip(srgb, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
+def _png(fr, path: Path) -> None:
+    from PIL import Image
+
+    Image.fromarray(_srgb8(fr)).save(path)
+
+
+def judge(args) -> dict:
+    from synth.appearance.skin import individual_typology_angle, ita_category
+    from synth.dataset.reader import iter_frames
+    from synth.model.default import load_default_model
+
+    idx, w, res = ibug68_weights(load_default_model())
+    truth, cats = {}, {}
+    with tempfile.TemporaryDirectory(prefix="synth-judge-") as d:
+        png = Path(d) / "png"
+        png.mkdir()
+        for fr in iter_frames(args.dataset):
+            if abs(fr.meta["camera"]["azimuth_deg"]) <= args.max_azimuth:
+                _png(fr, png / f"{fr.key}.png")
+                lm = np.asarray(fr.meta["landmarks_2d"], np.float64)
+                truth[fr.key] = lm
+                alb = (fr.meta.get("skin") or {}).get("albedo_linear_srgb")
+                cats[fr.key] = int(ita_category(individual_typology_angle(np.asarray(alb)))) if alb else -1
+        subprocess.run([args.mp_python, str(ROOT / "benchmarks" / "mediapipe_judge.py"), str(png), f"{d}/mp.json"],
+                       check=True, env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
+        det = json.loads(Path(f"{d}/mp.json").read_text())["images"]
+    n = len(truth)
+    n_det = sum(det[k]["detected"] for k in truth)
+    nme68, nme7, per = [], [], {}
+    for key, lm in truth.items():
+        mesh = det[key]["mesh"]
+        if mesh is None:
+            continue
+        P = np.asarray(mesh, np.float64)
+        iod = np.linalg.norm(lm[36] - lm[45])
+        mapped = np.einsum("lk,lkc->lc", w, P[idx])
+        nme68.append(np.linalg.norm(mapped - lm, axis=1).mean() / iod)
+        nme7.append(np.mean([np.linalg.norm(P[a] - lm[b]) for a, b in SEVEN]) / iod)
+        per[key] = {"nme68": nme68[-1], "nme7": nme7[-1], "ita_category": cats[key], "iod_px": float(iod)}
+    n_mesh = len(nme68)
+    print(f"\n### mediapipe {json.dumps(args.dataset)} (|azimuth| <= {args.max_azimuth} deg)\n")
+    print("| frames | face detected | face mesh | NME68 median | NME68 mean | 7-point median | 7-point mean |")
+    print("|---:|---:|---:|---:|---:|---:|---:|")
+    print(f"| {n} | {n_det}/{n} | {n_mesh}/{n} | {np.median(nme68):.1%} | {np.mean(nme68):.1%} | "
+          f"{np.median(nme7):.1%} | {np.mean(nme7):.1%} |")
+    print(f"\nmapping residual on the template: median {np.median(res) * 1000:.1f} mm, max {res.max() * 1000:.1f} mm\n")
+    print("| ITA category of the albedo | " + " | ".join(CATS) + " |\n|---|" + "---:|" * 6)
+    by = [[v["nme68"] for v in per.values() if v["ita_category"] == k] for k in range(6)]
+    print("| frames with a mesh | " + " | ".join(str(len(b)) for b in by) + " |")
+    print("| NME68 median | " + " | ".join(f"{np.median(b):.1%}" if b else "-" for b in by) + " |\n")
+    return {"frames": n, "detected": n_det, "mesh": n_mesh, "nme68": nme68, "nme7": nme7, "per_frame": per,
+            "mapping": {"mediapipe": idx.tolist(), "weights": np.round(w, 4).tolist(), "residual_m": res.tolist()}}
+
+
+def timing(args) -> dict:
+    out = {}
+    print("\n| dataset | frames | Cycles s/frame (median) | Cycles s/frame (mean) |\n|---|---:|---:|---:|")
+    for src in args.datasets:
+        secs = []
+        for log in Path(src, "logs").rglob("*.log"):
+            for line in log.read_text(errors="replace").splitlines():
+                if line.startswith("{") and '"event": "frame"' in line:
+                    m = re.search(r'"render_seconds": ([0-9.eE+-]+)', line)
+                    if m:
+                        secs.append(float(m.group(1)))
+        out[src] = secs
+        print(f"| {src} | {len(secs)} | {np.median(secs):.2f} | {np.mean(secs):.2f} |")
+    return out
+
+
+def plot_skin(args) -> dict:
+    """ITA histograms and the L*-b* plane of the planned albedos, before / after."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+    edges = [-90, -30, 10, 28, 41, 55, 120]
+    for path, label in zip(args.inputs, args.labels):
+        d = json.loads(Path(path).read_text())["albedo"]
+        ita, lab = np.asarray(d["ita"]), np.asarray(d["lab"])
+        h = np.histogram(ita, bins=edges)[0][::-1]
+        ax[0].bar(np.arange(6) + (0.2 if label == args.labels[-1] else -0.2), h, width=0.4, label=label)
+        ax[1].scatter(lab[:, 2], lab[:, 0], s=6, label=label)
+    ax[0].set_xticks(np.arange(6), CATS, rotation=20)
+    ax[0].set_ylabel("identities")
+    ax[0].legend()
+    ax[1].add_patch(plt.Rectangle((6, 28), 20, 54, fill=False, ls="--", color="k"))
+    ax[1].set_xlabel("b*")
+    ax[1].set_ylabel("L*")
+    ax[1].set_title("dashed: envelope of published skin colour", fontsize=9)
+    ax[1].legend()
+    fig.tight_layout()
+    fig.savefig(args.out, dpi=90)
+    return {}
+
+
+def sheet(args) -> dict:
+    """The frames nearest to frontal of the first identities of each dataset, one row per dataset."""
+    from PIL import Image
+
+    from synth.dataset.reader import iter_frames
+
+    rows = []
+    for src in args.datasets:
+        best: dict[int, tuple[float, object]] = {}
+        for fr in iter_frames(src):
+            c = fr.meta["camera"]
+            a = abs(c["azimuth_deg"]) + abs(c["elevation_deg"])
+            if fr.identity_index < args.identities and a < best.get(fr.identity_index, (1e9, None))[0]:
+                best[fr.identity_index] = (a, fr)
+        rows.append(np.concatenate([_srgb8(best[i][1]) for i in sorted(best)], axis=1))
+    w = min(r.shape[1] for r in rows)
+    Image.fromarray(np.concatenate([r[:, :w] for r in rows], axis=0)).save(args.out)
+    return {}
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    p = sub.add_parser("skin")
+    p.add_argument("--identities", type=int, default=200)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--frames", nargs="*", default=[])
+    p = sub.add_parser("framing")
+    p.add_argument("datasets", nargs="+")
+    p = sub.add_parser("hair")
+    p.add_argument("--identities", type=int, default=12)
+    p.add_argument("--seed", type=int, default=0)
+    p = sub.add_parser("judge")
+    p.add_argument("dataset")
+    p.add_argument("--mp-python", required=True)
+    p.add_argument("--max-azimuth", type=float, default=45.0)
+    p = sub.add_parser("timing")
+    p.add_argument("datasets", nargs="+")
+    p = sub.add_parser("plot-skin")
+    p.add_argument("out")
+    p.add_argument("--inputs", nargs="+", required=True, help="JSON files written by 'skin --json'")
+    p.add_argument("--labels", nargs="+", required=True)
+    p = sub.add_parser("sheet")
+    p.add_argument("out")
+    p.add_argument("datasets", nargs="+")
+    p.add_argument("--identities", type=int, default=8)
+    for q in sub.choices.values():
+        q.add_argument("--json", help="also write the figures to this JSON file")
+    args = ap.parse_args(argv)
+    res = {"skin": skin, "framing": framing, "hair": hair, "judge": judge, "timing": timing, "plot-skin": plot_skin,
+           "sheet": sheet}[args.cmd](args)
+    if args.json:
+        Path(args.json).write_text(json.dumps(res))
+
+
+if __name__ == "__main__":
+    main()
