@@ -11,6 +11,8 @@ G T-zone, B wrinkle zones, A beard area):
   by the resolution rule of :mod:`synth.appearance.skin_optics` (``ctx.pixel_m``),
 * ``detail_variant`` seeds the noise (pores and fine lines at ``pore_scale`` are the base
   material's: ``blender_scripts.materials.skin_material``),
+* the tear meniscus: coat and low roughness on the lower lids' margin (``tear_line`` attribute,
+  :func:`synth.assets.fit.eyes.lid_margin`),
 * stubble shadow over the beard area when the identity has no beard (drawn with
   probability 0.5 and a light strength) or has the ``stubble`` beard.
 
@@ -24,6 +26,7 @@ import numpy as np
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
 from synth.appearance.skin_optics import WRINKLES, detail_weight, sharp_lobe
+from synth.assets.fit.eyes import lid_margin
 from synth.assets.fit.masks import skin_detail_mask
 from synth.dataset.segmentation import CLASSES
 
@@ -89,6 +92,12 @@ def build(ctx, entry: dict) -> Rig:
         tz = bmat.math_node(mat, "MULTIPLY", tzone, 0.9)
         bmat.layer_over(mat, "Roughness", base_r * (1 - 0.6 * oil), tz)
         bmat.layer_over(mat, "Coat Weight", sharp_lobe(base_r, min(1.0, 2.0 * oil))["Coat Weight"], tz)
+    # the tear meniscus: a wet, sharp reflection along the lower lids' margin
+    bmat.write_point_vector(ctx.head.data, "tear_line", np.repeat(lid_margin(ctx.data, V)[:, None], 3, 1))
+    tear = nt.nodes.new("ShaderNodeSeparateXYZ")
+    nt.links.new(bmat.attribute(mat, "tear_line").outputs["Vector"], tear.inputs[0])
+    for name, value in (("Coat Weight", 1.0), ("Coat Roughness", 0.03), ("Roughness", 0.15)):
+        bmat.layer_over(mat, name, value, tear.outputs["X"])
     wd = float(p.get("wrinkle_depth", 0.0))
     w_wr = 1.0 if ctx.pixel_m is None else detail_weight(ctx.pixel_m, WRINKLES[0])
     if wd > 0.01 and w_wr > 0.0:

@@ -45,7 +45,7 @@ COAT_WEIGHT, COAT_OIL = 0.12, 0.35
 
 #: detail layers: (period in metres at scale 1, slope variance folded into roughness when unresolved)
 PORES = (0.0007, 0.02)  # pore spacing ~0.5-1 mm on the cheeks and nose
-FINE_LINES = (0.0022, 0.015)  # the micro-relief's grooves (the skin's polygonal furrow network)
+FINE_LINES = (0.0022, 0.015)  # the micro-relief's grooves (the skin's furrow network)
 WRINKLES = (0.011, 0.0)  # forehead bands, crow's feet, nasolabial folds
 
 #: footprint assumed without cameras (unit tests): a 0.2 m face over 60 % of the image

@@ -54,3 +54,29 @@ def test_eye_frame_turns_with_the_gaze(default_head, yaw, pitch):
     off = np.ones(len(V), bool)
     off[np.concatenate([hm.data.regions["eye_l"], hm.data.regions["eye_r"]])] = False
     assert not fr["eye_plane"][off].any()
+
+
+def test_lid_margin_is_the_lid_edge_per_sector(default_head):
+    from synth.assets.fit.eyes import MARGIN_SECTORS, lid_margin
+
+    hm = default_head
+    ctx = asset_scene.head_arrays(hm, "id+3_jaw")
+    V = ctx.vertices
+    m = lid_margin(hm.data, V)
+    fr = eye_frames(hm.data, V)
+    for side in "lr":
+        lid = np.asarray(hm.data.regions[f"eyelid_{side}_lower"])
+        assert m[lid].sum() >= 6 and set(np.nonzero(m)[0]) <= set(np.concatenate(
+            [hm.data.regions["eyelid_l_lower"], hm.data.regions["eyelid_r_lower"]]).tolist())
+        i0 = int(np.asarray(hm.data.regions[f"eye_{side}"])[0])
+        c, f, u, w = (fr[k][i0] for k in ("eye_centre", "eye_fwd", "eye_u", "eye_w"))
+        # brute force: per sector the lid vertex at the smallest angle from the axis
+        for k in range(MARGIN_SECTORS):
+            best, best_t = None, np.inf
+            for i in lid:
+                q = (V[i] - c) / np.linalg.norm(V[i] - c)
+                phi = np.arctan2(q @ w, q @ (u if side == "l" else -u))
+                if int(np.floor((phi + np.pi) / (2 * np.pi) * MARGIN_SECTORS)) == k and np.arccos(q @ f) < best_t:
+                    best, best_t = i, np.arccos(q @ f)
+            if best is not None:
+                assert m[best] == 1.0

@@ -93,3 +93,30 @@ def eye_frames(data, vertices: np.ndarray) -> dict[str, np.ndarray]:
         for k, v in zip(FRAME_ATTRIBUTES, (c, f, s * u, w, (R * np.sin(lim), R * np.cos(lim), 0.0))):
             out[k][eye] = v
     return out
+
+
+#: angular sectors around the eye axis in which the lid margin vertex is picked
+MARGIN_SECTORS = 36
+
+
+def lid_margin(data, vertices: np.ndarray, lid: str = "lower") -> np.ndarray:
+    """(V,) float mask, 1 on the margin of each eye's ``lid`` ("lower"/"upper"): in every angular
+    sector around the eye's axis, the lid vertex closest to the axis (the edge of the opening).
+    The skin-detail rig puts the wet tear meniscus there."""
+    V = np.asarray(vertices, np.float64)
+    out = np.zeros(len(V))
+    for side in ("l", "r"):
+        fr = _eye_frame(data, V, side)
+        ids = data.regions.get(f"eyelid_{side}_{lid}")
+        if fr is None or ids is None:
+            continue
+        ids = np.asarray(ids, np.int64)
+        _, c, f, u, w, _, _ = fr
+        q = V[ids] - c
+        q /= np.linalg.norm(q, axis=1, keepdims=True)
+        theta = np.arccos(np.clip(q @ f, -1, 1))
+        sector = np.floor((np.arctan2(q @ w, q @ u) + np.pi) / (2 * np.pi) * MARGIN_SECTORS).astype(np.int64)
+        order = np.lexsort((theta, sector))
+        first = np.r_[True, sector[order][1:] != sector[order][:-1]]
+        out[ids[order[first]]] = 1.0
+    return out
