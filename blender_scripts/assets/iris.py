@@ -49,6 +49,17 @@ def _write_frames(ctx) -> None:
         bmat.write_point_vector(ctx.head.data, name, v)
 
 
+def _map_range(nt, value, lo: float, hi: float, smooth: bool = False):
+    """Map Range node: ``value`` from [lo, hi] to [0, 1] (clamped; smoothstep if ``smooth``)."""
+    r = nt.nodes.new("ShaderNodeMapRange")
+    if smooth:
+        r.interpolation_type = "SMOOTHSTEP"
+    r.inputs["From Min"].default_value = lo
+    r.inputs["From Max"].default_value = hi
+    nt.links.new(value, r.inputs["Value"])
+    return r.outputs["Result"]
+
+
 def _vmath(nt, op, a, b=None, scale=None):
     n = nt.nodes.new("ShaderNodeVectorMath")
     n.operation = op
@@ -90,14 +101,9 @@ def refracted_coordinates(mat, surface):
     nt.links.new(_vmath(nt, "LENGTH", xy.outputs[0]), ref.inputs["Z"])
     sep = nt.nodes.new("ShaderNodeSeparateXYZ")
     nt.links.new(surface, sep.inputs[0])
-    out_of_cornea = nt.nodes.new("ShaderNodeMapRange")
-    out_of_cornea.interpolation_type = "SMOOTHSTEP"
-    out_of_cornea.inputs["From Min"].default_value = 0.97
-    out_of_cornea.inputs["From Max"].default_value = 1.03
-    nt.links.new(sep.outputs["Z"], out_of_cornea.inputs["Value"])
     mix = nt.nodes.new("ShaderNodeMix")
     mix.data_type = "VECTOR"
-    nt.links.new(out_of_cornea.outputs["Result"], mix.inputs["Factor"])
+    nt.links.new(_map_range(nt, sep.outputs["Z"], 0.97, 1.03, smooth=True), mix.inputs["Factor"])
     nt.links.new(ref.outputs[0], mix.inputs[4])
     nt.links.new(surface, mix.inputs[5])
     return mix.outputs[1]
@@ -126,18 +132,11 @@ def sclera_layer(mat, surface, seed: float) -> None:
     vor.inputs["W"].default_value = seed + 1.0
     vor.inputs["Scale"].default_value = 2.5
     nt.links.new(wvec, vor.inputs["Vector"])
-    vessel = nt.nodes.new("ShaderNodeMapRange")
-    vessel.inputs["From Min"].default_value = 0.035
-    vessel.inputs["From Max"].default_value = 0.0
-    nt.links.new(vor.outputs["Distance"], vessel.inputs["Value"])
-    zone = nt.nodes.new("ShaderNodeMapRange")
-    zone.interpolation_type = "SMOOTHSTEP"
-    zone.inputs["From Min"].default_value = SCLERA_VESSELS_FROM
-    zone.inputs["From Max"].default_value = SCLERA_VESSELS_FULL
-    nt.links.new(rho, zone.inputs["Value"])
-    fac = bmat.math_node(mat, "MULTIPLY", vessel.outputs["Result"], bmat.math_node(mat, "MULTIPLY", zone.outputs["Result"], 0.55))
+    vessel = _map_range(nt, vor.outputs["Distance"], 0.035, 0.0)
+    zone = _map_range(nt, rho, SCLERA_VESSELS_FROM, SCLERA_VESSELS_FULL, smooth=True)
+    fac = bmat.math_node(mat, "MULTIPLY", vessel, bmat.math_node(mat, "MULTIPLY", zone, 0.55))
     bmat.layer_over(mat, "Base Color", (0.62, 0.16, 0.13), fac)
-    bmat.layer_over(mat, "Base Color", (0.78, 0.52, 0.48), bmat.math_node(mat, "MULTIPLY", zone.outputs["Result"], 0.25))
+    bmat.layer_over(mat, "Base Color", (0.78, 0.52, 0.48), bmat.math_node(mat, "MULTIPLY", zone, 0.25))
 
 
 def build(ctx, entry: dict) -> Rig:
@@ -180,15 +179,12 @@ def build(ctx, entry: dict) -> Rig:
     fib.inputs["Detail"].default_value = 6.0
     nt.links.new(polar.outputs[0], fib.inputs["Vector"])
     contrast = float(p.get("fibre_contrast", 0.35))
-    fmap = nt.nodes.new("ShaderNodeMapRange")
-    fmap.inputs["From Min"].default_value = 0.35
-    fmap.inputs["From Max"].default_value = 0.65
-    nt.links.new(fib.outputs["Fac"], fmap.inputs["Value"])
+    fmap = _map_range(nt, fib.outputs["Fac"], 0.35, 0.65)
     col = nt.nodes.new("ShaderNodeMix")
     col.data_type = "RGBA"
     col.inputs[6].default_value = (*pal["base"], 1.0)
     col.inputs[7].default_value = (*pal["light"], 1.0)
-    nt.links.new(bmat.math_node(mat, "MULTIPLY", fmap.outputs["Result"], 0.4 + contrast), col.inputs[0])
+    nt.links.new(bmat.math_node(mat, "MULTIPLY", fmap, 0.4 + contrast), col.inputs[0])
     last = col.outputs[2]
 
     def over(colour, fac):
@@ -204,25 +200,18 @@ def build(ctx, entry: dict) -> Rig:
         last = m.outputs[2]
 
     def band(lo, hi, rising=True):
-        r = nt.nodes.new("ShaderNodeMapRange")
-        r.interpolation_type = "SMOOTHSTEP"
-        r.inputs["From Min"].default_value = lo
-        r.inputs["From Max"].default_value = hi
+        out = _map_range(nt, rho, lo, hi, smooth=True)
         if not rising:
-            r.inputs["To Min"].default_value, r.inputs["To Max"].default_value = 1.0, 0.0
-        nt.links.new(rho, r.inputs["Value"])
-        return r.outputs["Result"]
+            out.node.inputs["To Min"].default_value, out.node.inputs["To Max"].default_value = 1.0, 0.0
+        return out
 
     # crypts: Voronoi cells in the polar space, darker where a cell centre is near
     vor = nt.nodes.new("ShaderNodeTexVoronoi")
     vor.inputs["Scale"].default_value = 0.18
     nt.links.new(polar.outputs[0], vor.inputs["Vector"])
-    crypt = nt.nodes.new("ShaderNodeMapRange")
-    crypt.inputs["From Min"].default_value = 0.25
-    crypt.inputs["From Max"].default_value = 0.05
-    nt.links.new(vor.outputs["Distance"], crypt.inputs["Value"])
+    crypt = _map_range(nt, vor.outputs["Distance"], 0.25, 0.05)
     mid = bmat.math_node(mat, "MULTIPLY", band(pupil + 0.1, pupil + 0.25), band(0.7, 0.95, rising=False))
-    over(pal["dark"], bmat.math_node(mat, "MULTIPLY", crypt.outputs["Result"], mid))
+    over(pal["dark"], bmat.math_node(mat, "MULTIPLY", crypt, mid))
     # inner (collarette) zone and limbal ring
     het = float(p.get("central_heterochromia", 0.25))
     inner_edge = pupil + (1 - pupil) * 0.35
