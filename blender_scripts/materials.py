@@ -19,22 +19,48 @@ def _principled(name: str, cls: str):
     return mat, bsdf
 
 
-def skin_material(albedo, roughness: float = 0.45, redness: float = 0.0, pore_strength: float = 0.15,
-                  pore_scale: float = 900.0, sss_scale: float = 0.006, seed: float = 0.0):
-    """Principled skin: SSS (random walk), albedo modulated by low-frequency redness
-    variation and a high-frequency pore bump. All variation is procedural (noise textures
-    seeded by ``seed``), so it follows any identity and expression."""
+def _noise(nodes, links, coord, scale: float, w: float, detail: float = 1.0):
+    n = nodes.new("ShaderNodeTexNoise")
+    n.noise_dimensions = "4D"
+    n.inputs["W"].default_value = w
+    n.inputs["Scale"].default_value = scale
+    n.inputs["Detail"].default_value = detail
+    links.new(coord.outputs["Object"], n.inputs["Vector"])
+    return n
+
+
+def _ridge(nodes, links, fac):
+    """|fac - 0.5|: 0 along the lines where a noise crosses its middle."""
+    sub = nodes.new("ShaderNodeMath")
+    sub.operation = "SUBTRACT"
+    sub.inputs[1].default_value = 0.5
+    links.new(fac, sub.inputs[0])
+    ab = nodes.new("ShaderNodeMath")
+    ab.operation = "ABSOLUTE"
+    links.new(sub.outputs[0], ab.inputs[0])
+    return ab.outputs[0]
+
+
+def skin_material(albedo, params: dict | None = None, pixel_m: float | None = None):
+    """Principled skin (``synth.appearance.skin_optics`` for the physics and the rules):
+    random-walk subsurface with per-channel radii (red furthest), the broad specular lobe with
+    the sampled roughness (varied with a low-frequency noise) and a sharp coat lobe, albedo
+    modulated by low-frequency redness, and two fine bump layers, pores and the micro-relief's
+    fine lines, each built only as far as the finest view of the identity resolves it
+    (``pixel_m``: metres per pixel on the face; None = every layer at full strength); what is not
+    resolved widens the broad lobe instead. All variation is procedural (noise seeded by the
+    plan's ``noise_seed``), so it follows any identity and expression."""
+    from synth.appearance import skin_optics as so
+
+    p = dict(params or {})
+    roughness = float(p.get("roughness", 0.45))
+    seed = float(p.get("noise_seed", 7.31 * float(p.get("detail_variant", 0))))
     mat, bsdf = _principled("skin", "skin")
     nt = mat.node_tree
     nodes, links = nt.nodes, nt.links
     coord = nodes.new("ShaderNodeTexCoord")
     # low-frequency blotchiness / redness
-    blotch = nodes.new("ShaderNodeTexNoise")
-    blotch.noise_dimensions = "4D"
-    blotch.inputs["W"].default_value = seed
-    blotch.inputs["Scale"].default_value = 12.0
-    blotch.inputs["Detail"].default_value = 3.0
-    links.new(coord.outputs["Object"], blotch.inputs["Vector"])
+    blotch = _noise(nodes, links, coord, 12.0, seed, 3.0)
     base = nodes.new("ShaderNodeRGB")
     base.outputs[0].default_value = (*albedo, 1.0)
     red = nodes.new("ShaderNodeRGB")
@@ -43,34 +69,60 @@ def skin_material(albedo, roughness: float = 0.45, redness: float = 0.0, pore_st
     mix.data_type = "RGBA"
     ramp = nodes.new("ShaderNodeMath")
     ramp.operation = "MULTIPLY"
-    ramp.inputs[1].default_value = float(redness)
+    ramp.inputs[1].default_value = float(p.get("redness", 0.3))
     links.new(blotch.outputs["Fac"], ramp.inputs[0])
     links.new(ramp.outputs[0], mix.inputs["Factor"])
     links.new(base.outputs[0], mix.inputs["A"])
     links.new(red.outputs[0], mix.inputs["B"])
     links.new(mix.outputs["Result"], bsdf.inputs["Base Color"])
-    # pores: fine noise into a bump
-    pores = nodes.new("ShaderNodeTexNoise")
-    pores.noise_dimensions = "4D"
-    pores.inputs["W"].default_value = seed + 17.0
-    pores.inputs["Scale"].default_value = pore_scale
-    pores.inputs["Detail"].default_value = 1.0
-    links.new(coord.outputs["Object"], pores.inputs["Vector"])
-    bump = nodes.new("ShaderNodeBump")
-    bump.inputs["Strength"].default_value = pore_strength
-    bump.inputs["Distance"].default_value = 0.0003
-    links.new(pores.outputs["Fac"], bump.inputs["Height"])
-    links.new(bump.outputs["Normal"], bsdf.inputs["Normal"])
-    # roughness varies slightly with the blotch noise (oilier T-zone look)
+    # fine bump layers, as far as the resolution shows them
+    layers = {"pores": (so.PORES, float(p.get("pore_scale", 1.0)), float(p.get("pore_strength", 0.15)), 0.0003),
+              "fine_lines": (so.FINE_LINES, 1.0, 0.1 + 0.25 * float(p.get("wrinkle_depth", 0.5)), 0.0002)}
+    unresolved, normal = [], None
+    for name, ((period, var), scale, strength, dist) in layers.items():
+        w = 1.0 if pixel_m is None else so.detail_weight(pixel_m, period * scale)
+        unresolved.append((w, var))
+        mat[f"detail_{name}"] = w
+        if w <= 0.0:
+            continue
+        if name == "pores":
+            tex = _noise(nodes, links, coord, 1.0 / (period * scale), seed + 17.0)
+            height = tex.outputs["Fac"]
+        else:  # grooves: where a smooth noise crosses its middle (|noise - 0.5|: a furrow network);
+            # 3D noise offset by the seed costs about as much as the 4D pore noise, a Voronoi
+            # edge network (the look-alike) 3 times more
+            shift = nodes.new("ShaderNodeMapping")
+            shift.inputs["Location"].default_value = (0.37 * seed, 0.11 * seed, 0.23 * seed)
+            links.new(coord.outputs["Object"], shift.inputs["Vector"])
+            tex = nodes.new("ShaderNodeTexNoise")
+            tex.inputs["Scale"].default_value = 1.0 / period
+            tex.inputs["Detail"].default_value = 0.0
+            links.new(shift.outputs["Vector"], tex.inputs["Vector"])
+            height = _ridge(nodes, links, tex.outputs["Fac"])
+        bump = nodes.new("ShaderNodeBump")
+        bump.inputs["Strength"].default_value = strength * w
+        bump.inputs["Distance"].default_value = dist
+        links.new(height, bump.inputs["Height"])
+        if normal is not None:
+            links.new(normal, bump.inputs["Normal"])
+        normal = bump.outputs["Normal"]
+    if normal is not None:
+        links.new(normal, bsdf.inputs["Normal"])
+    # broad lobe: roughness varies slightly with the blotch noise (oilier T-zone look), widened by
+    # the unresolved detail; sharp lobe: the coat
+    broad = so.subpixel_roughness(roughness, unresolved)
     rough = nodes.new("ShaderNodeMapRange")
-    rough.inputs["To Min"].default_value = max(0.05, roughness - 0.1)
-    rough.inputs["To Max"].default_value = min(1.0, roughness + 0.1)
+    rough.inputs["To Min"].default_value = max(0.05, broad - 0.1)
+    rough.inputs["To Max"].default_value = min(1.0, broad + 0.1)
     links.new(blotch.outputs["Fac"], rough.inputs["Value"])
     links.new(rough.outputs["Result"], bsdf.inputs["Roughness"])
+    for k, v in so.sharp_lobe(roughness, float(p.get("oiliness", 0.0))).items():
+        bsdf.inputs[k].default_value = v
+    radius, scale = so.subsurface(float(p.get("subsurface_radius_scale", 1.0)))
     bsdf.subsurface_method = "RANDOM_WALK"
     bsdf.inputs["Subsurface Weight"].default_value = 1.0
-    bsdf.inputs["Subsurface Radius"].default_value = (1.0, 0.35, 0.2)
-    bsdf.inputs["Subsurface Scale"].default_value = float(sss_scale)
+    bsdf.inputs["Subsurface Radius"].default_value = radius
+    bsdf.inputs["Subsurface Scale"].default_value = scale
     bsdf.inputs["IOR"].default_value = 1.4
     return mat
 
@@ -94,13 +146,10 @@ def plain_material(name: str, cls: str, inputs: dict):
     return mat
 
 
-def head_materials(skin_params: dict, albedo) -> dict[int, "bpy.types.Material"]:
-    """Material per segmentation class for the head mesh."""
+def head_materials(skin_params: dict, albedo, pixel_m: float | None = None) -> dict[int, "bpy.types.Material"]:
+    """Material per segmentation class for the head mesh (``pixel_m``: see :func:`skin_material`)."""
     return {
-        CLASSES["skin"]: skin_material(albedo, roughness=skin_params.get("roughness", 0.45),
-                                       redness=skin_params.get("redness", 0.3),
-                                       pore_strength=skin_params.get("pore_strength", 0.15),
-                                       seed=float(skin_params.get("noise_seed", 0.0))),
+        CLASSES["skin"]: skin_material(albedo, skin_params, pixel_m),
         **{CLASSES[cls]: plain_material(name, cls, inputs) for name, cls, inputs in PLAIN_MATERIALS},
     }
 

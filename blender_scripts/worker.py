@@ -113,6 +113,7 @@ class IdentityScene:
         from blender_scripts import scene as bscene
         from blender_scripts.assets import HeadContext
         from synth.appearance.skin import skin_albedo
+        from synth.appearance.skin_optics import pixel_footprint_m
 
         self.ident, self.hm, self.render_cfg = ident, hm, render_cfg
         self.run_seed, self.model_info, self.versions, self.shard_id = run_seed, model_info, versions, shard_id
@@ -124,7 +125,8 @@ class IdentityScene:
         skin = dict(ident.get("skin") or {})
         albedo = skin_albedo(float(skin.get("melanin", 0.05)), float(skin.get("haemoglobin", 0.015)))
         self.skin_record = {**skin, "albedo_linear_srgb": [round(a, 6) for a in albedo]}
-        self.materials = bmat.head_materials(skin, albedo)
+        pixel_m = pixel_footprint_m([f["camera"] for e in ident["expressions"] for f in e["frames"]])
+        self.materials = bmat.head_materials(skin, albedo, pixel_m)
         self.beta = np.asarray(ident["identity_code"], np.float64)
         rest = self._evaluate(np.zeros(hm.data.expression_dims), np.zeros((hm.J, 3)))
         self.rest = rest[0]
@@ -135,7 +137,7 @@ class IdentityScene:
         self.ctx = HeadContext(data=hm.data, head=self.head_ob, materials=self.materials, rest_vertices=self.rest,
                                vertices=self.rest, joint_transforms=rest[2], joint_index=dict(hm.joint_index),
                                landmarks=rest[1], resolution=asset_resolution or max(self.width, self.height),
-                               identity_index=int(ident["identity_index"]), run_seed=run_seed)
+                               identity_index=int(ident["identity_index"]), run_seed=run_seed, pixel_m=pixel_m)
         self.rigs: dict = {}
         self.assets_record = _dress(ident, self.ctx, self.rigs)
         self.cam_ob = bcam.make_camera()

@@ -46,6 +46,7 @@ class HeadContext:
     identity_index: int
     run_seed: int
     assets: dict[str, Any] = field(default_factory=dict)  # the identity's full asset choice (class -> entry)
+    pixel_m: float | None = None  # metres per pixel on the face in the finest view (None: no resolution rule)
 
     def rng(self, cls: str) -> np.random.Generator:
         return rig_rng(self.run_seed, self.identity_index, cls)

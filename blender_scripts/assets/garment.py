@@ -14,6 +14,7 @@ from blender_scripts.assets import HeadContext, Rig
 from synth.assets.classes import CLASSES
 from synth.assets.fit.body import Body, Cloth, FittedShell, fit_shell
 from synth.assets.fit.garment import CLEARANCE, FABRICS, colour_rgb, garment_shell
+from synth.assets.fit.hem import hidden_polygons
 
 
 def cloth_material(cls: str, cloth: Cloth):
@@ -126,6 +127,40 @@ def shell_rig(fitted: FittedShell) -> FittedRig:
     return FittedRig(ob, fitted)
 
 
+def hide_bust_under_hem(head, body: Body) -> int:
+    """Give the head polygons under the garment's hem (:func:`synth.assets.fit.hem.hidden_polygons`)
+    a transparent material outside every pass (pass index 0: background in the segmentation;
+    Cycles leaves fully transparent surfaces out of the depth and normal passes), so that the
+    bust's cut is never seen. Returns how many polygons were hidden."""
+    import bpy
+    import numpy as np
+
+    me = head.data
+    n = len(me.polygons)
+    start, total = np.empty(n, np.int32), np.empty(n, np.int32)
+    me.polygons.foreach_get("loop_start", start)
+    me.polygons.foreach_get("loop_total", total)
+    corners = np.empty(len(me.loops), np.int32)
+    me.loops.foreach_get("vertex_index", corners)
+    hidden = hidden_polygons(body.V, body.F, np.append(start, start[-1] + total[-1]), corners)
+    if hidden.any():
+        mat = bpy.data.materials.new("bust_under_hem")
+        mat.use_nodes = True
+        mat.pass_index = 0
+        nt = mat.node_tree
+        nt.nodes.remove(nt.nodes["Principled BSDF"])
+        nt.links.new(nt.nodes.new("ShaderNodeBsdfTransparent").outputs[0], nt.nodes["Material Output"].inputs[0])
+        me.materials.append(mat)
+        slots = np.empty(n, np.int32)
+        me.polygons.foreach_get("material_index", slots)
+        slots[hidden] = len(me.materials) - 1
+        me.polygons.foreach_set("material_index", slots)
+        me.update()
+    return int(hidden.sum())
+
+
 def build(ctx: HeadContext, entry: dict) -> Rig:
     body = Body.of(ctx)
-    return shell_rig(fit_shell(body, garment_shell(body, entry, ctx.rng("garment")), CLEARANCE))
+    rig = shell_rig(fit_shell(body, garment_shell(body, entry, ctx.rng("garment")), CLEARANCE))
+    rig.info["hidden_bust_polygons"] = hide_bust_under_hem(ctx.head, body)
+    return rig

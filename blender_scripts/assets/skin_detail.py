@@ -6,9 +6,13 @@ G T-zone, B wrinkle zones, A beard area):
 * freckles (small Voronoi spots on cheeks and nose, density/strength ~ ``freckles``),
 * age spots / moles (sparse larger Voronoi spots on the face, ``age_spots``),
 * redness (cheeks and nose, from ``haemoglobin``),
-* oiliness -> lower roughness in the T-zone,
-* wrinkles (forehead bands, crow's feet, nasolabial folds) as a bump, ``wrinkle_depth``,
-* pore scale (rescales the base material's pore noise), ``detail_variant`` seeds the noise,
+* oiliness -> lower roughness and a stronger sharp specular lobe (coat) in the T-zone,
+* wrinkles (forehead bands, crow's feet, nasolabial folds) as a bump, ``wrinkle_depth``, faded
+  by the resolution rule of :mod:`synth.appearance.skin_optics` (``ctx.pixel_m``),
+* ``detail_variant`` seeds the noise (pores and fine lines at ``pore_scale`` are the base
+  material's: ``blender_scripts.materials.skin_material``),
+* the tear meniscus: coat and low roughness on the lower lids' margin (``tear_line`` attribute,
+  :func:`synth.assets.fit.eyes.lid_margin`),
 * stubble shadow over the beard area when the identity has no beard (drawn with
   probability 0.5 and a light strength) or has the ``stubble`` beard.
 
@@ -21,6 +25,8 @@ import numpy as np
 
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
+from synth.appearance.skin_optics import WRINKLES, detail_weight, sharp_lobe
+from synth.assets.fit.eyes import lid_margin
 from synth.assets.fit.masks import skin_detail_mask
 from synth.dataset.segmentation import CLASSES
 
@@ -54,10 +60,7 @@ def build(ctx, entry: dict) -> Rig:
     nt.links.new(attr.outputs["Color"], sep.inputs["Color"])
     cheeks, tzone, wzone, beard = sep.outputs[0], sep.outputs[1], sep.outputs[2], attr.outputs["Alpha"]
     rec = {"id": entry.get("id")}
-    pore = float(p.get("pore_scale", 1.0))
-    for n in nt.nodes:  # rescale the base material's pore noise
-        if n.type == "TEX_NOISE" and n.inputs["Scale"].default_value > 300:
-            n.inputs["Scale"].default_value *= pore
+    pore = float(p.get("pore_scale", 1.0))  # the base material builds the pores (materials.skin_material)
     # redness from blood volume
     red = float(np.clip(float(p.get("haemoglobin", 0.02)) / 0.07, 0, 1))
     bmat.layer_over(mat, "Base Color", (0.75, 0.3, 0.3), bmat.math_node(mat, "MULTIPLY", cheeks, 0.35 * red),
@@ -84,17 +87,26 @@ def build(ctx, entry: dict) -> Rig:
         f = bmat.math_node(mat, "MULTIPLY", bmat.math_node(mat, "MULTIPLY", spot, small), face)
         bmat.layer_over(mat, "Base Color", (0.45, 0.3, 0.2), f, blend="MULTIPLY")
     oil = float(p.get("oiliness", 0.0))
-    if oil > 0.0:
+    if oil > 0.0:  # an oilier T-zone: both lobes sharper, the sharp one stronger
         base_r = float(p.get("roughness", 0.45))
-        bmat.layer_over(mat, "Roughness", base_r * (1 - 0.6 * oil), bmat.math_node(mat, "MULTIPLY", tzone, 0.9))
+        tz = bmat.math_node(mat, "MULTIPLY", tzone, 0.9)
+        bmat.layer_over(mat, "Roughness", base_r * (1 - 0.6 * oil), tz)
+        bmat.layer_over(mat, "Coat Weight", sharp_lobe(base_r, min(1.0, 2.0 * oil))["Coat Weight"], tz)
+    # the tear meniscus: a wet, sharp reflection along the lower lids' margin
+    bmat.write_point_vector(ctx.head.data, "tear_line", np.repeat(lid_margin(ctx.data, V)[:, None], 3, 1))
+    tear = nt.nodes.new("ShaderNodeSeparateXYZ")
+    nt.links.new(bmat.attribute(mat, "tear_line").outputs["Vector"], tear.inputs[0])
+    for name, value in (("Coat Weight", 1.0), ("Coat Roughness", 0.03), ("Roughness", 0.15)):
+        bmat.layer_over(mat, name, value, tear.outputs["X"])
     wd = float(p.get("wrinkle_depth", 0.0))
-    if wd > 0.01:
+    w_wr = 1.0 if ctx.pixel_m is None else detail_weight(ctx.pixel_m, WRINKLES[0])
+    if wd > 0.01 and w_wr > 0.0:
         wave = _tex_node(mat, "ShaderNodeTexWave", 90.0, seed)
         wave.wave_type = "BANDS"
         wave.bands_direction = "Z"
         wave.inputs["Distortion"].default_value = 3.0
         h = bmat.math_node(mat, "MULTIPLY", wave.outputs["Fac"], wzone)
-        bmat.chain_bump(mat, h, 0.35 * wd, 0.0006)
+        bmat.chain_bump(mat, h, 0.35 * wd * w_wr, 0.0006)
     beard_entry = (ctx.assets or {}).get("beard")
     beard_id = (beard_entry or {}).get("id")
     stubble = 0.0
@@ -108,5 +120,8 @@ def build(ctx, entry: dict) -> Rig:
         bmat.layer_over(mat, "Base Color", (0.35, 0.33, 0.34), bmat.math_node(mat, "MINIMUM", f, 1.0),
                         blend="MULTIPLY")
     rec.update(freckles=fr, age_spots=ag, redness=round(red, 4), oiliness=oil, wrinkle_depth=wd,
-               pore_scale=pore, stubble_shadow=round(stubble, 4))
+               pore_scale=pore, stubble_shadow=round(stubble, 4),
+               detail={"pixel_m": None if ctx.pixel_m is None else round(ctx.pixel_m, 7),
+                       "pores": round(float(mat.get("detail_pores", 1.0)), 4),
+                       "fine_lines": round(float(mat.get("detail_fine_lines", 1.0)), 4), "wrinkles": round(w_wr, 4)})
     return Rig("skin", [], rec)

@@ -40,6 +40,7 @@ GARMENT_MAX_PEN = 0.002
 GARMENT_MAX_FRACTION = 0.01
 HEADWEAR_MAX_PEN = 0.0005
 FRACTION_TOLERANCE = 0.00025
+HEM_MAX_TURN = 30.0
 
 # every id of garment.toml / headwear.toml, with parameter variants cycled over the cases
 GARMENTS = {
@@ -160,6 +161,11 @@ def test_tubes_and_noise_are_finite_and_deterministic():
 
 # ----------------------------------------------------------------------------- every id on the hard cases
 
+def _outer(s, P):
+    """The vertices meant to lie outside the skin (a hem cap lies inside it on purpose)."""
+    return P if s.inside is None else P[~s.inside]
+
+
 @pytest.fixture(scope="module")
 def fitted(default_head):
     """Per schedule entry: build every id at case a, measure; change to case b + follow, measure."""
@@ -176,12 +182,12 @@ def fitted(default_head):
                 entry = {"id": aid, "generator": f"procedural:{cls}_shell", "params": params}
                 shells.append((cls, aid, params, fit_shell(body, make(body, entry, ctx.rng(cls)), clearance)))
         for cls, aid, params, s in shells:
-            results.append((a, "build", cls, aid, params, s.P, s.F, _penetration(ctx, s.P)))
+            results.append((a, "build", cls, aid, params, s.P, s.F, _penetration(ctx, _outer(s, s.P))))
         if b != a:
             asset_scene.set_case_arrays(ctx, hm, b)
             for cls, aid, params, s in shells:
                 v = s.follow(ctx.vertices, ctx.data.triangles)
-                results.append((b, "update", cls, aid, params, v, s.F, _penetration(ctx, v)))
+                results.append((b, "update", cls, aid, params, v, s.F, _penetration(ctx, _outer(s, v))))
     return results
 
 
@@ -230,3 +236,25 @@ def test_determinism(default_head):
         assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b
 
 
+
+
+@pytest.mark.slow
+def test_hem_is_smooth_and_closed(fitted):
+    """Every garment ends on a smooth hem (no sawtooth at the arm cuts): along each boundary loop
+    at the bottom of the garment (the hem and its cap's rim) consecutive edges turn by less than
+    ``HEM_MAX_TURN`` degrees, after the build and after an expression change; and the hem is
+    closed by a cap (two loops at the bottom: the garment's hem and the cap's rim)."""
+    from synth.assets.fit.hem import turning_angles
+
+    worst = {}
+    for case, stage, cls, aid, params, v, f, _ in fitted:
+        if cls != "garment":
+            continue
+        loops = [lo for lo in boundary_loops(f) if len(lo) >= 8]
+        zs = np.array([v[lo, 2].mean() for lo in loops])
+        bottom = [lo for lo, z in zip(loops, zs) if z < zs.min() + 0.01]
+        assert len(bottom) >= 2, (case, stage, aid, len(bottom))
+        turn = max(float(turning_angles(v[lo]).max()) for lo in bottom)
+        worst[aid] = max(worst.get(aid, 0.0), turn)
+        assert turn < HEM_MAX_TURN, (case, stage, aid, params, turn)
+    print("\nworst hem turning angle (deg):", {k: round(t, 1) for k, t in worst.items()})

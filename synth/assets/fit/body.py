@@ -116,6 +116,7 @@ class Body:
         self.head_tris = np.nonzero(hd[self.F].all(1))[0]
         self.frame = NeckFrame(self.V, self.F, regions, ibug68)
         self.lm = np.asarray(ibug68, np.float64)
+        self._hem = None
 
     @classmethod
     def of(cls, head) -> "Body":
@@ -123,18 +124,29 @@ class Body:
         ``data.regions`` and ``landmarks["ibug68"]``: the rigs' HeadContext)."""
         return cls(head.vertices, head.data.triangles, head.data.regions, head.landmarks["ibug68"])
 
-    def shell(self, tris: np.ndarray, field: np.ndarray, offset_fn, subdiv: int = 1):
+    @property
+    def hem(self) -> np.ndarray:
+        """Per-vertex hem field (>= 0 above the hem; :mod:`synth.assets.fit.hem`), computed once."""
+        if self._hem is None:
+            from synth.assets.fit.hem import hem_field
+
+            self._hem = hem_field(self.V, self.F)
+        return self._hem
+
+    def shell(self, tris: np.ndarray, field: np.ndarray, offset_fn, subdiv: int = 1, weights: bool = False):
         """Clip ``tris`` at ``field >= 0``, subdivide, offset by ``offset_fn(base points, normals)``.
-        Returns (P, faces, cut mask)."""
+        Returns (P, faces, cut mask), and the (M, V) combination matrix of the body vertices
+        giving each point's base position when ``weights``."""
         W, faces, cut = clip_by_field(self.F[tris], field, len(self.V))
         if len(faces) == 0:
-            return np.zeros((0, 3)), faces, cut
+            P = np.zeros((0, 3))
+            return (P, faces, cut, W) if weights else (P, faces, cut)
         for _ in range(subdiv):
             W, faces, cut = subdivide(W, faces, cut)
         base = np.asarray(W @ self.V)
         nrm = normalize(np.asarray(W @ self.N))
         P = base + nrm * np.asarray(offset_fn(base, nrm))[:, None]
-        return P, faces, cut
+        return (P, faces, cut, W) if weights else (P, faces, cut)
 
     def neck_loop(self, z_fn, n: int = 48, angle0: float = 0.0) -> np.ndarray:
         """Loop on the neck/shoulder surface where ``z == z_fn(theta)``, resampled at ``n``
@@ -148,21 +160,25 @@ class Parts:
     """Accumulates mesh parts: (positions, faces, material slot, trimmable)."""
 
     def __init__(self):
-        self.P, self.F, self.M, self.T = [], [], [], []
+        self.P, self.F, self.M, self.T, self.R = [], [], [], [], []
 
-    def add(self, P, F, slot: int = 0, trim: bool = False):
+    def add(self, P, F, slot: int = 0, trim: bool = False, inside: bool = False):
+        """``trim``: vertices deep in another body part are trimmed; ``inside``: the part lies
+        inside the body on purpose (a hem cap) and is never pushed out."""
         if len(F) == 0:
             return
         self.P.append(np.asarray(P, np.float64))
         self.F.append(np.asarray(F, np.int64))
         self.M.append(np.full(len(F), slot, np.int32))
         self.T.append(np.full(len(P), trim))
+        self.R.append(np.full(len(P), inside))
 
     def merged(self):
+        """(P, F, slot per face, trimmable per vertex, inside per vertex)."""
         off = np.cumsum([0] + [len(p) for p in self.P])
         P = np.concatenate(self.P)
         F = np.concatenate([f + o for f, o in zip(self.F, off[:-1])])
-        return P, F, np.concatenate(self.M), np.concatenate(self.T)
+        return P, F, np.concatenate(self.M), np.concatenate(self.T), np.concatenate(self.R)
 
 
 @dataclass(frozen=True)
@@ -202,22 +218,26 @@ class FittedShell:
     body_tris: np.ndarray
     clearance: float
     info: dict
+    inside: np.ndarray | None = None  # (V,) vertices never pushed out (hem caps)
 
     def follow(self, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
         """Positions on new body vertices: the binding re-applied, then pushed out again."""
         P = self.binding.apply(vertices)
-        return push_out(P, body_query(vertices, triangles, self.body_tris), self.clearance, iterations=6)
+        out = np.ones(len(P), bool) if self.inside is None else ~self.inside
+        P[out] = push_out(P[out], body_query(vertices, triangles, self.body_tris), self.clearance, iterations=6)
+        return P
 
 
 def fit_shell(body: Body, shell: Shell, clearance: float) -> FittedShell:
     """Trim deep vertices of trimmable parts, push out, bind."""
-    P, F, M, T = shell.parts.merged()
+    P, F, M, T, R = shell.parts.merged()
     sd = body.query(P)
     deep = T & (sd < -TRIM_DEPTH)
     keep = ~deep[F].any(1)
     P, F, used = remove_faces(P, F, keep)
-    M = M[keep]
-    P = push_out(P, body.query, clearance, iterations=6)
+    M, R = M[keep], R[used]
+    P[~R] = push_out(P[~R], body.query, clearance, iterations=6)
     binding = Binding(body.V, body.F, shell.anchor_tris, P)
     info = dict(shell.info, vertices=int(len(P)), faces=int(len(F)), trimmed_vertices=int(deep.sum()))
-    return FittedShell(shell.cls, shell.name, P, F, M, shell.cloths, binding, body.skin_tris, clearance, info)
+    return FittedShell(shell.cls, shell.name, P, F, M, shell.cloths, binding, body.skin_tris, clearance, info,
+                       R if R.any() else None)

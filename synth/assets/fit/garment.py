@@ -43,6 +43,8 @@ from synth.assets.fit.meshops import icosphere, smoothstep
 
 #: minimum distance (m) kept between every garment vertex and the skin
 CLEARANCE = 0.0015
+#: width (m) of the tank top's band along the hem, over the arm stumps
+TANK_BAND = 0.035
 
 #: colour names -> sRGB HSV (h, s, v in [0, 1])
 COLOURS = {
@@ -235,7 +237,8 @@ def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
             zr = fr.z_ring(th)
             torso = np.minimum(zr - 0.05 - 0.04 * front_weight(th) - V[:, 2], 0.13 - np.abs(V[:, 0]))
             strap = np.minimum(w / 2 - np.abs(np.abs(V[:, 0]) - xs), zr + 0.01 - V[:, 2])
-            return np.maximum(torso, strap)
+            band = TANK_BAND - body.hem  # a band along the hem covers the arm stumps (the bust's cut)
+            return np.maximum(np.maximum(torso, strap), band)
         torso_shell(body, parts, lambda t: fr.z_ring(t), wr(base, 0.001), extra_field=extra, rim=0.0)
         info["strap_width_m"] = w
     else:

@@ -16,6 +16,7 @@ import numpy as np
 
 from synth.assets.fit.attach import push_out
 from synth.assets.fit.body import Body, Parts, WaveNoise
+from synth.assets.fit.hem import CAP_INSET, HEM_BAND, cap, hem_loops, smooth_loops
 from synth.assets.fit.meshops import boundary_loops, grid_faces, icosphere, laplacian_smooth, sweep_tube
 from synth.geometry.normals import normalize
 
@@ -51,16 +52,25 @@ def wrinkle_offset(rng, base_off: float, amp: float, wavelength: float = 0.05):
 
 def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None, rim: float = 0.0,
                 rim_slot=None, rim_flatten: float = 1.0):
-    """Torso shell under the neckline ``z_fn``, with an optional rim tube on the cut."""
+    """Torso shell under the neckline ``z_fn`` and above the hem (:mod:`synth.assets.fit.hem`),
+    with an optional rim tube on the neckline and a cap closing the hem from below."""
     th = body.frame.theta(body.V)
     f = z_fn(th) - body.V[:, 2]
     if extra_field is not None:
         f = extra_field(f)
-    P, F, cut = body.shell(body.torso_tris, f, off_fn)
+    hem_f = body.hem
+    # a neckline never reaches the hem (a deep V on a short torso): it stops HEM_BAND above it
+    f = np.maximum(f, HEM_BAND - hem_f)
+    P, F, cut, W = body.shell(body.torso_tris, np.minimum(f, hem_f), off_fn, weights=True)
+    on_hem = cut & (np.abs(np.asarray(W @ hem_f)) < 1e-7)
+    P = smooth_loops(P, F, on_hem)
     parts.add(P, F, slot, trim=True)
+    for loop in hem_loops(F, on_hem):
+        Vc, Fc = cap(P, loop, inset=CAP_INSET)
+        parts.add(Vc, Fc, slot, inside=True)
     if rim > 0 and len(F):
         for loop in boundary_loops(F):
-            if cut[loop].mean() < 0.8 or len(loop) < 8:
+            if cut[loop].mean() < 0.8 or len(loop) < 8 or on_hem[loop].mean() >= 0.8:
                 continue
             path = P[loop]
             # push the rim centre out so the tube sits on the shell

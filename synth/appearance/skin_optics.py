@@ -1,0 +1,103 @@
+"""Skin reflectance beyond the albedo (pure numpy): subsurface radii, the two specular lobes,
+and which surface details a render can show.
+
+**Subsurface radius per channel.** Jensen et al. 2001 ("A practical model for subsurface light
+transport", Table 1, skin 1) measured the reduced scattering and absorption coefficients of
+skin in red, green and blue: ``sigma_s' = (0.74, 0.88, 1.01)`` and ``sigma_a = (0.032, 0.17,
+0.48)`` per mm. The diffuse falloff distance is ``1 / sigma_tr`` with ``sigma_tr = sqrt(3
+sigma_a (sigma_a + sigma_s'))``: (3.67, 1.37, 0.68) mm, red light scattering furthest. Cycles'
+random-walk subsurface takes these as its per-channel radius; the plan's
+``subsurface_radius_scale`` (0.8-1.2) scales all three.
+
+**Two specular lobes** (skin's specular reflection is better fitted by two microfacet lobes
+than by one: d'Eon & Luebke 2007, GPU Gems 3 ch. 14; Weyrich et al. 2006 measured roughness
+0.3-0.5 varying over the face): the Principled base specular is the broad lobe (the sampled
+``roughness``, 0.35-0.6: the stratum corneum's micro-relief) and the clear coat the sharp one
+(``SHARP_LOBE_RATIO`` x that roughness, IOR 1.45 of sebum), a thin oily film whose weight
+grows with ``oiliness`` (``COAT_WEIGHT`` + ``COAT_OIL`` x oiliness; more in the T-zone, where
+the skin-detail rig raises it).
+
+**Model only what the scene shows.** A bump layer whose pattern repeats every ``period`` metres
+is resolved when one pixel covers at most half a period on the face (Nyquist) and not at all
+when a pixel covers a whole period or more. :func:`detail_weight` is 1 at
+``period >= 2 x pixel``, 0 at ``period <= pixel``, linear in between; the layer's bump
+strength is multiplied by it, and at 0 its nodes are not built at all. What a skipped (or
+faded) layer would have done below the pixel, spreading the reflected light, is kept by
+widening the broad lobe: ``roughness' = sqrt(roughness^2 + (1 - w) slope_variance)``
+(Toksvig 2005: the variance of unresolved normals adds to the microfacet slope variance).
+The pixel footprint is that of the identity's finest view, ``distance / f_x``
+(:func:`pixel_footprint_m`), so all views of one identity share one material (views are camera
+moves of one scene).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Jensen et al. 2001, skin 1, per mm (R, G, B)
+SIGMA_S_REDUCED = (0.74, 0.88, 1.01)
+SIGMA_A = (0.032, 0.17, 0.48)
+
+#: sharp lobe roughness / broad lobe roughness; sharp lobe IOR (sebum); its weight
+SHARP_LOBE_RATIO = 0.45
+SHARP_LOBE_IOR = 1.45
+COAT_WEIGHT, COAT_OIL = 0.12, 0.35
+
+#: detail layers: (period in metres at scale 1, slope variance folded into roughness when unresolved)
+PORES = (0.0007, 0.02)  # pore spacing ~0.5-1 mm on the cheeks and nose
+FINE_LINES = (0.0022, 0.015)  # the micro-relief's grooves (the skin's furrow network)
+WRINKLES = (0.011, 0.0)  # forehead bands, crow's feet, nasolabial folds
+
+#: footprint assumed without cameras (unit tests): a 0.2 m face over 60 % of the image
+FACE_WIDTH_M, FACE_FILL = 0.2, 0.6
+
+
+def diffuse_mean_free_path_mm(sigma_a=SIGMA_A, sigma_s_reduced=SIGMA_S_REDUCED) -> np.ndarray:
+    """(3,) ``1 / sigma_tr`` in mm, ``sigma_tr = sqrt(3 sigma_a (sigma_a + sigma_s'))``."""
+    a = np.asarray(sigma_a, np.float64)
+    s = np.asarray(sigma_s_reduced, np.float64)
+    return 1.0 / np.sqrt(3.0 * a * (a + s))
+
+
+def subsurface(scale: float = 1.0) -> tuple[tuple[float, float, float], float]:
+    """(per-channel radius relative to red, scale in metres) for Cycles' subsurface inputs."""
+    mfp = diffuse_mean_free_path_mm()
+    rel = mfp / mfp[0]
+    return (float(rel[0]), float(rel[1]), float(rel[2])), float(mfp[0] * 1e-3 * scale)
+
+
+def sharp_lobe(roughness: float, oiliness: float = 0.0) -> dict[str, float]:
+    """Principled coat inputs of the sharp specular lobe."""
+    return {"Coat Weight": float(np.clip(COAT_WEIGHT + COAT_OIL * oiliness, 0.0, 1.0)),
+            "Coat Roughness": float(SHARP_LOBE_RATIO * roughness), "Coat IOR": SHARP_LOBE_IOR}
+
+
+def detail_weight(pixel_m: float, period_m: float) -> float:
+    """1 when the period spans >= 2 pixels, 0 when <= 1 pixel, linear in between."""
+    if pixel_m <= 0:
+        return 1.0
+    return float(np.clip(period_m / pixel_m - 1.0, 0.0, 1.0))
+
+
+def subpixel_roughness(roughness: float, unresolved: list[tuple[float, float]]) -> float:
+    """Broad-lobe roughness widened by the unresolved part of detail layers: ``unresolved`` is
+    [(weight, slope variance)] per layer; ``sqrt(r^2 + sum (1 - w) var)``."""
+    var = sum((1.0 - w) * v for w, v in unresolved)
+    return float(min(1.0, np.sqrt(roughness ** 2 + var)))
+
+
+def pixel_footprint_m(cameras, default_resolution: int | None = None) -> float:
+    """Metres one pixel covers on the face in the finest of ``cameras`` (frame-JSON camera
+    dicts: ``K``, ``world_to_camera``, ``target``): ``|camera centre - target| / f_x``. Without
+    cameras, a face of ``FACE_WIDTH_M`` filling ``FACE_FILL`` of ``default_resolution`` pixels."""
+    best = np.inf
+    for c in cameras or ():
+        K = np.asarray(c["K"], np.float64)
+        w2c = np.asarray(c["world_to_camera"], np.float64)
+        centre = -w2c[:3, :3].T @ w2c[:3, 3]
+        best = min(best, float(np.linalg.norm(centre - np.asarray(c["target"], np.float64)) / K[0, 0]))
+    if np.isfinite(best):
+        return best
+    if not default_resolution:
+        raise ValueError("pixel_footprint_m needs cameras or a resolution")
+    return FACE_WIDTH_M / (FACE_FILL * float(default_resolution))

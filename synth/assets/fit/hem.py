@@ -1,0 +1,144 @@
+"""The bust's cut, hidden by the garment (pure numpy; the rig is ``blender_scripts/assets/garment.py``).
+
+The default bust ends in an open boundary cut along mesh edges: a zig-zag (median turning angle
+~80 degrees between consecutive edges) across the chest, the back and the arm stumps. A garment
+that simply followed the bust's skin ended on that zig-zag (sawtooth arm cuts), and from below
+(cameras go down to -45 degrees elevation) one looked past its edge at the bust's skin.
+
+Every garment now ends on a **hem**: the level set ``cut_distance == HEM_MARGIN`` of a smooth
+field on the body, the distance from the bust's open boundary (Euclidean, to the boundary
+polyline) smoothed on the mesh with the cut held at 0, so the hem runs parallel to the cut, ``HEM_MARGIN`` above it,
+without its zig-zag. Under the hem:
+
+* the bust's skin faces (any vertex closer to the cut than the hem) are hidden at render time
+  (:func:`hidden_polygons`; the rig gives them a transparent material outside every pass), and
+* a **cap** of cloth closes the garment's hem loop (:func:`cap`), so that from below one sees
+  the garment's underside, never the inside of the bust.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from synth.assets.fit.meshops import boundary_loops
+from synth.geometry.normals import normalize
+
+#: distance (m) from the bust's cut at which every garment ends
+HEM_MARGIN = 0.025
+#: smoothing passes of the distance field on the mesh (each averages a vertex with its neighbours)
+FIELD_SMOOTHING = 12
+#: smoothing passes of the hem polyline itself (along the loop, after the clip)
+LOOP_SMOOTHING = 8
+#: the garment is kept this far (m of the hem field) above the hem whatever the neckline
+HEM_BAND = 0.02
+#: how far (m) the cap's rim sits inside the garment's hem edge (no coincident edges)
+CAP_INSET = 0.0005
+
+
+def cut_loop(F: np.ndarray, V: np.ndarray) -> np.ndarray:
+    """The bust's open boundary: the lowest of the mesh's boundary loops (eyes and mouth leave
+    smaller loops higher up). Vertex indices, in order."""
+    loops = boundary_loops(F)
+    if not loops:
+        raise ValueError("the head mesh has no open boundary (no bust cut)")
+    return min(loops, key=lambda lo: float(np.asarray(V)[lo, 2].mean()))
+
+
+def _segment_distance(P: np.ndarray, A: np.ndarray, B: np.ndarray, chunk: int = 2048) -> np.ndarray:
+    """Distance from each point of P to the closest of the segments A[i]-B[i]."""
+    out = np.empty(len(P))
+    AB = B - A
+    L2 = np.maximum((AB ** 2).sum(1), 1e-30)
+    for s in range(0, len(P), chunk):
+        p = P[s:s + chunk, None, :]
+        t = np.clip(((p - A) * AB).sum(-1) / L2, 0.0, 1.0)
+        d = p - (A + t[..., None] * AB)
+        out[s:s + chunk] = np.sqrt((d ** 2).sum(-1).min(1))
+    return out
+
+
+def _neighbour_mean_matrix(F: np.ndarray, n: int):
+    import scipy.sparse as sp
+
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    E = np.unique(np.sort(E, 1), axis=0)
+    r = np.concatenate([E[:, 0], E[:, 1], np.arange(n)])
+    c = np.concatenate([E[:, 1], E[:, 0], np.arange(n)])
+    A = sp.csr_matrix((np.ones(len(r)), (r, c)), shape=(n, n))
+    deg = np.asarray(A.sum(1)).ravel()
+    return sp.diags(1.0 / deg) @ A
+
+
+def cut_distance(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """(V,) smooth distance (m) of every vertex from the bust's cut (see the module docstring)."""
+    V = np.asarray(V, np.float64)
+    F = np.asarray(F, np.int64)
+    loop = cut_loop(F, V)
+    d = _segment_distance(V, V[loop], V[np.roll(loop, -1)])
+    M = _neighbour_mean_matrix(F, len(V))
+    for _ in range(FIELD_SMOOTHING):
+        d = M @ d
+        d[loop] = 0.0  # the cut itself stays at distance 0
+    return d
+
+
+def hem_field(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Per-vertex field, >= 0 where a garment may be (above the hem)."""
+    return cut_distance(V, F) - HEM_MARGIN
+
+
+def hidden_polygons(V: np.ndarray, F: np.ndarray, poly_offsets: np.ndarray, poly_indices: np.ndarray) -> np.ndarray:
+    """(P,) bool: the head polygons (CSR ``offsets``/``indices``) under the hem (any corner
+    closer to the cut than ``HEM_MARGIN``); hidden at render time under a garment."""
+    below = cut_distance(V, F) < HEM_MARGIN
+    off = np.asarray(poly_offsets, np.int64)
+    hit = below[np.asarray(poly_indices, np.int64)].astype(np.int64)
+    return np.add.reduceat(hit, off[:-1]) > 0
+
+
+def smooth_loops(P: np.ndarray, F: np.ndarray, on_hem: np.ndarray, iterations: int = LOOP_SMOOTHING) -> np.ndarray:
+    """Smooth, along itself, every boundary loop of (P, F) that lies on the hem (``on_hem``
+    per vertex, mostly true on the loop): the clip of a triangle mesh leaves tiny edges where the
+    level set passes near a vertex; averaging along the loop removes the kinks they make."""
+    P = np.array(P, np.float64, copy=True)
+    for loop in boundary_loops(F):
+        if on_hem[loop].mean() < 0.8:
+            continue
+        for _ in range(iterations):
+            P[loop] = 0.5 * P[loop] + 0.25 * (P[np.roll(loop, 1)] + P[np.roll(loop, -1)])
+    return P
+
+
+def hem_loops(F: np.ndarray, on_hem: np.ndarray) -> list[np.ndarray]:
+    return [lo for lo in boundary_loops(F) if on_hem[lo].mean() >= 0.8 and len(lo) >= 8]
+
+
+def cap(P: np.ndarray, loop: np.ndarray, inset: float) -> tuple[np.ndarray, np.ndarray]:
+    """A fan of triangles closing the loop ``P[loop]`` from underneath: its rim ``inset`` inside
+    the loop (toward the loop's axis, so it tucks under the garment's edge), its centre at the
+    loop's centroid. Faces point down/outward (seen from below). Returns (vertices, faces)."""
+    Q = np.asarray(P, np.float64)[loop]
+    c = Q.mean(0)
+    radial = Q - c
+    radial[:, 2] = 0.0
+    rim = Q - normalize(radial) * float(inset)
+    n = len(rim)
+    verts = np.vstack([rim, c[None]])
+    i = np.arange(n)
+    faces = np.stack([i, (i + 1) % n, np.full(n, n)], 1)
+    # orient so the face normals point down (the side a camera below sees)
+    tri = verts[faces]
+    nz = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])[:, 2].sum()
+    if nz > 0:
+        faces = faces[:, ::-1]
+    return verts, faces
+
+
+def turning_angles(P: np.ndarray, closed: bool = True) -> np.ndarray:
+    """Degrees between consecutive edges of a polyline (closed: also across the seam)."""
+    P = np.asarray(P, np.float64)
+    e = np.diff(np.vstack([P, P[:1]]) if closed else P, axis=0)
+    e = e / np.maximum(np.linalg.norm(e, axis=1, keepdims=True), 1e-15)
+    nxt = np.roll(e, -1, 0) if closed else e[1:]
+    cur = e if closed else e[:-1]
+    return np.degrees(np.arccos(np.clip((cur * nxt).sum(1), -1.0, 1.0)))
