@@ -119,7 +119,7 @@ def fit_cmd(
     steps: Optional[int] = typer.Option(None, "--steps", help="Fine-tuning steps (finetune.steps)."),
     preset: Optional[str] = typer.Option(None, "--preset", "-p", help="small (CPU, default) or paper."),
     config: Optional[Path] = typer.Option(None, "--config", "-c", help="TOML file with [landmarks] [inversion] "
-                                                                         "[finetune] sections."),
+                                                                         "[finetune] [fit] sections."),
     set_: list[str] = typer.Option([], "--set", help="Override one key: section.key=value (repeatable)."),
     no_pretraining: bool = typer.Option(False, "--no-pretraining", help="Start from a randomly initialised field "
                                                                         "of the prior's configuration (baseline)."),

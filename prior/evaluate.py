@@ -98,7 +98,7 @@ def evaluate_fit(fit_dir, gt, *, views=None, device="cpu", save=None, frontal_de
             continue
         K = np.diag([f.width / W0, f.height / H0, 1.0]) @ fit.K[0]
         c2w = sim.camera_to_source(f.camera_to_world)
-        img = render_fit_view(fit, K, c2w, f.width, f.height, chunk=int(fit.info["config"]["render_chunk"]),
+        img = render_fit_view(fit, K, c2w, f.width, f.height, chunk=fit.render_chunk,
                               device=device)
         pred, ref = linear_to_srgb(img["rgb"]).astype(np.float32), linear_to_srgb(f.rgba[..., :3]).astype(np.float32)
         mask = np.clip(f.alpha, 0, 1)

@@ -47,6 +47,11 @@ class FittedFace:
         return np.asarray(self.info["codes"], np.float32)
 
     @property
+    def render_chunk(self) -> int:
+        """Rays per chunk when rendering whole images (the fit config's ``fit.render_chunk``)."""
+        return int(self.info["config"]["fit"]["render_chunk"])
+
+    @property
     def K(self) -> np.ndarray:
         return np.asarray([c["K"] for c in self.info["cameras"]], np.float64)
 

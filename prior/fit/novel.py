@@ -96,7 +96,7 @@ def render_fit(fit_dir, out_dir, *, orbit_views: int = 8, size: int | None = Non
         raise SynthError("output path exists and is not a directory", str(out_dir), "pass a directory to -o")
     out_dir.mkdir(parents=True, exist_ok=True)
     written, cams = [], []
-    chunk = int(fit.info["config"].get("render_chunk", 4096))
+    chunk = fit.render_chunk
     for v in views:
         img = render_fit_view(fit, v["K"], v["camera_to_world"], v["width"], v["height"], chunk=chunk, device=device)
         written += write_view(out_dir, v["key"], img)

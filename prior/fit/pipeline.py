@@ -15,6 +15,7 @@ prior's scene sphere (it holds every training identity's bounding sphere, in the
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -114,7 +115,7 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
     if steps is not None:
         if steps < 0:
             raise SynthError(f"--steps {steps} must be >= 0", "--steps", "pass a number of fine-tuning steps")
-        cfg.finetune.steps = int(steps)
+        cfg = dataclasses.replace(cfg, finetune=dataclasses.replace(cfg.finetune, steps=int(steps)))
     ck = load_prior(prior_run)
     model, model_sha = head_model(model_path)
     check_head_model(model, model_sha, ck, str(ck.path))
@@ -130,7 +131,7 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
     times = {}
     t0 = time.perf_counter()
     lm = cfg.landmarks
-    obs = observations(inputs, source, model, sigma_px=lm.sigma_px, noise_px=lm.noise_px, seed=cfg.seed)
+    obs = observations(inputs, source, model, sigma_px=lm.sigma_px, noise_px=lm.noise_px, seed=cfg.fit.seed)
     if lm.focal_px > 0:
         W, H = inputs[0].size
         obs.K = np.broadcast_to(np.array([[lm.focal_px, 0, W / 2], [0, lm.focal_px, H / 2], [0, 0, 1.0]]),
@@ -156,10 +157,10 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
     t0 = time.perf_counter()
     low = views.resized(*low_wh)
     report = _progress(log)
-    w, inv_hist = invert_latent(net, low, w0, cfg.inversion, seed=cfg.seed, device=dev, progress=report)
+    w, inv_hist = invert_latent(net, low, w0, cfg.inversion, seed=cfg.fit.seed, device=dev, progress=report)
     times["inversion_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    w, ft_hist = finetune(net, views, w, cfg.finetune, seed=cfg.seed, device=dev, progress=report)
+    w, ft_hist = finetune(net, views, w, cfg.finetune, seed=cfg.fit.seed, device=dev, progress=report)
     times["finetune_s"] = time.perf_counter() - t0
 
     info = {"format": fitdir.FORMAT, "pretrained": bool(pretrained),

@@ -1,4 +1,4 @@
-"""prior.fit.config: presets, TOML and --set overrides (the training config's machinery), validation,
+"""prior.fit.config: presets, TOML and --set overrides (synth.configkit), validation,
 the saved form and the docs table."""
 
 from __future__ import annotations
@@ -20,10 +20,10 @@ def test_presets_and_override_order(tmp_path):
     assert paper.finetune.lr_init == 2e-3 and paper.finetune.lr_final == 2e-5 and paper.finetune.grad_clip == 1e-3
     assert small.finetune.steps < paper.finetune.steps
     f = tmp_path / "c.toml"
-    f.write_text('seed = 4\n[finetune]\nsteps = 7\nnormal_weight = 0.0\n[inversion]\nlpips_net = "alex"\n')
-    cfg = fc.load("small", f, ["finetune.steps=9", "seed=5", "landmarks.per_image_expression=false"])
+    f.write_text('[fit]\nseed = 4\n[finetune]\nsteps = 7\nnormal_weight = 0.0\n[inversion]\nlpips_net = "alex"\n')
+    cfg = fc.load("small", f, ["finetune.steps=9", "fit.seed=5", "landmarks.per_image_expression=false"])
     assert cfg.finetune.steps == 9 and cfg.finetune.normal_weight == 0.0 and cfg.inversion.lpips_net == "alex"
-    assert cfg.seed == 5 and cfg.landmarks.per_image_expression is False
+    assert cfg.fit.seed == 5 and cfg.landmarks.per_image_expression is False
     assert fc.from_dict(cfg.to_dict(), "saved") == cfg
 
 
@@ -31,10 +31,11 @@ def test_presets_and_override_order(tmp_path):
     (["finetune.stepz=3"], "did you mean 'finetune.steps'"),
     (["finetun.steps=3"], "did you mean 'finetune'"),
     (["finetune.steps=3.5"], "not an integer"),
-    (["seed=-1"], "seed must be >= 0"),
+    (["fit.seed=-1"], "fit.seed"),
     (["inversion.lpips_net=squeeze"], "lpips_net"),
+    (["inversion.lr_init=1e-4"], "inversion.lr_final = 0.001 exceeds"),
     (["inversion.lr_final=1.0"], "inversion.lr_final"),
-    (["finetune.normal_weight=-1"], "loss weights"),
+    (["finetune.normal_weight=-1"], "finetune.normal_weight"),
     (["inversion.patch_size=4"], "patch_size"),
     (["landmarks.sigma_px=0"], "sigma_px"),
     (["steps=3"], "bad override"),
@@ -55,3 +56,12 @@ def test_every_key_is_documented():
     for line in fc.reference().splitlines()[2:]:
         key = line.split("|")[1].strip()
         assert key in text, f"{key} missing from docs/prior.md (regenerate with prior.fit.config.reference())"
+
+
+def test_overrides_are_checked_together():
+    """Every --set is applied before the rules between fields: lowering lr_init below the current
+    lr_final and then lr_final is fine in either order."""
+    for sets in (["inversion.lr_init=1e-4", "inversion.lr_final=1e-5"],
+                 ["inversion.lr_final=1e-5", "inversion.lr_init=1e-4"]):
+        cfg = fc.load("small", None, sets)
+        assert (cfg.inversion.lr_init, cfg.inversion.lr_final) == (1e-4, 1e-5)
