@@ -59,6 +59,10 @@ def render_image(model, K, c2w, width: int, height: int, code: np.ndarray, laten
     r = camera_rays(K, c2w, width, height)
     o, d, cos_z = (x.reshape(-1, *x.shape[2:]) for x in r)
     near, far = intersect_sphere(o, d, np.asarray(centre), float(radius))
+    # rays that miss the bounding sphere see nothing (zero colour, opacity, depth, normals): only
+    # the others go through the field
+    hit = np.flatnonzero(far > near)
+    o, d, near, far = o[hit], d[hit], near[hit], far[hit]
     n = o.shape[0]
     dev = torch.device(device)
     rad = torch.full((n,), float(pixel_radius(np.asarray(K))), device=dev)
@@ -77,7 +81,11 @@ def render_image(model, K, c2w, width: int, height: int, code: np.ndarray, laten
         parts["acc"].append(out["acc"].float())
         parts["depth"].append(out["depth"].float())
         parts["normals"].append(out["normals_pred"].float())
-    res = {k: torch.cat(v).cpu().numpy() for k, v in parts.items()}
+    res = {k: np.zeros((width * height, 3) if k in ("rgb", "normals") else width * height, np.float32)
+           for k in parts}
+    for k, v in parts.items():
+        if v:
+            res[k][hit] = torch.cat(v).cpu().numpy()
     surf = res["acc"] >= SURFACE_ACC
     depth = np.where(surf, res["depth"] * cos_z, 0.0)
     nrm = res["normals"]

@@ -166,3 +166,29 @@ def test_novel_views_interpolate_the_expression(views, tmp_path):
     np.testing.assert_allclose(img["rgb"], ref["rgb"], atol=1e-6)
     other = render_image(fit.model, views.K[0], mid, 8, 8, codes[0], None, np.zeros(3), 0.16, latent=torch.zeros(4))
     assert np.abs(other["rgb"] - img["rgb"]).max() > 1e-4  # the code matters
+
+
+def test_render_image_skips_rays_that_miss_the_bounds(views):
+    """Rays outside the bounding sphere are not sent through the field; the image equals the
+    field evaluated on every ray (the misses see nothing: zero colour and opacity)."""
+    from prior.data.bounds import intersect_sphere
+    from prior.data.sampler import pixel_radius
+    from prior.render_views import render_image
+    from synth.dataset.reader import camera_rays
+
+    model, K, c2w, lat = tiny_model(), views.K[0], views.c2w[0], torch.full((4,), 0.1)
+    code = views.codes[0]
+    img = render_image(model, K, c2w, 12, 10, code, None, np.zeros(3), 0.1, latent=lat, chunk=7)
+    r = camera_rays(K, c2w, 12, 10)
+    o, d = r.origins.reshape(-1, 3), r.directions.reshape(-1, 3)
+    near, far = intersect_sphere(o, d, np.zeros(3), 0.1)
+    miss = far <= near
+    assert 0 < miss.sum() < miss.size  # both kinds of rays in the image
+    T = lambda a: torch.as_tensor(np.ascontiguousarray(a, np.float32))  # noqa: E731
+    n = o.shape[0]
+    with torch.no_grad():
+        ref = model(T(o), T(d), T(near), T(far), T(code).expand(n, -1), None, lat.reshape(1, -1).expand(n, -1),
+                    radii=torch.full((n,), float(pixel_radius(K))), randomized=False)
+    np.testing.assert_allclose(img["rgb"].reshape(-1, 3), ref["rgb"].clamp(0, 1).numpy(), atol=1e-6)
+    np.testing.assert_allclose(img["acc"].reshape(-1), ref["acc"].numpy(), atol=1e-6)
+    assert (img["rgb"].reshape(-1, 3)[miss] == 0).all() and (img["depth"].reshape(-1)[miss] == 0).all()
