@@ -51,17 +51,17 @@ INPUT_SETS = {1: [0], 2: [0, 1], 3: [0, 1, 2]}
 TEST_RADIUS_M = 1.0
 
 PROFILES = {
-    # the run reported in docs/prior.md, sized for the shared 2-core machine under a load of 15-17
-    # (other jobs): about 20 training rays/s
+    # the run reported in docs/prior.md, sized for about 75 minutes of training and fitting on the shared
+    # 2-core machine (one torch thread: under other jobs' load two threads ran 40x slower)
     "cpu": dict(rungs=[1, 4, 12], expressions=2, views=12, res=32, test_ids=4, test_expressions=1, test_res=64,
-                train_steps=100, train_sets=["train.identities_per_batch=2", "train.views_per_identity=4",
-                                             "train.pixels_per_view=16", "train.foreground_fraction=0.5",
-                                             "train.warmup_steps=10", "train.background_steps=15",
-                                             "train.log_every=10", "train.checkpoint_every=25",
-                                             "train.preview_every=0", "train.bf16=true",
-                                             "sampling.proposal_samples=[16,16]", "sampling.nerf_samples=24"],
-                fit_sets=["inversion.steps=10", "inversion.patches=1", "inversion.patch_size=16",
-                          "finetune.steps=20", "finetune.rays_per_step=128", "finetune.warmup_steps=3",
+                train_steps=1000, train_sets=["train.identities_per_batch=2", "train.views_per_identity=4",
+                                              "train.pixels_per_view=32", "train.foreground_fraction=0.5",
+                                              "train.warmup_steps=30", "train.background_steps=100",
+                                              "train.log_every=50", "train.checkpoint_every=250",
+                                              "train.preview_every=0", "train.bf16=true",
+                                              "sampling.proposal_samples=[16,16]", "sampling.nerf_samples=24"],
+                fit_sets=["inversion.steps=30", "inversion.patches=1", "inversion.patch_size=16",
+                          "finetune.steps=100", "finetune.rays_per_step=256", "finetune.warmup_steps=10",
                           "finetune.normal_weight=0", "finetune.bf16=true"]),
     # a few minutes end to end: checks the script, proves nothing
     "tiny": dict(rungs=[1, 2], expressions=1, views=6, res=32, test_ids=1, test_expressions=1, test_res=64,
@@ -97,7 +97,9 @@ class Times:
         self.data = json.loads(self.path.read_text()) if self.path.is_file() else {}
 
     def record(self, key: str, t0: float, **extra) -> None:
-        self.data[key] = {"seconds": round(time.perf_counter() - t0, 1), "load_end": list(os.getloadavg()), **extra}
+        entry = {"seconds": round(time.perf_counter() - t0, 1), "load_end": list(os.getloadavg()), **extra}
+        disk = json.loads(self.path.read_text()) if self.path.is_file() else {}  # other processes' entries
+        self.data = {**self.data, **disk, key: entry}
         atomic_write_json(self.path, self.data)
 
 
@@ -217,14 +219,17 @@ def fit_rows(p: dict) -> list[tuple[str, int | None, int]]:
     return rows + [(f"ids{big}_views{v}", big, v) for v in (1, 2)]
 
 
-def fit(work: Path, p: dict, scale: float, device: str, times: Times, rows=None, tag="") -> None:
+def fit(work: Path, p: dict, scale: float, device: str, times: Times, rows=None, tag="", only=None) -> None:
+    """Every row on every test scene (``only``: indices into the scenes, for parallel processes)."""
     from prior.evaluate import evaluate_fit
     from prior.fit.pipeline import fit_face
 
     sets = scaled_sets(p["fit_sets"], scale)
     t_stage = time.perf_counter()
     # scene by scene, every row for a scene before the next: a run cut short still compares every row
-    for ident, expr in scenes(work):
+    for k, (ident, expr) in enumerate(scenes(work)):
+        if only is not None and k not in only:
+            continue
         for name, rung, nviews in rows or fit_rows(p):
             out = work / "fits" / f"{name}{tag}" / f"id{ident:06d}_ex{expr:02d}"
             if (out / "eval.json").is_file():
@@ -242,8 +247,10 @@ def fit(work: Path, p: dict, scale: float, device: str, times: Times, rows=None,
             res["times"] = {**json.loads((out / "fit" / "report.json").read_text())["times"],
                             "fit_total_s": t1 - t0, "eval_s": time.perf_counter() - t1}
             atomic_write_json(out / "eval.json", res)
-            log(f"  PSNR {res['mean']['psnr']:.2f} dB  SSIM {res['mean']['ssim']:.4f}  LPIPS {res['mean']['lpips']:.4f}")
-    times.record(f"fit{tag}", t_stage, note="per-fit times are in fits/*/*/eval.json")
+            m = res["mean"]
+            log(f"  PSNR {m['psnr']:.2f} dB  SSIM {m['ssim']:.4f}  LPIPS {m['lpips']:.4f}")
+    part = "" if only is None else "_scenes" + "_".join(map(str, only))
+    times.record(f"fit{tag}{part}", t_stage, note="per-fit times are in fits/*/*/eval.json")
 
 
 # --------------------------------------------------------------------------- report
@@ -296,7 +303,7 @@ def report(work: Path, p: dict, times: Times, figure: Path | None) -> dict:
 def make_figure(work: Path, p: dict, path: Path, scenes_shown: int = 2) -> None:
     """Per test scene: the 3 inputs | for two held-out views: prediction of the largest prior,
     ground truth, depth, normals, and the predictions of the 1-identity prior and no pre-training."""
-    from PIL import Image
+    from PIL import Image, ImageDraw
 
     from synth.dataset.preview import linear_to_srgb
     from synth.dataset.reader import read_frame
@@ -319,8 +326,19 @@ def make_figure(work: Path, p: dict, path: Path, scenes_shown: int = 2) -> None:
                 tiles.append(np.asarray(Image.open(work / "fits" / other / key / "views" / f"{fk}_pred_colour.png")))
         rows.append(np.concatenate([t[..., :3] if t.ndim == 3 else np.repeat(t[..., None], 3, -1) for t in tiles], 1))
     img = np.concatenate(rows, 0)
+    t = 128  # tile side in the figure
+    fig = Image.fromarray(img).resize((img.shape[1] * t // S, img.shape[0] * t // S), Image.LANCZOS)
+    labels = ["input 0°", "input +45°", "input -45°"]
+    for v in (HELD_OUT[1], HELD_OUT[4]):
+        az = TEST_VIEWS[v][0]
+        labels += [f"{big} ids, {az:+.0f}°", "ground truth", "depth", "normals", "1 identity", "no pre-training"]
+    out = Image.new("RGB", (fig.width, fig.height + 16), "white")
+    out.paste(fig, (0, 16))
+    draw = ImageDraw.Draw(out)
+    for k, text in enumerate(labels):
+        draw.text((k * t + 4, 2), text, fill="black")
     path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(img).resize((img.shape[1] * 256 // S // 2, img.shape[0] * 256 // S // 2)).save(path)
+    out.save(path, optimize=True)
     log(f"figure: {path}")
 
 
@@ -358,7 +376,10 @@ def main(argv=None) -> int:
     ap.add_argument("--profile", choices=sorted(PROFILES), default="cpu")
     ap.add_argument("--scale", type=float, default=1.0, help="multiply training/fitting steps and rays per step")
     ap.add_argument("--device", default="cpu")
-    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--threads", type=int, default=1,
+                    help="torch threads (on a loaded machine, more threads than free cores is much slower)")
+    ap.add_argument("--scenes", default=None, help="fit: only these test scenes (indices, e.g. 0,1), so that "
+                    "several processes can share the fits")
     ap.add_argument("--figure", type=Path, default=None, help="write the Fig. 5-like figure here (report)")
     a = ap.parse_args(argv)
     import torch
@@ -373,7 +394,8 @@ def main(argv=None) -> int:
     if a.stage in ("all", "train"):
         train(a.work, p, a.scale, a.device, times)
     if a.stage in ("all", "fit"):
-        fit(a.work, p, a.scale, a.device, times)
+        only = None if a.scenes is None else [int(x) for x in a.scenes.split(",")]
+        fit(a.work, p, a.scale, a.device, times, only=only)
     if a.stage == "bf16":
         bf16_check(a.work, p, a.scale, a.device, times)
     if a.stage in ("all", "report"):
