@@ -4,6 +4,10 @@
                               [--steps N] [--resume] [--device cpu|cuda]
     synth prior render RUN --identity I --expression E [--orbit N] [--size S] -o DIR
     synth prior info RUN
+    synth prior fit IMAGES... --prior RUN --out FIT [--landmarks auto|json|mediapipe] [--steps N]
+                    [--preset small|paper] [--config F] [--set key=value] [--no-pretraining] [--model PATH]
+    synth prior render FIT [--orbit N] [--size S] [--cameras cameras.json] -o DIR
+    synth prior eval FIT --gt DATASET [--views 3,4,5] [--json] [--save DIR]
 
 Bad input gets one line ``synth: error: ...`` and exit code 2, with nothing written; Ctrl-C
 during training writes a checkpoint and exits with 130 (``--resume`` continues exactly).
@@ -66,22 +70,102 @@ def train_cmd(
 
 @app.command("render")
 def render_cmd(
-    run: Path = typer.Argument(..., help="Run directory of synth prior train."),
-    identity: int = typer.Option(..., "--identity", "-i", help="Dataset identity index (a trained identity)."),
-    expression: int = typer.Option(..., "--expression", "-e", help="Expression index of that identity."),
+    run: Path = typer.Argument(..., help="Run directory of synth prior train, or fit directory of synth prior fit."),
+    identity: Optional[int] = typer.Option(None, "--identity", "-i", help="Run: dataset identity index (a trained "
+                                                                           "identity)."),
+    expression: Optional[int] = typer.Option(None, "--expression", "-e", help="Run: expression index of that "
+                                                                               "identity."),
     orbit: int = typer.Option(8, "--orbit", help="Views on a circle about the vertical axis."),
-    size: Optional[int] = typer.Option(None, "--size", help="Image size in pixels (square; default: the dataset's)."),
+    size: Optional[int] = typer.Option(None, "--size", help="Image size in pixels (square; default: the dataset's "
+                                                            "or the fit's inputs')."),
+    cameras: Optional[Path] = typer.Option(None, "--cameras", help="Fit: render the views of this cameras.json "
+                                                                   "(as render writes it) instead of an orbit."),
     out: Path = typer.Option(..., "-o", "--out", help="Output directory."),
     device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
 ) -> None:
-    """Novel views of a training identity: colour, opacity and normals PNGs, depth EXR."""
+    """Novel views of a training identity or of a fitted face: colour, opacity and normals PNGs, depth EXR."""
     _need_torch()
-    from prior.render_views import render_run
+    from prior.fit.fitdir import FIT_FILE
     from prior.train.setup import resolve_device
 
-    files = render_run(run, identity, expression, out, orbit_views=orbit, size=size,
-                       device=str(resolve_device(device)))
+    dev = str(resolve_device(device))
+    if (run / FIT_FILE).is_file():
+        if identity is not None or expression is not None:
+            raise SynthError("--identity and --expression select a training identity of a prior run, not of a fit",
+                             str(run), "drop them (a fit renders its own face)")
+        from prior.fit.novel import render_fit
+
+        files = render_fit(run, out, orbit_views=orbit, size=size, cameras=cameras, device=dev)
+    else:
+        if identity is None or expression is None:
+            raise SynthError("rendering a prior run needs --identity and --expression", str(run),
+                             "pass both (synth prior info RUN lists them), or pass a fit directory")
+        if cameras is not None:
+            raise SynthError("--cameras renders a fit, not a prior run", str(run), "pass a fit directory")
+        from prior.render_views import render_run
+
+        files = render_run(run, identity, expression, out, orbit_views=orbit, size=size, device=dev)
     print(f"wrote {len(files)} files to {out}")
+
+
+@app.command("fit")
+def fit_cmd(
+    images: list[Path] = typer.Argument(..., help="1-3 images of one face: photos (PNG/JPEG) or synth frame EXRs "
+                                                  "with their JSON beside them; one size."),
+    prior: Path = typer.Option(..., "--prior", help="Run directory of synth prior train (its newest checkpoint)."),
+    out: Path = typer.Option(..., "--out", "-o", help="Fit directory (new)."),
+    landmarks: str = typer.Option("auto", "--landmarks", help="json (synth frames), mediapipe (photos; the fit "
+                                                              "extra) or auto."),
+    steps: Optional[int] = typer.Option(None, "--steps", help="Fine-tuning steps (finetune.steps)."),
+    preset: Optional[str] = typer.Option(None, "--preset", "-p", help="small (CPU, default) or paper."),
+    config: Optional[Path] = typer.Option(None, "--config", "-c", help="TOML file with [landmarks] [inversion] "
+                                                                         "[finetune] [fit] sections."),
+    set_: list[str] = typer.Option([], "--set", help="Override one key: section.key=value (repeatable)."),
+    no_pretraining: bool = typer.Option(False, "--no-pretraining", help="Start from a randomly initialised field "
+                                                                        "of the prior's configuration (baseline)."),
+    model: Optional[Path] = typer.Option(None, "--model", "-m", help="Head model .npz the prior's dataset was "
+                                                                     "rendered with (default: embedded)."),
+    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+) -> None:
+    """Reconstruct a face from a few images: landmarks -> head model and cameras -> inversion -> fine-tuning."""
+    _need_torch()
+    from prior.fit.pipeline import fit_face
+    from prior.train.setup import resolve_device
+
+    fit_face(images, prior, out, landmarks=landmarks, preset=preset, config_path=config, sets=set_, steps=steps,
+             pretrained=not no_pretraining, model_path=model, device=str(resolve_device(device)))
+
+
+def _view_list(text: Optional[str]) -> Optional[list[int]]:
+    if text is None:
+        return None
+    try:
+        views = [int(x) for x in text.replace(" ", "").split(",") if x]
+    except ValueError:
+        raise SynthError(f"bad view list {text!r}", "--views", "write view indices separated by commas: 3,4,5") \
+            from None
+    if not views:
+        raise SynthError("empty view list", "--views", "write view indices separated by commas: 3,4,5")
+    return views
+
+
+@app.command("eval")
+def eval_cmd(
+    fit: Path = typer.Argument(..., help="Fit directory of synth prior fit (inputs: synth frames)."),
+    gt: Path = typer.Option(..., "--gt", help="The synth dataset the inputs came from (ground truth)."),
+    views: Optional[str] = typer.Option(None, "--views", help="View indices to evaluate, e.g. 3,4,5 (default: "
+                                                              "every other view in the frontal hemisphere)."),
+    as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a Markdown table."),
+    save: Optional[Path] = typer.Option(None, "--save", help="Also write the rendered and ground-truth views here."),
+    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+) -> None:
+    """PSNR, SSIM and LPIPS of held-out views of a fitted synth identity, on the foreground."""
+    _need_torch()
+    from prior.evaluate import evaluate_fit, markdown
+    from prior.train.setup import resolve_device
+
+    res = evaluate_fit(fit, gt, views=_view_list(views), device=str(resolve_device(device)), save=save)
+    print(json.dumps(res) if as_json else markdown(res))
 
 
 @app.command("info")

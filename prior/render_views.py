@@ -50,30 +50,42 @@ def orbit(c2w: np.ndarray, centre: np.ndarray, n: int) -> list[np.ndarray]:
 
 
 @torch.no_grad()
-def render_image(model, K, c2w, width: int, height: int, code: np.ndarray, latent_id: int, centre, radius: float,
-                 *, chunk: int = 4096, device="cpu", bf16: bool = False) -> dict[str, np.ndarray]:
+def render_image(model, K, c2w, width: int, height: int, code: np.ndarray, latent_id: int | None, centre,
+                 radius: float, *, chunk: int = 4096, device="cpu", bf16: bool = False,
+                 latent=None) -> dict[str, np.ndarray]:
     """Render one view: ``rgb`` (H, W, 3) over black, ``acc`` (H, W), ``depth`` (H, W) planar
-    camera z (0 where ``acc < SURFACE_ACC``), ``normals`` (H, W, 3) unit world normals (0 there)."""
+    camera z (0 where ``acc < SURFACE_ACC``), ``normals`` (H, W, 3) unit world normals (0 there).
+    The latent is the codebook row ``latent_id``, or the vector ``latent`` (a fitted face)."""
     r = camera_rays(K, c2w, width, height)
     o, d, cos_z = (x.reshape(-1, *x.shape[2:]) for x in r)
     near, far = intersect_sphere(o, d, np.asarray(centre), float(radius))
+    # rays that miss the bounding sphere see nothing (zero colour, opacity, depth, normals): only
+    # the others go through the field
+    hit = np.flatnonzero(far > near)
+    o, d, near, far = o[hit], d[hit], near[hit], far[hit]
     n = o.shape[0]
     dev = torch.device(device)
     rad = torch.full((n,), float(pixel_radius(np.asarray(K))), device=dev)
     codes = torch.as_tensor(np.asarray(code, np.float32), device=dev)
-    ids = torch.full((n,), int(latent_id), dtype=torch.long, device=dev)
+    ids = None if latent is not None else torch.full((n,), int(latent_id), dtype=torch.long, device=dev)
+    lat = None if latent is None else torch.as_tensor(latent, dtype=torch.float32, device=dev).reshape(1, -1)
     T = [torch.as_tensor(np.ascontiguousarray(a, np.float32), device=dev) for a in (o, d, near, far)]
     parts: dict[str, list] = {"rgb": [], "acc": [], "depth": [], "normals": []}
     for a in range(0, n, chunk):
         b = min(n, a + chunk)
         with torch.autocast(dev.type, dtype=torch.bfloat16, enabled=bf16):
-            out = model(T[0][a:b], T[1][a:b], T[2][a:b], T[3][a:b], codes.expand(b - a, -1), ids[a:b],
+            out = model(T[0][a:b], T[1][a:b], T[2][a:b], T[3][a:b], codes.expand(b - a, -1),
+                        None if ids is None else ids[a:b], None if lat is None else lat.expand(b - a, -1),
                         radii=rad[a:b], randomized=False)
         parts["rgb"].append(out["rgb"].float().clamp(0, 1))
         parts["acc"].append(out["acc"].float())
         parts["depth"].append(out["depth"].float())
         parts["normals"].append(out["normals_pred"].float())
-    res = {k: torch.cat(v).cpu().numpy() for k, v in parts.items()}
+    res = {k: np.zeros((width * height, 3) if k in ("rgb", "normals") else width * height, np.float32)
+           for k in parts}
+    for k, v in parts.items():
+        if v:
+            res[k][hit] = torch.cat(v).cpu().numpy()
     surf = res["acc"] >= SURFACE_ACC
     depth = np.where(surf, res["depth"] * cos_z, 0.0)
     nrm = res["normals"]

@@ -79,6 +79,7 @@ class FrameStore:
     train: np.ndarray  # (N,) bool: False for held-out views
     fg_offsets: np.ndarray  # (N + 1,) int64 into fg_pixels
     fg_pixels: np.ndarray  # flat (row * W + col) indices of foreground pixels, int32
+    head_model: dict | None = None  # the head model the frames were rendered with: name, sha256 (frame JSON)
 
     @property
     def size(self) -> tuple[int, int]:
@@ -106,7 +107,7 @@ def load_store(dataset, *, joints: tuple[str, ...], holdout_views: int = 0, marg
         raise SynthError("dataset has no committed frames", str(dataset),
                          "render it first (synth render ... --out DIR) or pass the --out directory of a render")
     dt = np.dtype(pixel_dtype)
-    layout = None
+    layout = head_model = None
     rgba = K = c2w = None
     ids, exprs, views, codes, fg, keys = [], [], [], [], [], []
     points: dict[int, list[np.ndarray]] = {}
@@ -115,6 +116,7 @@ def load_store(dataset, *, joints: tuple[str, ...], holdout_views: int = 0, marg
         f = ref.read()
         if layout is None:
             layout = CodeLayout.of_frame(f, joints)
+            head_model = {k: f.meta.get("model", {}).get(k) for k in ("name", "sha256")}
             H, W = f.height, f.width
             rgba = np.empty((len(refs), H, W, 4), dt)
             K, c2w = np.empty((len(refs), 3, 3)), np.empty((len(refs), 4, 4))
@@ -168,4 +170,4 @@ def load_store(dataset, *, joints: tuple[str, ...], holdout_views: int = 0, marg
     offsets = np.concatenate([[0], np.cumsum([len(x) for x in fg])]).astype(np.int64)
     return FrameStore(layout=layout, identities=info, keys=keys, rgba=rgba, K=K, c2w=c2w, latent=latent,
                       expression=exprs_a, view=views_a, codes=codes_a, train=train, fg_offsets=offsets,
-                      fg_pixels=np.concatenate(fg) if fg else np.zeros(0, np.int32))
+                      fg_pixels=np.concatenate(fg) if fg else np.zeros(0, np.int32), head_model=head_model)

@@ -44,6 +44,8 @@ class Checkpoint:
     model_state: dict[str, torch.Tensor]
     losses: dict
     dataset: str
+    #: the head model of the training frames (name, sha256), {} for checkpoints that predate it
+    head_model: dict
 
     @property
     def optimizer_path(self) -> Path:
@@ -67,7 +69,8 @@ def latest(run_dir) -> Path | None:
 
 
 def save(run_dir, step: int, model: torch.nn.Module, optimizer: torch.optim.Optimizer, cfg, layout: CodeLayout,
-         identities: IdentityInfo, *, losses: dict, trainer_state: dict, dataset: str, keep: int) -> Path:
+         identities: IdentityInfo, *, losses: dict, trainer_state: dict, dataset: str, keep: int,
+         head_model: dict | None = None) -> Path:
     """Write the checkpoint of ``step`` (completed steps) and prune all but the ``keep`` newest."""
     from safetensors.torch import save as st_save
 
@@ -81,7 +84,7 @@ def save(run_dir, step: int, model: torch.nn.Module, optimizer: torch.optim.Opti
     tensors.update({f"identities.{k}": torch.from_numpy(np.ascontiguousarray(v)) for k, v in identities.arrays().items()})
     meta = {"format": FORMAT, "step": str(int(step)), "config": json.dumps(cfg.to_dict()),
             "layout": json.dumps(layout.to_dict()), "losses": json.dumps(losses), "dataset": str(dataset),
-            "optimizer_sha256": sha256_bytes(opt_bytes)}
+            "optimizer_sha256": sha256_bytes(opt_bytes), "head_model": json.dumps(head_model or {})}
     opt_path = path.with_name(path.name.replace(".safetensors", ".optim.pt"))
     atomic_write_bytes(opt_path, opt_bytes)
     atomic_write_bytes(path, st_save(tensors, metadata=meta))
@@ -123,7 +126,7 @@ def load(path) -> Checkpoint:
         _refuse(path, f"checkpoint lacks or garbles {e}")
     model_state = {k[len("model."):]: v for k, v in tensors.items() if k.startswith("model.")}
     return Checkpoint(path, step, cfg, layout, ident, model_state, json.loads(meta.get("losses", "{}")),
-                      meta.get("dataset", ""))
+                      meta.get("dataset", ""), json.loads(meta.get("head_model", "{}")))
 
 
 def _metadata(data: bytes) -> dict:

@@ -233,7 +233,7 @@ class Trainer:
         t = self.cfg.train
         ckpt.save(self.s.run_dir, done, self.model, self.opt, self.cfg, self.s.store.layout, self.s.store.identities,
                   losses=self.losses, trainer_state={"collapse_count": self.collapse_count},
-                  dataset=str(self.s.dataset), keep=t.keep_checkpoints)
+                  dataset=str(self.s.dataset), keep=t.keep_checkpoints, head_model=self.s.store.head_model)
         self.last_saved = done
 
     def _preview(self, done: int) -> None:

@@ -21,3 +21,41 @@ def test_gpu_script_dry_run_on_cpu(tmp_path):
     assert res["preset"] == "small" and res["flops_per_step"] > 0 and res["eager_rays_per_s"] > 0
     assert res["max_abs_rgb"] == 0.0  # CPU against itself
     assert "| eager bf16 |" in r.stdout
+    fit = json.loads((tmp_path / "prior_gpu_fit.json").read_text())  # the fitting part, same script
+    assert fit["preset"] == "small" and fit["finetune_fp32_s_per_step"] > 0 and fit["finetune_bf16_s_per_step"] > 0
+    full = fit["render"][0]
+    assert full["samples"] == [32, 32, 32] and not full["bf16"] and full["max_abs_rgb"] == 0.0  # itself
+    assert all(r["psnr_vs_full"] > 20 for r in fit["render"])
+    assert "| samples per level |" in r.stdout
+
+
+def test_claim_test_plan_has_fixed_cameras(tmp_path):
+    """benchmarks/prior_claim.py's test plan: every expression's views at TEST_VIEWS around its
+    target at TEST_RADIUS_M, everything else the source plan's."""
+    import importlib.util
+
+    import numpy as np
+
+    from synth.conventions import orbit_camera_to_world
+    from synth.plan import io
+    from tests.prior.test_cli import synth
+
+    spec = importlib.util.spec_from_file_location("prior_claim", ROOT / "benchmarks" / "prior_claim.py")
+    pc = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(pc)
+    r = synth("plan", "-n", 2, "--start", 3, "--seed", 1, "--out", tmp_path / "p0",
+              "--set", f"dataset.views_per_expression={len(pc.TEST_VIEWS)}", "--set", "camera.min_separation_deg=0",
+              "--set", "dataset.expressions_per_identity=1")
+    assert r.returncode == 0, r.stderr
+    pc.fixed_camera_plan(tmp_path / "p0", tmp_path / "p1")
+    a, b = io.load_plan(tmp_path / "p0"), io.load_plan(tmp_path / "p1")
+    assert a.shard_ids() == b.shard_ids()
+    for sid in a.shard_ids():
+        for ia, ib in zip(a.shard(sid)["identities"], b.shard(sid)["identities"]):
+            assert ia["identity_index"] == ib["identity_index"] and ia["target"] == ib["target"]
+            for fr, (az, el) in zip(ib["expressions"][0]["frames"], pc.TEST_VIEWS):
+                want = orbit_camera_to_world(az, el, pc.TEST_RADIUS_M, np.asarray(ib["target"]))
+                np.testing.assert_allclose(fr["camera"]["camera_to_world"], want, atol=1e-6)
+                assert fr["camera"]["azimuth_deg"] == az
+    assert pc.scaled_sets(["finetune.steps=10", "finetune.lr_init=0.5"], 2.0) == ["finetune.steps=20",
+                                                                                   "finetune.lr_init=0.5"]

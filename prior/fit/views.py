@@ -1,0 +1,96 @@
+"""The input views of a fit as rays: masked target colours, fitted cameras, per-image codes, and
+the ray bounds (the prior's scene sphere).
+
+Rays go through pixel centres (:func:`synth.dataset.reader.camera_rays`) and carry mip-NeRF
+cone radii from their own image's ``K`` (:func:`prior.data.sampler.pixel_radius`), so images
+of any resolution are rendered with the right footprint; :meth:`ViewSet.resized` gives the
+same views at another resolution (inputs downscaled to the prior's for the inversion).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from prior.data.bounds import intersect_sphere
+from prior.data.sampler import pixel_radius
+from synth.dataset.reader import camera_rays
+
+
+@dataclass
+class RayBatch:
+    origins: torch.Tensor  # (N, 3)
+    directions: torch.Tensor  # (N, 3) unit
+    near: torch.Tensor  # (N,)
+    far: torch.Tensor  # (N,)
+    radii: torch.Tensor  # (N,)
+    codes: torch.Tensor  # (N, C)
+    target: torch.Tensor  # (N, 3) masked linear colour
+
+    @property
+    def valid(self) -> torch.Tensor:
+        """1 for rays that cross the bounding sphere."""
+        return (self.far > self.near).float()
+
+
+@dataclass
+class ViewSet:
+    target: np.ndarray  # (V, H, W, 3) float32: linear colour times the foreground mask
+    K: np.ndarray  # (V, 3, 3) fitted intrinsics of this resolution
+    c2w: np.ndarray  # (V, 4, 4) fitted camera_to_world (OpenCV)
+    codes: np.ndarray  # (V, C) float32 conditioning codes (beta || psi) per image
+    centre: np.ndarray  # (3,) ray bounds: sphere centre
+    radius: float
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(height, width)."""
+        return int(self.target.shape[1]), int(self.target.shape[2])
+
+    def __len__(self) -> int:
+        return int(self.target.shape[0])
+
+    def rays(self, views: np.ndarray, pixels: np.ndarray, device="cpu") -> RayBatch:
+        """Rays of flat pixel indices ``pixels`` (N,) of views ``views`` (N,)."""
+        H, W = self.size
+        views, pixels = np.asarray(views, np.int64), np.asarray(pixels, np.int64)
+        n = views.size
+        o, d = np.empty((n, 3), np.float32), np.empty((n, 3), np.float32)
+        for v in np.unique(views).tolist():
+            sel = views == v
+            rows, cols = np.divmod(pixels[sel], W)
+            r = camera_rays(self.K[v], self.c2w[v], W, H, pixels=(rows, cols))
+            o[sel], d[sel] = r.origins, r.directions
+        near, far = intersect_sphere(o, d, self.centre, self.radius)
+        rgb = self.target.reshape(len(self), H * W, 3)[views, pixels]
+        T = lambda a: torch.as_tensor(np.ascontiguousarray(a, np.float32), device=device)  # noqa: E731
+        return RayBatch(T(o), T(d), T(near), T(far), T(pixel_radius(self.K[views])), T(self.codes[views]), T(rgb))
+
+    def resized(self, width: int, height: int) -> "ViewSet":
+        """The same views at ``width`` x ``height`` (area-averaged when shrinking, bilinear when
+        growing); ``K`` scaled per axis so every pixel still sees the same part of the scene."""
+        H, W = self.size
+        if (width, height) == (W, H):
+            return self
+        x = torch.from_numpy(np.ascontiguousarray(self.target)).permute(0, 3, 1, 2)
+        shrink = width <= W and height <= H
+        y = F.interpolate(x, size=(height, width), mode="bilinear", antialias=shrink, align_corners=False)
+        S = np.diag([width / W, height / H, 1.0])
+        return ViewSet(y.permute(0, 2, 3, 1).numpy().astype(np.float32), S @ self.K, self.c2w, self.codes,
+                       self.centre, self.radius)
+
+    def patch_pixels(self, view: int, top: int, left: int, size: int) -> np.ndarray:
+        """Flat pixel indices (size * size,) of a square patch, row-major."""
+        H, W = self.size
+        r, c = np.mgrid[top:top + size, left:left + size]
+        return (r * W + c).reshape(-1)
+
+
+def prior_resolution(width: int, height: int, prior_size: tuple[int, int], factor: float = 1.0) -> tuple[int, int]:
+    """Input size scaled so that its longer side is ``factor`` times the prior's longer side
+    (never enlarged)."""
+    s = min(1.0, factor * max(prior_size) / max(width, height))
+    return max(1, round(width * s)), max(1, round(height * s))

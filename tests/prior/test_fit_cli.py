@@ -1,0 +1,201 @@
+"""synth prior fit / render FIT / eval as a user runs them (subprocesses): the whole chain on a tiny
+toy-model dataset, and bad input (one line, exit 2, nothing written)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.prior import face_scene as fs
+from tests.prior.scene import TINY
+from tests.prior.test_cli import one_line_error, synth
+
+pytest.importorskip("OpenEXR")
+SETS = [a for s in TINY for a in ("--set", s)]
+FIT_SETS = ["--set", "inversion.steps=3", "--set", "inversion.patches=1", "--set", "finetune.rays_per_step=128",
+            "--set", "finetune.warmup_steps=1", "--steps", "4"]
+
+
+@pytest.fixture(scope="module")
+def world(tmp_path_factory):
+    root = tmp_path_factory.mktemp("fit")
+    model = fs.write_model(root / "toy.npz")
+    train = fs.make_dataset(root / "train", model, identities=(0, 1, 2), expressions=2, views=6, size=16)
+    r = synth("prior", "train", train, "--out", root / "run", "--steps", 6, *SETS)
+    assert r.returncode == 0, r.stderr
+    test = fs.make_dataset(root / "test", model, identities=(7,), expressions=1, views=6, size=32,
+                           angles=fs.INPUT_ANGLES)
+    inputs = [next((test / "shards").glob(f"*/id000007_ex00_v{v:02d}.exr")) for v in range(3)]
+    return root, model, root / "run", test, inputs
+
+
+@pytest.fixture(scope="module")
+def fitted(world):
+    root, model, run, test, inputs = world
+    r = synth("prior", "fit", *inputs, "--prior", run, "--out", root / "fit", "--model", model, *FIT_SETS)
+    assert r.returncode == 0, r.stderr
+    return root / "fit"
+
+
+def test_fit_writes_codes_cameras_weights_and_report(world, fitted):
+    info = json.loads((fitted / "fit.json").read_text())
+    assert info["pretrained"] is True and info["landmark_source"] == "json"
+    assert [r["view_index"] for r in info["inputs"]] == [0, 1, 2]
+    C = fs.IDENTITY_DIMS + len(fs.MODEL.expression_names) + 9
+    assert np.asarray(info["codes"]).shape == (3, C) and len(info["cameras"]) == 3
+    assert info["head_model"]["name"] == fs.MODEL.name and info["prior"]["head_model"]["name"] == fs.MODEL.name
+    # per-image expressions, one shared identity code
+    codes = np.asarray(info["codes"])
+    assert np.allclose(codes[:, :fs.IDENTITY_DIMS], codes[0, :fs.IDENTITY_DIMS])
+    # the JSON's cameras are not inputs: the fitted ones differ from them (fitted focal length, own frame)
+    true_K = json.loads(world[4][0].with_suffix(".json").read_text())["camera"]["K"]
+    assert info["cameras"][0]["K"] != true_K
+    rep = json.loads((fitted / "report.json").read_text())
+    assert len(rep["inversion"]) == 3 and rep["finetune"][-1]["step"] == 4 and max(rep["landmarks"]["rmse_px"]) < 1
+    assert "Fit of 3 image(s)" in (fitted / "report.md").read_text()
+    from safetensors.torch import load_file
+
+    t = load_file(str(fitted / "weights.safetensors"))
+    assert t["latent"].shape == (4,) and any(k.startswith("model.nerf.") for k in t)
+
+
+def test_render_orbit_and_cameras(world, fitted, tmp_path):
+    from PIL import Image
+
+    r = synth("prior", "render", fitted, "--orbit", 2, "--size", 12, "-o", tmp_path / "orbit")
+    assert r.returncode == 0, r.stderr
+    cams = json.loads((tmp_path / "orbit" / "cameras.json").read_text())
+    assert [v["key"] for v in cams["views"]] == ["orbit000", "orbit001"]
+    assert sum(cams["views"][0]["expression_weights"]) == pytest.approx(1.0)
+    for kind in ("colour", "opacity", "normals"):
+        assert Image.open(tmp_path / "orbit" / f"orbit001_{kind}.png").size == (12, 12)
+    assert (tmp_path / "orbit" / "orbit001_depth.exr").is_file()
+    r = synth("prior", "render", fitted, "--cameras", tmp_path / "orbit" / "cameras.json", "-o", tmp_path / "again")
+    assert r.returncode == 0, r.stderr
+    for k in ("orbit000", "orbit001"):
+        a = np.asarray(Image.open(tmp_path / "orbit" / f"{k}_colour.png"))
+        assert np.array_equal(a, np.asarray(Image.open(tmp_path / "again" / f"{k}_colour.png")))
+
+
+def test_eval_frontal_held_out_views(world, fitted, tmp_path):
+    test = world[3]
+    r = synth("prior", "eval", fitted, "--gt", test, "--json", "--save", tmp_path / "ev")
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout)
+    # inputs 0-2 are not held out; view 5 (azimuth 150) is behind the head
+    assert [v["view"] for v in res["views"]] == [3, 4]
+    for v in res["views"]:
+        assert np.isfinite([v["psnr"], v["ssim"], v["lpips"]]).all() and 0 < v["lpips"] < 1 and -1 <= v["ssim"] <= 1
+    assert res["mean"]["psnr"] == pytest.approx(np.mean([v["psnr"] for v in res["views"]]))
+    assert 0.5 < res["alignment"]["scale"] < 2
+    assert (tmp_path / "ev" / "id000007_ex00_v03_gt.png").is_file()
+    r = synth("prior", "eval", fitted, "--gt", test, "--views", "0,5")
+    assert r.returncode == 0, r.stderr
+    assert "id000007_ex00_v00 (input)" in r.stdout and "id000007_ex00_v05" in r.stdout and "**mean of 2**" in r.stdout
+
+
+def test_no_pretraining_fits_a_random_field(world, fitted, tmp_path):
+    root, model, run, test, inputs = world
+    r = synth("prior", "fit", *inputs, "--prior", run, "--out", tmp_path / "fit0", "--model", model,
+              "--no-pretraining", *FIT_SETS)
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "fit0" / "fit.json").read_text())["pretrained"] is False
+    assert "randomly initialised" in (tmp_path / "fit0" / "report.md").read_text()
+    from safetensors.torch import load_file
+
+    a, b = load_file(str(fitted / "weights.safetensors")), load_file(str(tmp_path / "fit0" / "weights.safetensors"))
+    assert not np.allclose(a["model.nerf.density.weight"].numpy(), b["model.nerf.density.weight"].numpy())
+
+
+def _edited_frame(src: Path, dst_dir: Path, edit) -> Path:
+    dst_dir.mkdir(parents=True, exist_ok=True)
+    shutil.copy(src, dst_dir / src.name)
+    meta = json.loads(src.with_suffix(".json").read_text())
+    edit(meta)
+    (dst_dir / src.with_suffix(".json").name).write_text(json.dumps(meta))
+    return dst_dir / src.name
+
+
+CASES = ["no_face", "few_landmarks", "unreadable", "sizes", "other_dims", "other_model", "exists", "no_json",
+         "suffix", "json_photo", "no_mediapipe", "bad_set", "no_prior"]
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_bad_input_is_one_line_and_writes_nothing(world, fitted, tmp_path, case):
+    root, model, run, test, inputs = world
+    out = tmp_path / "fit"
+    images, extra = list(inputs), ["--model", model]
+
+    def hide(keep):
+        def edit(meta):
+            meta["landmarks_visible"] = [i < keep for i in range(68)]
+        return edit
+
+    if case == "no_face":
+        images[1] = _edited_frame(inputs[1], tmp_path / "nf", hide(0))
+    elif case == "few_landmarks":
+        images[2] = _edited_frame(inputs[2], tmp_path / "fl", hide(3))
+    elif case == "unreadable":
+        images[0] = tmp_path / "broken.png"
+        images[0].write_bytes(b"\x89PNG\r\n\x1a\n not really")
+    elif case == "sizes":
+        images[0] = next((root / "train" / "shards").glob("*/id000001_ex00_v00.exr"))
+    elif case == "other_dims":
+        extra = []  # the embedded default model: 48 identity dims, the prior's toy has 6
+    elif case == "other_model":
+        from tests.support.toy_model import write_toy_model
+
+        extra = ["--model", write_toy_model(tmp_path / "other.npz", name="other-toy", identity_dims=fs.IDENTITY_DIMS)]
+    elif case == "exists":
+        out = fitted
+    elif case == "no_json":
+        (tmp_path / "nj").mkdir()
+        images[0] = Path(shutil.copy(inputs[0], tmp_path / "nj" / inputs[0].name))
+    elif case == "suffix":
+        images[0] = tmp_path / "face.bmp"
+        images[0].write_bytes(b"BM")
+    elif case in ("json_photo", "no_mediapipe"):
+        from PIL import Image
+
+        photo = tmp_path / "face.png"
+        Image.new("RGB", (32, 32), (200, 150, 120)).save(photo)
+        images[0] = photo
+        if case == "json_photo":
+            extra += ["--landmarks", "json"]
+    elif case == "bad_set":
+        extra += ["--set", "finetune.stepz=3"]
+    else:
+        run = tmp_path / "nothing"
+    before = sorted(p.name for p in tmp_path.iterdir())
+    msg = one_line_error(synth("prior", "fit", *images, "--prior", run, "--out", out, *extra, *FIT_SETS))
+    expect = {"no_face": "no face in the image", "few_landmarks": "only 3 landmarks are visible",
+              "unreadable": "unreadable image", "sizes": "images differ in size", "other_dims": "identity 6",
+              "other_model": "not 'other-toy'", "exists": "fit output exists", "no_json": "has no JSON beside it",
+              "suffix": "unsupported image type", "json_photo": "needs synth frames",
+              "no_mediapipe": "mediapipe", "bad_set": "finetune.steps", "no_prior": "no prior checkpoint"}[case]
+    assert expect in msg
+    if case != "exists":
+        assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == before
+    if case in ("no_face", "few_landmarks", "unreadable", "no_json"):
+        named = images[{"no_face": 1, "few_landmarks": 2}.get(case, 0)]
+        assert str(named.with_suffix("")) in msg  # the line names the file (or its missing JSON)
+
+
+def test_render_and_eval_errors(world, fitted, tmp_path):
+    root, model, run, test, inputs = world
+    assert "not a fit directory" in one_line_error(synth("prior", "eval", tmp_path, "--gt", test))
+    assert "select a training identity" in one_line_error(
+        synth("prior", "render", fitted, "--identity", 0, "-o", tmp_path / "v"))
+    assert "needs --identity and --expression" in one_line_error(synth("prior", "render", run, "-o", tmp_path / "v"))
+    bad = tmp_path / "cams.json"
+    bad.write_text('{"views": [{"K": [1, 2]}]}')
+    assert "cameras file is malformed" in one_line_error(
+        synth("prior", "render", fitted, "--cameras", bad, "-o", tmp_path / "v"))
+    assert "no frame of identity 7" in one_line_error(synth("prior", "eval", fitted, "--gt", root / "train"))
+    assert "bad view list" in one_line_error(synth("prior", "eval", fitted, "--gt", test, "--views", "a,b"))
+    assert "not in the ground truth" in one_line_error(synth("prior", "eval", fitted, "--gt", test, "--views", "9"))
+    assert not (tmp_path / "v").exists()
