@@ -23,6 +23,7 @@ from typing import Optional
 
 import typer
 
+from synth.cli.params import Device, Overrides, PriorPreset
 from synth.errors import SynthError
 
 app = typer.Typer(name="prior", help="Train the conditional NeRF face prior and render from it.",
@@ -42,13 +43,13 @@ def _need_torch() -> None:
 def train_cmd(
     dataset: Path = typer.Argument(..., help="Dataset directory (the --out of synth render)."),
     out: Path = typer.Option(..., "--out", "-o", help="Run directory (created; with --resume: continued)."),
-    preset: Optional[str] = typer.Option(None, "--preset", "-p", help="small (CPU, default) or paper."),
-    config: Optional[Path] = typer.Option(None, "--config", "-c", help="TOML file with [model] [sampling] [data] "
-                                                                         "[train] sections."),
-    set_: list[str] = typer.Option([], "--set", help="Override one key: section.key=value (repeatable)."),
+    preset: PriorPreset = None,
+    config: Optional[Path] = typer.Option(None, "--config", "-c", help="TOML file with model, sampling, data "
+                                                                         "and train sections."),
+    set_: Overrides = [],
     steps: Optional[int] = typer.Option(None, "--steps", help="Total training steps (train.steps)."),
     resume: bool = typer.Option(False, "--resume", help="Continue the run in --out from its newest checkpoint."),
-    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+    device: Device = "cpu",
 ) -> None:
     """Train the prior on a rendered dataset."""
     _need_torch()
@@ -81,7 +82,7 @@ def render_cmd(
     cameras: Optional[Path] = typer.Option(None, "--cameras", help="Fit: render the views of this cameras.json "
                                                                    "(as render writes it) instead of an orbit."),
     out: Path = typer.Option(..., "-o", "--out", help="Output directory."),
-    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+    device: Device = "cpu",
 ) -> None:
     """Novel views of a training identity or of a fitted face: colour, opacity and normals PNGs, depth EXR."""
     _need_torch()
@@ -117,15 +118,15 @@ def fit_cmd(
     landmarks: str = typer.Option("auto", "--landmarks", help="json (synth frames), mediapipe (photos; the fit "
                                                               "extra) or auto."),
     steps: Optional[int] = typer.Option(None, "--steps", help="Fine-tuning steps (finetune.steps)."),
-    preset: Optional[str] = typer.Option(None, "--preset", "-p", help="small (CPU, default) or paper."),
-    config: Optional[Path] = typer.Option(None, "--config", "-c", help="TOML file with [landmarks] [inversion] "
-                                                                         "[finetune] [fit] sections."),
-    set_: list[str] = typer.Option([], "--set", help="Override one key: section.key=value (repeatable)."),
+    preset: PriorPreset = None,
+    config: Optional[Path] = typer.Option(None, "--config", "-c", help="TOML file with landmarks, inversion, "
+                                                                         "finetune and fit sections."),
+    set_: Overrides = [],
     no_pretraining: bool = typer.Option(False, "--no-pretraining", help="Start from a randomly initialised field "
                                                                         "of the prior's configuration (baseline)."),
     model: Optional[Path] = typer.Option(None, "--model", "-m", help="Head model .npz the prior's dataset was "
                                                                      "rendered with (default: embedded)."),
-    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+    device: Device = "cpu",
 ) -> None:
     """Reconstruct a face from a few images: landmarks -> head model and cameras -> inversion -> fine-tuning."""
     _need_torch()
@@ -157,7 +158,7 @@ def eval_cmd(
                                                               "every other view in the frontal hemisphere)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object instead of a Markdown table."),
     save: Optional[Path] = typer.Option(None, "--save", help="Also write the rendered and ground-truth views here."),
-    device: str = typer.Option("cpu", "--device", help="cpu or cuda."),
+    device: Device = "cpu",
 ) -> None:
     """PSNR, SSIM and LPIPS of held-out views of a fitted synth identity, on the foreground."""
     _need_torch()
