@@ -19,7 +19,9 @@ Crash safety (kill -9 at any instant):
 - a commit fsyncs every file, writes ``manifest.json`` (sha256 of every file) atomically,
   fsyncs, then renames the whole staging directory to ``shards/<id>`` in one ``rename(2)``:
   a shard is either committed complete or not at all;
-- the index is updated last, under a lock, and is repaired from the files on the next open;
+- the commit signs the manifest's sha256 into ``index.json`` under the dataset lock just before
+  that rename (:mod:`synth.dataset.index`), so the index is never behind the files and never
+  re-signs a manifest that changed after its commit;
 - a shard is claimed with a lease file (:mod:`synth.dataset.lease`) that a process on another
   host can see and, once its holder is gone, break: flock is not reliable on NFS or Lustre.
 """
@@ -32,15 +34,16 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import synth
-from synth.dataset.index import ManifestError, parse_manifest, read_index, update_index
+from synth.dataset.index import (REPAIR_HINT, IndexDamaged, ManifestError, parse_manifest, read_index,
+                                 read_manifest_bytes, shard_entries, update_index)
 from synth.dataset.frame_json import jsonable
-from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, LOCK_FILE, LOGS_DIR, MANIFEST_FILE,
-                                  SHARDS_DIR, STAGING_DIR, check_shard_id, flock, lease_path, shard_dir, staging_dir,
-                                  utc_now)
+from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, INDEX_FILE, LOCK_FILE, LOGS_DIR,
+                                  MANIFEST_FILE, MAX_DATASET_JSON_BYTES, SHARDS_DIR, STAGING_DIR, check_shard_id, flock, lease_path,
+                                  shard_dir, staging_dir, utc_now)
 from synth.dataset.lease import DEFAULT_TTL_S, Holder, read_holder
 from synth.dataset.staging import ShardBusy, ShardCommitted, StagingShard
 from synth.errors import SynthError
-from synth.io import atomic_write_json, is_temp_name, loads_json
+from synth.io import atomic_write_json, is_temp_name, read_json
 
 
 #: ``synth render`` keeps the plan directory it renders next to the shards (DIR/plan/).
@@ -69,16 +72,49 @@ def _normalise_expected(expected: Mapping[str, Sequence[str]]) -> dict[str, list
 
 def _read_dataset_json(root: Path) -> dict:
     p = root / DATASET_FILE
+    fix = "restore it or render into a new --out directory"
     try:
-        d = loads_json(p.read_bytes())
-    except (ValueError, UnicodeDecodeError) as e:
-        raise SynthError(f"dataset.json does not parse ({e})", str(p),
-                         "restore it or render into a new --out directory") from None
+        d = read_json(p, max_bytes=MAX_DATASET_JSON_BYTES, follow_symlinks=False)
+    except (ValueError, OSError) as e:
+        why = e.strerror if isinstance(e, OSError) else str(e)
+        raise SynthError(f"dataset.json cannot be read ({why})", str(p), fix) from None
     if not isinstance(d, dict) or d.get("format") != DATASET_FORMAT or not isinstance(d.get("plan_hash"), str) \
             or not isinstance(d.get("expected"), dict):
-        raise SynthError(f"dataset.json is not a {DATASET_FORMAT} file", str(p),
-                         "restore it or render into a new --out directory")
+        raise SynthError(f"dataset.json is not a {DATASET_FORMAT} file", str(p), fix)
+    try:
+        if _normalise_expected(d["expected"]) != d["expected"]:
+            raise SynthError("its expected shards are not sorted lists of frame keys")
+    except SynthError as e:
+        raise SynthError(f"dataset.json is damaged: {e.what}", str(p), fix) from None
     return d
+
+
+def check_out_dir(root: Path) -> dict | None:
+    """Refuse a directory that cannot hold a dataset, before anything is written: a path that
+    is not a directory, or a non-empty directory without ``dataset.json`` (only a plan, logs,
+    the lock and temporary names of other ``synth render`` runs may be there). Returns the
+    existing ``dataset.json`` (checked), or ``None``."""
+    root = Path(root)
+    if not os.path.lexists(root):
+        return None
+    if not root.is_dir():
+        raise SynthError("output path exists and is not a directory", str(root), "choose a directory for --out")
+    if os.path.lexists(root / DATASET_FILE):
+        return _read_dataset_json(root)
+    others = sorted(n for n in os.listdir(root) if n not in (LOCK_FILE, PLAN_DIR, LOGS_DIR) and not is_temp_name(n))
+    if others:
+        raise SynthError(f"directory is not empty and holds no dataset.json (found {others[0]!r})", str(root),
+                         "use an empty or new --out directory")
+    return None
+
+
+def _check_same_plan(root: Path, info: dict, plan_hash: str, exp: dict) -> None:
+    if info["plan_hash"] != plan_hash:
+        raise SynthError(f"{root} holds a dataset from a different plan (hash {info['plan_hash'][:16]}, "
+                         f"this plan {plan_hash[:16]})", str(root / DATASET_FILE), "use a new --out or the original plan")
+    if info["expected"] != exp:
+        raise SynthError("dataset.json's expected shards differ from this plan's although the hashes match",
+                         str(root / DATASET_FILE), "the plan hash must cover the shard layout; use a new --out")
 
 
 class Dataset:
@@ -100,34 +136,37 @@ class Dataset:
 
     # -- state (always read from the files) --------------------------------------------------
     def committed_shards(self) -> set[str]:
-        """Shards under ``shards/`` with a valid manifest. Reads the files, not the index.
+        """Planned shards that are committed: a directory under ``shards/`` that the index
+        lists (a commit signs the index before its rename, so the index is never behind).
 
-        A manifest whose size matches the index entry is trusted (it was parsed when indexed;
-        committed shards never change); any other is parsed. Directories without a valid
-        manifest are not committed (``synth validate`` reports them).
+        Read from the files each time; ``shards/`` is listed before the index is read, so a
+        commit in progress in another process is seen either whole or not at all. Raises a
+        :class:`SynthError` (run ``synth validate --repair-index``) when the index is damaged,
+        of another plan, or missing while shards exist, and when a planned shard's entry is not
+        a real directory or is not in the index: synth did not commit it, and nothing will
+        silently adopt it. Unplanned entries are left to ``synth validate``.
         """
-        base = self.root / SHARDS_DIR
+        entries = shard_entries(self.root)
+        where = str(self.root / INDEX_FILE)
         try:
-            names = sorted(os.listdir(base))
-        except FileNotFoundError:
+            idx = read_index(self.root)
+        except IndexDamaged as e:
+            raise SynthError(f"index.json is damaged ({e})", where, REPAIR_HINT) from None
+        if idx is None:
+            if any(k == "dir" and n in self.expected for n, k in entries.items()):
+                raise SynthError("index.json is missing but shards/ holds committed shards", where, REPAIR_HINT)
             return set()
-        idx = read_index(self.root)
-        known = idx["shards"] if idx and idx.get("plan_hash") == self.plan_hash else {}
+        if idx["plan_hash"] != self.plan_hash:
+            raise SynthError("index.json belongs to another plan", where, REPAIR_HINT)
         out = set()
-        for name in names:
-            mp = base / name / MANIFEST_FILE
-            try:
-                size = mp.stat().st_size
-            except OSError:
+        for name, kind in entries.items():
+            if name not in self.expected:
                 continue
-            ent = known.get(name)
-            if ent is not None and ent.get("manifest_bytes") == size:
-                out.add(name)
-                continue
-            try:
-                parse_manifest(mp.read_bytes(), name)
-            except (OSError, ManifestError):
-                continue
+            if name not in idx["shards"]:
+                raise SynthError(f"shards/{name} is not in index.json (synth did not commit it)", where, REPAIR_HINT)
+            if kind != "dir":
+                raise SynthError(f"shards/{name} is a {kind}, not a directory", str(self.shard_dir(name)),
+                                 "restore the shard, or delete it and rerun the render")
             out.add(name)
         return out
 
@@ -139,7 +178,7 @@ class Dataset:
     def read_manifest(self, shard_id: str) -> dict:
         p = self.shard_dir(shard_id) / MANIFEST_FILE
         try:
-            return parse_manifest(p.read_bytes(), shard_id)
+            return parse_manifest(read_manifest_bytes(p.parent), shard_id)
         except FileNotFoundError:
             raise SynthError(f"shard {shard_id} is not committed", str(p.parent), "render it first") from None
         except ManifestError as e:
@@ -210,31 +249,19 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
     if not isinstance(plan_hash, str) or not plan_hash:
         raise SynthError("plan hash is empty", str(root), "pass the plan's hash")
     exp = _normalise_expected(expected)
-    if root.exists() and not root.is_dir():
-        raise SynthError("output path exists and is not a directory", str(root), "choose a directory for --out")
+    found = check_out_dir(root)  # refuse before anything is created
+    if found is not None:
+        _check_same_plan(root, found, plan_hash, exp)
     try:
         root.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise SynthError(f"cannot create the dataset directory ({e.strerror})", str(root),
                          "choose a writable --out") from None
     with flock(root / LOCK_FILE):
-        if (root / DATASET_FILE).exists():
-            info = _read_dataset_json(root)
-            if info["plan_hash"] != plan_hash:
-                raise SynthError(f"{root} holds a dataset from a different plan (hash {info['plan_hash'][:16]}, "
-                                 f"this plan {plan_hash[:16]})", str(root / DATASET_FILE),
-                                 "use a new --out or the original plan")
-            if info["expected"] != exp:
-                raise SynthError("dataset.json's expected shards differ from this plan's although the hashes match",
-                                 str(root / DATASET_FILE), "the plan hash must cover the shard layout; use a new --out")
+        info = check_out_dir(root)  # again, under the lock: another process may have created it
+        if info is not None:
+            _check_same_plan(root, info, plan_hash, exp)
         else:
-            leftovers = [n for n in os.listdir(root) if is_temp_name(n)]  # a creation killed half-way
-            others = sorted(n for n in os.listdir(root)
-                            if n not in (LOCK_FILE, PLAN_DIR, LOGS_DIR) and n not in leftovers
-                            and not n.startswith(".plan-"))
-            if others:
-                raise SynthError(f"directory is not empty and holds no dataset.json (found {others[0]!r})",
-                                 str(root), "use an empty or new --out directory")
             info = {
                 "format": DATASET_FORMAT,
                 "plan_hash": plan_hash,
@@ -246,8 +273,6 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
                 "meta": jsonable(meta or {}),
                 "expected": exp,
             }
-            for n in leftovers:
-                os.unlink(root / n)
             try:
                 atomic_write_json(root / DATASET_FILE, info)
             except (TypeError, ValueError) as e:
@@ -262,8 +287,10 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
 def load_dataset(root) -> Dataset:
     """Open an existing dataset read-only (validate, preview, training readers)."""
     root = Path(root)
-    if not root.is_dir():
+    if not os.path.lexists(root):
         raise SynthError("dataset directory not found", str(root), "pass the --out directory of `synth render`")
+    if not root.is_dir():
+        raise SynthError("not a directory", str(root), "pass the dataset directory (the --out of `synth render`)")
     if not (root / DATASET_FILE).is_file():
         raise SynthError("not a synth dataset (no dataset.json)", str(root), "pass the --out directory of `synth render`")
     return Dataset(root, _read_dataset_json(root), writable=False)

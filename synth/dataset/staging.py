@@ -16,12 +16,13 @@ import numpy as np
 import synth
 from synth.dataset.exr import encode_frame_exr, read_frame_exr_header
 from synth.dataset.frame_json import check_frame_json, jsonable
-from synth.dataset.index import update_index
-from synth.dataset.layout import MANIFEST_FILE, SHARD_FORMAT, frame_files, lease_path, shard_dir, staging_dir, utc_now
+from synth.dataset.index import commit_shard, manifest_entry
+from synth.dataset.layout import (MANIFEST_FILE, MAX_FRAME_JSON_BYTES, SHARD_FORMAT, frame_files, lease_path, shard_dir,
+                                  staging_dir, utc_now)
 from synth.dataset.lease import DEFAULT_TTL_S, Lease, LeaseBusy
 from synth.errors import SynthError
 from synth.io import (atomic_write_bytes, atomic_write_json, dumps_json, file_digest, fsync_dir, is_temp_name,
-                      loads_json, sha256_bytes)
+                      read_json, sha256_bytes)
 
 
 class ShardBusy(SynthError):
@@ -149,7 +150,7 @@ class StagingShard:
             ok = exr in names
             if ok:
                 try:
-                    fj = loads_json((self.dir / js).read_bytes())
+                    fj = read_json(self.dir / js, max_bytes=MAX_FRAME_JSON_BYTES, follow_symlinks=False)
                     hdr = read_frame_exr_header(self.dir / exr)
                     ok = (fj.get("frame_id") == stem and (hdr["width"], hdr["height"])
                           == (fj["image"]["width"], fj["image"]["height"]))
@@ -209,8 +210,9 @@ class StagingShard:
 
         Checks that exactly the planned frames are present (``expected_keys``, when given, must
         equal the plan's), fsyncs every file, writes ``manifest.json`` (frames, sha256 and size of
-        every file, plan hash, versions, plus ``manifest_extra`` such as seeds), renames the
-        staging directory to ``shards/<id>`` and updates the index. Nothing is committed when
+        every file, plan hash, versions, plus ``manifest_extra`` such as seeds), then, under the
+        dataset lock, signs the manifest into the index and renames the staging directory to
+        ``shards/<id>`` (:func:`synth.dataset.index.commit_shard`). Nothing is committed when
         anything is missing.
         """
         self._need_lock()
@@ -234,7 +236,7 @@ class StagingShard:
                              "remove them (only KEY.exr and KEY.json belong to a shard)")
         files = {}
         for name in sorted(wanted):
-            digest, size = file_digest(self.dir / name, sync=durable)
+            digest, size = file_digest(self.dir / name, sync=durable, follow_symlinks=False)
             files[name] = {"sha256": digest, "bytes": size}
         manifest = {
             "format": SHARD_FORMAT,
@@ -258,18 +260,22 @@ class StagingShard:
             fsync_dir(self.dir)
         target = self.target
         target.parent.mkdir(exist_ok=True)
-        if target.exists():
-            raise ShardCommitted(f"shard {self.shard_id} is already committed", str(target),
-                                 "committed shards are never modified")
-        if not self._lease.held():  # broken by another host after a missed heartbeat: let it commit
-            raise ShardBusy(f"shard {self.shard_id}: this process's claim was broken by another process; "
-                            "not committed", str(self.dir), "the other process finishes the shard")
-        os.rename(self.dir, target)  # the commit point
-        self._committed = True
-        if durable:
-            fsync_dir(target.parent)
-            fsync_dir(self.dir.parent)
-        update_index(self.root, self.plan_hash, durable=durable)
+
+        def rename() -> None:  # under the dataset lock, after the index signed the manifest
+            if os.path.lexists(target):
+                raise ShardCommitted(f"shard {self.shard_id} is already committed", str(target),
+                                     "committed shards are never modified")
+            if not self._lease.held():  # broken by another host after a missed heartbeat: let it commit
+                raise ShardBusy(f"shard {self.shard_id}: this process's claim was broken by another process; "
+                                "not committed", str(self.dir), "the other process finishes the shard")
+            os.rename(self.dir, target)  # the commit point
+            self._committed = True
+            if durable:
+                fsync_dir(target.parent)
+                fsync_dir(self.dir.parent)
+
+        commit_shard(self.root, self.plan_hash, self.shard_id, manifest_entry(data, manifest), rename,
+                     durable=durable)
         self.close()  # anyone who takes the lease now sees the committed shard
         manifest["manifest_sha256"] = sha256_bytes(data)
         return manifest
