@@ -32,6 +32,8 @@ import threading
 from dataclasses import asdict, dataclass, fields
 from typing import IO, ClassVar, Union
 
+from synth.io.jsonio import loads_json
+
 #: Bumped whenever an event's fields change meaning or a required field is added.
 PROTOCOL_VERSION = 2
 
@@ -203,8 +205,8 @@ def parse_line(line: str) -> Event | None:
     if start < 0:
         return None
     try:
-        d = json.loads(line[start:])
-    except ValueError:
+        d = loads_json(line[start:])
+    except ValueError:  # not JSON, or nested deeper than any event
         return None
     if not isinstance(d, dict) or "event" not in d:
         return None

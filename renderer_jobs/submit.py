@@ -50,17 +50,18 @@ def prepare_plan(out: Path, identities: int, config: Path | None, sets: list[str
 
     cfg = load_config(config, sets)
     check_hdri_files({"environment": cfg.lighting.environment, "hdri_files": cfg.lighting.hdri_files})
-    check_out_dir(out)
+    info = check_out_dir(out)
     target = out / PLAN_DIR
-    if os.path.lexists(target):
-        existing = load_plan(target)
+    if os.path.lexists(target) or info is not None:  # a plan or a dataset is there: the same one?
+        there = load_plan(target).plan_hash if os.path.lexists(target) else info["plan_hash"]
         header, _ = run_plan(cfg, identities, None, seed=seed, first_identity=start, model_path=model)
-        if header["plan_hash"] != existing.plan_hash:
-            raise SynthError(f"{out} already holds a render of a different plan (hash {existing.plan_hash[:16]}, "
+        if header["plan_hash"] != there:
+            raise SynthError(f"{out} already holds a render of a different plan (hash {there[:16]}, "
                              f"these arguments give {header['plan_hash'][:16]})", str(target),
                              "rerun with the original arguments to resume, or use a new --out")
-        return target
-    run_plan(cfg, identities, target, seed=seed, first_identity=start, model_path=model)
+        if os.path.lexists(target):
+            return target
+    run_plan(cfg, identities, target, seed=seed, first_identity=start, model_path=model)  # (re)write the plan
     return target
 
 

@@ -74,6 +74,32 @@ def _where(e: OSError) -> str | None:
     return " -> ".join(names) or None
 
 
+def _file_in_traceback(e: BaseException) -> str | None:
+    """Best effort for errors that name no file (a decoding error, input nested too deeply):
+    the file being read where it was raised, i.e. the innermost frame holding an open file or
+    a path."""
+    import io
+    from pathlib import PurePath
+
+    frames = []
+    tb = e.__traceback__
+    while tb is not None:
+        frames.append(tb.tb_frame)
+        tb = tb.tb_next
+    for fr in reversed(frames):
+        for v in fr.f_locals.values():
+            if isinstance(v, io.IOBase) and isinstance(getattr(v, "name", None), str):
+                return v.name
+            if isinstance(v, PurePath):
+                return str(v)
+    return None
+
+
+def _printable(text: str) -> str:
+    """One line, control characters (a NUL, a newline) and undecodable bytes escaped."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 def translate(e: BaseException):
     """The :class:`synth.errors.SynthError` that stands for ``e`` (an error of the input or the
     environment), or ``None`` when ``e`` is a bug."""
@@ -88,10 +114,10 @@ def translate(e: BaseException):
         return SynthError(what, _where(e), fix)
     if isinstance(e, UnicodeError):
         reason = getattr(e, "reason", str(e))
-        return SynthError(f"text is not valid UTF-8 ({reason})", None,
+        return SynthError(f"text is not valid UTF-8 ({reason})", _file_in_traceback(e),
                           "save the file as UTF-8 (and use UTF-8 paths in configuration files)")
     if isinstance(e, RecursionError):
-        return SynthError("input nested too deeply to read", None, "check the files this command reads")
+        return SynthError("input nested too deeply to read", _file_in_traceback(e), "check the file")
     if isinstance(e, MemoryError):
         return SynthError("out of memory", None, "free memory or ask for less (fewer identities, views, workers)")
     if isinstance(e, ValueError) and "null" in str(e) and ("byte" in str(e) or "character" in str(e)):
@@ -120,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:  # older typer: plain click
         from click import ClickException
     try:
-        rc = app(args=argv, standalone_mode=False)
+        rc = app(args=argv, prog_name="synth", standalone_mode=False)
     except typer.Exit as e:
         return e.exit_code
     except (typer.Abort, KeyboardInterrupt):
@@ -136,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
             raise
     else:
         return rc if isinstance(rc, int) else 0
-    print(f"synth: error: {err}", file=sys.stderr)
+    print(f"synth: error: {_printable(str(err))}", file=sys.stderr)
     return err.exit_code
 
 

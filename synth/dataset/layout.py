@@ -42,6 +42,7 @@ MAX_DATASET_JSON_BYTES = 1 << 30  # dataset.json lists every frame key (~25 byte
 MAX_INDEX_BYTES = 256 << 20
 MAX_MANIFEST_BYTES = 64 << 20
 MAX_FRAME_JSON_BYTES = 16 << 20
+MAX_EXR_BYTES = 2 << 30
 MAX_LEASE_BYTES = 64 << 10
 
 SHARD_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,127}$")

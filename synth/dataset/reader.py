@@ -40,9 +40,10 @@ import numpy as np
 
 from synth.dataset.exr import decode_frame_exr
 from synth.dataset.frame_json import check_frame_json
-from synth.dataset.layout import MANIFEST_FILE, SHARDS_DIR, SHARD_ID_RE
+from synth.dataset.layout import (FRAME_KEY_RE, MANIFEST_FILE, MAX_EXR_BYTES, MAX_FRAME_JSON_BYTES, MAX_MANIFEST_BYTES,
+                                  SHARDS_DIR, SHARD_ID_RE)
 from synth.errors import SynthError
-from synth.io import loads_json
+from synth.io import FileRefused, loads_json, read_bounded, read_json
 
 #: Largest frame member read from a tar stream (bytes); a larger one is refused, not read.
 MAX_MEMBER_BYTES = 1 << 30
@@ -142,9 +143,11 @@ def read_frame(json_path, *, shard: str | None = None, validate: bool = False) -
     """Read ``KEY.json`` and the ``KEY.exr`` beside it."""
     p = Path(json_path)
     try:
-        jb, eb = p.read_bytes(), p.with_suffix(".exr").read_bytes()
+        jb, eb = read_bounded(p, MAX_FRAME_JSON_BYTES), read_bounded(p.with_suffix(".exr"), MAX_EXR_BYTES)
     except FileNotFoundError as e:
         raise SynthError("frame file not found", str(e.filename), "check the path (or re-render the frame)") from None
+    except FileRefused as e:
+        raise SynthError(f"frame file refused: it {e.what}", os.fsdecode(e.path), "re-render the frame") from None
     return decode_frame(jb, eb, key=p.stem, shard=shard or p.parent.name, validate=validate, where=str(p))
 
 
@@ -166,9 +169,13 @@ def _shard_keys(shard_dir: Path) -> list[str]:
     """Frame keys of a shard: the manifest's list when committed, else the JSON files present."""
     man = shard_dir / MANIFEST_FILE
     if man.is_file():
-        m = loads_json(man.read_bytes())
+        try:
+            m = read_json(man, max_bytes=MAX_MANIFEST_BYTES, follow_symlinks=False)
+        except ValueError as e:
+            raise SynthError(f"manifest.json cannot be read ({e})", str(man), "run `synth validate` on the dataset") \
+                from None
         if isinstance(m, dict) and isinstance(m.get("frames"), list):
-            return sorted(str(k) for k in m["frames"])
+            return sorted(str(k) for k in m["frames"] if FRAME_KEY_RE.match(str(k)))
     return sorted(n[:-5] for n in os.listdir(shard_dir) if n.endswith(".json") and n != MANIFEST_FILE
                   and (shard_dir / (n[:-5] + ".exr")).is_file())
 

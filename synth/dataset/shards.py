@@ -57,6 +57,8 @@ def _normalise_expected(expected: Mapping[str, Sequence[str]]) -> dict[str, list
         raise SynthError("the plan has no shards to render", None, "check the plan (expected shard -> frame keys)")
     for sid in sorted(expected):
         check_shard_id(sid)
+        if not isinstance(expected[sid], (list, tuple)):
+            raise SynthError(f"shard {sid}'s frames are not a list of frame keys", None, "check the plan")
         keys = list(expected[sid])
         if not keys:
             raise SynthError(f"shard {sid} has no frames in the plan", None, "drop empty shards from the plan")
