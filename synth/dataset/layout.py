@@ -63,6 +63,11 @@ def entry_kind(path: Path) -> str | None:
     return "symlink" if stat.S_ISLNK(mode) else "other"
 
 
+#: :func:`entry_kind` in words, for messages ("X is a symbolic link").
+KIND_TEXT = {"dir": "directory", "file": "regular file", "symlink": "symbolic link",
+             "other": "device, FIFO or socket"}
+
+
 def utc_now() -> str:
     """A timestamp for records (``created``); never used as a seed."""
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")

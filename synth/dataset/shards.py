@@ -37,9 +37,9 @@ import synth
 from synth.dataset.index import (REPAIR_HINT, IndexDamaged, ManifestError, parse_manifest, read_index,
                                  read_manifest_bytes, shard_entries, update_index)
 from synth.dataset.frame_json import jsonable
-from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, INDEX_FILE, LOCK_FILE, LOGS_DIR,
-                                  MANIFEST_FILE, MAX_DATASET_JSON_BYTES, SHARDS_DIR, STAGING_DIR, check_shard_id, flock, lease_path,
-                                  shard_dir, staging_dir, utc_now)
+from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, INDEX_FILE, KIND_TEXT, LOCK_FILE,
+                                  LOGS_DIR, MANIFEST_FILE, MAX_DATASET_JSON_BYTES, SHARDS_DIR, STAGING_DIR,
+                                  check_shard_id, flock, lease_path, shard_dir, staging_dir, utc_now)
 from synth.dataset.lease import DEFAULT_TTL_S, Holder, read_holder
 from synth.dataset.staging import ShardBusy, ShardCommitted, StagingShard
 from synth.errors import SynthError
@@ -113,7 +113,8 @@ def check_out_dir(root: Path) -> dict | None:
 def _check_same_plan(root: Path, info: dict, plan_hash: str, exp: dict) -> None:
     if info["plan_hash"] != plan_hash:
         raise SynthError(f"{root} holds a dataset from a different plan (hash {info['plan_hash'][:16]}, "
-                         f"this plan {plan_hash[:16]})", str(root / DATASET_FILE), "use a new --out or the original plan")
+                         f"this plan {plan_hash[:16]})", str(root / DATASET_FILE),
+                         "use a new --out or the original plan")
     if info["expected"] != exp:
         raise SynthError("dataset.json's expected shards differ from this plan's although the hashes match",
                          str(root / DATASET_FILE), "the plan hash must cover the shard layout; use a new --out")
@@ -167,7 +168,7 @@ class Dataset:
             if name not in idx["shards"]:
                 raise SynthError(f"shards/{name} is not in index.json (synth did not commit it)", where, REPAIR_HINT)
             if kind != "dir":
-                raise SynthError(f"shards/{name} is a {kind}, not a directory", str(self.shard_dir(name)),
+                raise SynthError(f"shards/{name} is a {KIND_TEXT[kind]}, not a directory", str(self.shard_dir(name)),
                                  "restore the shard, or delete it and rerun the render")
             out.add(name)
         return out
@@ -294,5 +295,6 @@ def load_dataset(root) -> Dataset:
     if not root.is_dir():
         raise SynthError("not a directory", str(root), "pass the dataset directory (the --out of `synth render`)")
     if not (root / DATASET_FILE).is_file():
-        raise SynthError("not a synth dataset (no dataset.json)", str(root), "pass the --out directory of `synth render`")
+        raise SynthError("not a synth dataset (no dataset.json)", str(root),
+                         "pass the --out directory of `synth render`")
     return Dataset(root, _read_dataset_json(root), writable=False)

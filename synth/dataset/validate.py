@@ -31,7 +31,8 @@ from synth.dataset.exr import decode_frame_exr, pixel_defects
 from synth.dataset.frame_json import validate_frame_json
 from synth.dataset.index import (REPAIR_HINT, IndexDamaged, ManifestError, dataset_digest, parse_manifest,
                                  read_index, read_manifest_bytes, repair_index, shard_entries)
-from synth.dataset.layout import (FRAME_KEY_RE, LOGS_DIR, MANIFEST_FILE, MAX_FRAME_JSON_BYTES, SHARD_ID_RE, SHARDS_DIR, STAGING_DIR,
+from synth.dataset.layout import (FRAME_KEY_RE, KIND_TEXT, LOGS_DIR, MANIFEST_FILE, MAX_FRAME_JSON_BYTES, SHARD_ID_RE,
+                                  SHARDS_DIR, STAGING_DIR,
                                   entry_kind, frame_files, utc_now)
 from synth.dataset.shards import load_dataset
 from synth.errors import SynthError
@@ -96,7 +97,8 @@ def _check_frame(shard_dir: Path, shard: str, key: str, listed: dict, readable: 
         try:
             fj = loads_json(_read(shard_dir / js, listed[js]["bytes"], MAX_FRAME_JSON_BYTES))
         except (ValueError, OSError) as e:
-            out.append(Defect(shard, key, "json", f"{js} does not parse: {e.strerror if isinstance(e, OSError) else e}"))
+            why = e.strerror if isinstance(e, OSError) else e
+            out.append(Defect(shard, key, "json", f"{js} does not parse: {why}"))
     if fj is not None:
         errs = validate_frame_json(fj)
         for e in errs[:5]:
@@ -177,7 +179,8 @@ def validate_shard(root: str, shard: str, expected_keys: list[str] | None, quick
     for n in sorted(set(listed) & set(on_disk)):
         ent, key = listed[n], _stem(n)
         if on_disk[n] != "file":
-            defects.append(Defect(shard, key, "not-a-file", f"{n} is a {on_disk[n]}, not a regular file (not read)"))
+            defects.append(Defect(shard, key, "not-a-file",
+                                  f"{n} is a {KIND_TEXT[on_disk[n]]}, not a regular file (not read)"))
             continue
         size = os.lstat(d / n).st_size
         if size != ent["bytes"]:
@@ -208,7 +211,7 @@ def _staging_warnings(root: Path) -> tuple[list[Defect], list[Defect]]:
     if kind is None:
         return [], []
     if kind != "dir":
-        return [Defect(None, None, "unexpected-entry", f"{STAGING_DIR} is a {kind}, not a directory")], []
+        return [Defect(None, None, "unexpected-entry", f"{STAGING_DIR} is a {KIND_TEXT[kind]}, not a directory")], []
     defects, out = [], []
     for n in sorted(os.listdir(st)):
         k = entry_kind(st / n)
@@ -223,7 +226,7 @@ def _staging_warnings(root: Path) -> tuple[list[Defect], list[Defect]]:
         elif k == "file":
             out.append(Defect(None, None, "staging", f"stray file .staging/{n}"))
         else:
-            defects.append(Defect(None, None, "unexpected-entry", f".staging/{n} is a {k}"))
+            defects.append(Defect(None, None, "unexpected-entry", f".staging/{n} is a {KIND_TEXT[k]}"))
     return defects, out
 
 
@@ -271,13 +274,14 @@ def validate_dataset(root, *, quick: bool = False, partial: bool = False, jobs: 
     kind = entry_kind(root / SHARDS_DIR)
     entries = shard_entries(root) if kind == "dir" else {}
     if kind not in (None, "dir"):
-        rep.defects.append(Defect(None, None, "unexpected-entry", f"{SHARDS_DIR} is a {kind}, not a directory "
-                                                                  "(not followed)"))
+        rep.defects.append(Defect(None, None, "unexpected-entry",
+                                  f"{SHARDS_DIR} is a {KIND_TEXT[kind]}, not a directory (not followed)"))
     dirs = []
     for n, k in entries.items():
         if k != "dir":
-            rep.defects.append(Defect(None, None, "unexpected-entry", f"{SHARDS_DIR}/{n[:120]!r} is a {k}: only "
-                                                                      "shard directories belong there (not opened)"))
+            rep.defects.append(Defect(None, None, "unexpected-entry",
+                                      f"{SHARDS_DIR}/{n[:120]!r} is a {KIND_TEXT[k]}: only shard directories belong "
+                                      "there (not opened)"))
         elif not SHARD_ID_RE.match(n) or n not in ds.expected:
             rep.defects.append(Defect(n[:120], None, "unexpected-shard", "shard directory not in the plan"))
             if SHARD_ID_RE.match(n):

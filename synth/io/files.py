@@ -206,8 +206,12 @@ def atomic_dir(final: Path, *, durable: bool = True) -> Iterator[Path]:
                 if e.errno not in (errno.ENOTEMPTY, errno.EEXIST):
                     raise
                 raise DirectoryTaken(final) from None
-    except BaseException:
+    except BaseException as e:
         shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(e, OSError) and not isinstance(e, DirectoryTaken):  # name the file as it would have been
+            name = os.fsdecode(e.filename) if e.filename is not None else str(tmp)
+            if name == str(tmp) or name.startswith(str(tmp) + os.sep):
+                raise OSError(e.errno, e.strerror, str(final) + name[len(str(tmp)):]) from e
         raise
     if durable:
         fsync_dir(final.parent)
