@@ -1,23 +1,25 @@
-"""``DIR/index.json``: the committed shards, each with the sha256 of its manifest, signed at commit.
+"""What is committed, and with which manifest: commit records and ``DIR/index.json``.
 
-A commit adds its shard's entry to the index (under the dataset lock) *before* it renames the
-staging directory into ``shards/``, and holds the lock until the rename is done (see
-:func:`commit_shard`). So the index is never behind the files, and it is written only by a
-commit, never from what happens to be on disk:
+A commit signs its shard: before it renames the staging directory into ``shards/`` it writes
+the **commit record** ``.commits/<shard>.json`` (the sha256 and size of the manifest, the frame
+and byte counts), then, after the rename, adds the same entry to ``index.json`` (the records of
+every shard in one file, with ``digest``, a sha256 over every ``shard_id manifest_sha256``
+line: one number that changes when any committed shard does). Both writes are atomic; the
+record is one file per shard, so commits on several hosts never lose each other's signatures
+even where ``flock`` does not work (NFS, Lustre) and ``index.json``'s read-modify-write might.
 
-- a shard directory the index does not list was not committed by synth (or the index was
-  lost): nothing adds it automatically;
-- an entry whose manifest changed after commit is never re-signed: ``synth validate`` reports
-  the change, and a rerun of the render cannot launder it;
-- an index-less dataset with committed shards stays index-less (``synth validate`` fails)
-  until the explicit, logged repair :func:`repair_index` (``synth validate --repair-index``)
-  rebuilds it from the manifests and reports every change.
+A shard's **signature** is its commit record, else its ``index.json`` entry (datasets from
+before commit records). Signatures are written only by a commit, never from what happens to
+be on disk:
 
-:func:`update_index` (run when a dataset is opened for writing) only forgets entries whose
-shard directory is gone (deleted to be re-rendered, or a commit killed between the two
-steps) and creates the empty index of a new dataset. The index also holds ``digest``: the
-sha256 over every ``shard_id manifest_sha256`` line, one number that changes when any
-committed shard does (docs/reliability.md).
+- a shard directory without a signature was not committed by synth: nothing adopts it;
+- a manifest changed after its commit is never re-signed: ``synth validate`` reports it and a
+  rerun of the render cannot launder it;
+- :func:`update_index` (every time a dataset is opened for writing) rebuilds ``index.json``
+  from the signatures (never from the manifests), forgetting shards whose directory is gone;
+  a damaged ``index.json`` is left for the explicit repair;
+- :func:`repair_index` (``synth validate --repair-index``) is the one way to sign what the
+  manifests now say; it reports every change, and ``synth validate`` logs it.
 """
 
 from __future__ import annotations
@@ -27,13 +29,14 @@ import re
 from collections.abc import Callable
 from pathlib import Path
 
-from synth.dataset.layout import (INDEX_FILE, INDEX_FORMAT, LOCK_FILE, MANIFEST_FILE, MAX_INDEX_BYTES,
-                                  MAX_MANIFEST_BYTES, SHARD_FORMAT, SHARD_ID_RE, SHARDS_DIR, entry_kind, flock)
+from synth.dataset.layout import (COMMITS_DIR, INDEX_FILE, INDEX_FORMAT, LOCK_FILE, MANIFEST_FILE, MAX_INDEX_BYTES,
+                                  MAX_MANIFEST_BYTES, MAX_RECORD_BYTES, SHARD_FORMAT, SHARD_ID_RE, SHARDS_DIR,
+                                  entry_kind, flock)
 from synth.errors import SynthError
 from synth.io import FileRefused, atomic_write_json, loads_json, read_bounded, read_json, sha256_bytes
 
 _SHA256 = re.compile(r"^[0-9a-f]{64}$")
-REPAIR_HINT = "run `synth validate --repair-index DIR` to rebuild it from the manifests (it reports what changed)"
+REPAIR_HINT = "run `synth validate --repair-index DIR` to sign the manifests as they are now (it reports what changed)"
 
 
 class ManifestError(ValueError):
@@ -81,12 +84,11 @@ def read_manifest_bytes(shard_dir: Path) -> bytes:
 def index_entry(shard_dir: Path) -> dict:
     """Read ``shard_dir/manifest.json`` into an index entry; raises OSError/ManifestError."""
     data = read_manifest_bytes(shard_dir)
-    m = parse_manifest(data, Path(shard_dir).name)
-    return manifest_entry(data, m)
+    return manifest_entry(data, parse_manifest(data, Path(shard_dir).name))
 
 
 def manifest_entry(data: bytes, manifest: dict) -> dict:
-    """The index entry of a manifest (its bytes and their parse)."""
+    """The signature of a manifest (its bytes and their parse)."""
     return {"frames": len(manifest["frames"]), "bytes": sum(e["bytes"] for e in manifest["files"].values()),
             "manifest_sha256": sha256_bytes(data), "manifest_bytes": len(data), "committed": manifest.get("created")}
 
@@ -94,6 +96,11 @@ def manifest_entry(data: bytes, manifest: dict) -> dict:
 def dataset_digest(shards: dict) -> str:
     """sha256 over the lines ``shard_id manifest_sha256``, sorted: changes with any manifest."""
     return sha256_bytes("".join(f"{s} {shards[s]['manifest_sha256']}\n" for s in sorted(shards)).encode())
+
+
+def _entry_ok(e) -> bool:
+    return isinstance(e, dict) and bool(_SHA256.match(str(e.get("manifest_sha256")))) \
+        and all(_is_count(e.get(k)) for k in ("manifest_bytes", "frames", "bytes"))
 
 
 def _check_index(idx) -> dict:
@@ -104,8 +111,7 @@ def _check_index(idx) -> dict:
     for s, e in idx["shards"].items():
         if not SHARD_ID_RE.match(s):
             raise IndexDamaged(f"lists a bad shard id {s[:80]!r}")
-        if not isinstance(e, dict) or not _SHA256.match(str(e.get("manifest_sha256"))) \
-                or not all(_is_count(e.get(k)) for k in ("manifest_bytes", "frames", "bytes")):
+        if not _entry_ok(e):
             raise IndexDamaged(f"entry of {s} is not an object with manifest_sha256, manifest_bytes, frames, bytes")
     if "digest" in idx and not _SHA256.match(str(idx["digest"])):
         raise IndexDamaged("digest is not a sha256")
@@ -123,6 +129,44 @@ def read_index(root: Path) -> dict | None:
         raise IndexDamaged(str(e.strerror if isinstance(e, OSError) else e)) from None
 
 
+def record_path(root: Path, shard_id: str) -> Path:
+    return Path(root) / COMMITS_DIR / f"{shard_id}.json"
+
+
+def read_records(root: Path, plan_hash: str) -> tuple[dict[str, dict], list[str]]:
+    """The commit records of this plan: ``({shard: signature}, [problems])``. A record that is
+    not a regular file, does not parse or belongs to another plan is left out and named in
+    ``problems`` (``synth validate`` reports them)."""
+    base = Path(root) / COMMITS_DIR
+    try:
+        names = sorted(os.listdir(base))
+    except FileNotFoundError:
+        return {}, []
+    out, problems = {}, []
+    for n in names:
+        sid = n[:-5] if n.endswith(".json") else ""
+        if not SHARD_ID_RE.match(sid):
+            if not (n.startswith(".") and n.endswith(".tmp")):
+                problems.append(f"{COMMITS_DIR}/{n[:120]!r} is not a commit record")
+            continue
+        try:
+            rec = read_json(base / n, max_bytes=MAX_RECORD_BYTES, follow_symlinks=False)
+        except (OSError, ValueError) as e:
+            problems.append(f"{COMMITS_DIR}/{n} cannot be read ({e})")
+            continue
+        if not isinstance(rec, dict) or rec.get("plan_hash") != plan_hash or not _entry_ok(rec.get("entry")):
+            problems.append(f"{COMMITS_DIR}/{n} is not a commit record of this plan")
+            continue
+        out[sid] = rec["entry"]
+    return out, problems
+
+
+def _write_record(root: Path, plan_hash: str, shard_id: str, entry: dict, durable: bool) -> None:
+    (Path(root) / COMMITS_DIR).mkdir(exist_ok=True)
+    atomic_write_json(record_path(root, shard_id), {"plan_hash": plan_hash, "shard": shard_id, "entry": entry},
+                      durable=durable)
+
+
 def shard_entries(root: Path) -> dict[str, str]:
     """Every entry under ``shards/`` (not following links) -> its kind (:func:`entry_kind`)."""
     base = Path(root) / SHARDS_DIR
@@ -138,76 +182,76 @@ def shard_dirs(root: Path) -> list[str]:
     return [n for n, k in shard_entries(root).items() if k == "dir" and SHARD_ID_RE.match(n)]
 
 
-def _new_index(plan_hash: str, shards: dict) -> dict:
+def new_index(plan_hash: str, shards: dict) -> dict:
     shards = dict(sorted(shards.items()))
     return {"format": INDEX_FORMAT, "plan_hash": plan_hash, "num_shards": len(shards),
             "num_frames": sum(e["frames"] for e in shards.values()), "digest": dataset_digest(shards),
             "shards": shards}
 
 
-def _index_for_writing(root: Path, plan_hash: str) -> dict:
-    """The stored index, or a new empty one when there is none and nothing is committed;
-    :class:`SynthError` when it is damaged, of another plan, or lost while shards exist."""
+def signatures(root: Path, plan_hash: str) -> dict[str, dict]:
+    """Every shard's signature (its commit record, else its ``index.json`` entry), whether or
+    not its directory exists. Raises :class:`SynthError` when ``index.json`` is damaged or of
+    another plan (run the repair)."""
     where = str(Path(root) / INDEX_FILE)
     try:
         idx = read_index(root)
     except IndexDamaged as e:
         raise SynthError(f"index.json is damaged ({e})", where, REPAIR_HINT) from None
-    if idx is None:
-        if shard_dirs(root):
-            raise SynthError("index.json is missing but shards/ holds committed shards", where, REPAIR_HINT)
-        return _new_index(plan_hash, {})
-    if idx["plan_hash"] != plan_hash:
+    if idx is not None and idx["plan_hash"] != plan_hash:
         raise SynthError("index.json belongs to another plan", where, REPAIR_HINT)
-    return idx
+    records, _ = read_records(root, plan_hash)
+    return {**(idx["shards"] if idx else {}), **records}
 
 
 def commit_shard(root: Path, plan_hash: str, shard_id: str, entry: dict, rename: Callable[[], None], *,
                  durable: bool = True) -> dict:
-    """Sign ``entry`` into the index, then ``rename()`` the shard into place, all under the
-    dataset lock (so the index is never behind ``shards/``). If the rename fails the entry is
-    taken out again. Returns the new index."""
+    """Sign ``entry`` (the commit record), ``rename()`` the shard into place, then add it to
+    ``index.json``; under the dataset lock. If the rename fails the record is taken back.
+    Returns the new index."""
     root = Path(root)
     with flock(root / LOCK_FILE):
-        idx = _index_for_writing(root, plan_hash)
-        shards = dict(idx["shards"])
-        before = shards.get(shard_id)
-        shards[shard_id] = entry
-        new = _new_index(plan_hash, shards)
-        atomic_write_json(root / INDEX_FILE, new, durable=durable)
+        sigs = signatures(root, plan_hash)
+        rec = record_path(root, shard_id)
+        before = rec.read_bytes() if entry_kind(rec) == "file" else None
+        _write_record(root, plan_hash, shard_id, entry, durable)
         try:
             rename()
         except BaseException:
             if before is None:
-                shards.pop(shard_id)
+                rec.unlink(missing_ok=True)
             else:
-                shards[shard_id] = before
-            atomic_write_json(root / INDEX_FILE, _new_index(plan_hash, shards), durable=durable)
+                atomic_write_json(rec, loads_json(before), durable=durable)
             raise
-    return new
+        sigs[shard_id] = entry
+        idx = new_index(plan_hash, {s: e for s, e in sigs.items() if entry_kind(root / SHARDS_DIR / s) == "dir"})
+        atomic_write_json(root / INDEX_FILE, idx, durable=durable)
+    return idx
 
 
 def update_index(root: Path, plan_hash: str, *, durable: bool = True) -> dict:
-    """Under the dataset lock: create the empty index of a new dataset, and forget entries
-    whose shard directory is gone. Never adds or re-signs a shard. Raises :class:`SynthError`
-    when the index is damaged, of another plan, or missing while shards exist."""
+    """Under the dataset lock, rewrite ``index.json`` from the signatures of the shards whose
+    directory exists (it creates the empty index of a new dataset, recovers an entry a lost
+    update dropped, forgets shards deleted to be re-rendered). Never signs a manifest.
+    Raises :class:`SynthError` when ``index.json`` is damaged or of another plan."""
     root = Path(root)
     with flock(root / LOCK_FILE):
-        exists = (root / INDEX_FILE).exists()
-        idx = _index_for_writing(root, plan_hash)
-        gone = [s for s in idx["shards"] if entry_kind(root / SHARDS_DIR / s) is None]
-        if gone or not exists:
-            shards = {s: e for s, e in idx["shards"].items() if s not in gone}
-            idx = _new_index(plan_hash, shards)
+        sigs = signatures(root, plan_hash)
+        idx = new_index(plan_hash, {s: sigs[s] for s in shard_dirs(root) if s in sigs})
+        try:
+            old = read_index(root)
+        except IndexDamaged:
+            old = None
+        if old != idx:
             atomic_write_json(root / INDEX_FILE, idx, durable=durable)
     return idx
 
 
 def repair_index(root: Path, plan_hash: str) -> tuple[dict, list[dict]]:
-    """Rebuild ``index.json`` from the manifests of the shard directories (explicitly: this
-    signs whatever the manifests now say). Returns the new index and the changes, each
-    ``{"shard", "change": "added" | "removed" | "changed" | "skipped", ...}``; the index
-    itself is ``"shard": None`` when it was missing or damaged."""
+    """Sign every shard directory's manifest as it is now: commit records and ``index.json``
+    rebuilt from the manifests (explicitly: this is the one place that signs what is on disk).
+    Returns the new index and the changes, each ``{"shard", "change": "added" | "removed" |
+    "changed" | "skipped", ...}``; ``"shard": None`` is ``index.json`` itself."""
     root = Path(root)
     changes: list[dict] = []
     with flock(root / LOCK_FILE):
@@ -221,14 +265,16 @@ def repair_index(root: Path, plan_hash: str) -> tuple[dict, list[dict]]:
         except IndexDamaged as e:
             changes.append({"shard": None, "change": "changed", "reason": f"index.json was damaged ({e})"})
             old = None
-        before = (old or {}).get("shards", {})
+        records, _ = read_records(root, plan_hash)
+        before = {**(old or {}).get("shards", {}), **records}
         shards = {}
         for s in shard_dirs(root):
             try:
                 shards[s] = index_entry(root / SHARDS_DIR / s)
             except (OSError, ManifestError) as e:
-                changes.append({"shard": s, "change": "skipped", "reason": f"not indexed: {e}"})
-        for s in sorted(set(before) | set(shards)):
+                changes.append({"shard": s, "change": "skipped", "reason": f"not signed: {e}"})
+        on_disk = set(shard_dirs(root))
+        for s in sorted((set(before) & on_disk) | set(shards)):
             a, b = before.get(s), shards.get(s)
             if a is None and b is not None:
                 changes.append({"shard": s, "change": "added", "new": b["manifest_sha256"]})
@@ -237,7 +283,12 @@ def repair_index(root: Path, plan_hash: str) -> tuple[dict, list[dict]]:
             elif a is not None and a["manifest_sha256"] != b["manifest_sha256"]:
                 changes.append({"shard": s, "change": "changed", "old": a["manifest_sha256"],
                                 "new": b["manifest_sha256"]})
-        idx = _new_index(plan_hash, shards)
-        if changes or old != idx:
+        for s, e in shards.items():
+            if records.get(s) != e:
+                _write_record(root, plan_hash, s, e, durable=True)
+        for s in set(records) - set(shards):
+            record_path(root, s).unlink(missing_ok=True)
+        idx = new_index(plan_hash, shards)
+        if old != idx:
             atomic_write_json(root / INDEX_FILE, idx)
     return idx, changes

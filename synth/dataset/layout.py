@@ -4,7 +4,8 @@
 
     DIR/
       dataset.json          plan hash, expected shards -> frame keys, meta, created, versions
-      index.json            committed shards and their manifests' sha256, signed at each commit
+      index.json            committed shards and their manifests' sha256, with a digest over them
+      .commits/<shard>.json the commit record: the manifest's sha256, signed by the commit itself
       .lock                 flock for dataset-wide updates (dataset.json creation, index)
       logs/                 worker and task logs of `synth render` (one file per attempt)
       plan/                 the plan ``synth render`` made (docs/plan-format.md)
@@ -35,6 +36,7 @@ LOCK_FILE = ".lock"
 LOGS_DIR = "logs"
 SHARDS_DIR = "shards"
 STAGING_DIR = ".staging"
+COMMITS_DIR = ".commits"
 MANIFEST_FILE = "manifest.json"
 
 #: Bounds on the files synth reads from a dataset: a larger one is refused, never read.
@@ -44,6 +46,7 @@ MAX_MANIFEST_BYTES = 64 << 20
 MAX_FRAME_JSON_BYTES = 16 << 20
 MAX_EXR_BYTES = 2 << 30
 MAX_LEASE_BYTES = 64 << 10
+MAX_RECORD_BYTES = 64 << 10
 
 SHARD_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,127}$")
 FRAME_KEY_RE = re.compile(r"^id(\d{6})_ex(\d{2})_v(\d{2})$")

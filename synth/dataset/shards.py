@@ -34,10 +34,10 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import synth
-from synth.dataset.index import (REPAIR_HINT, IndexDamaged, ManifestError, parse_manifest, read_index,
-                                 read_manifest_bytes, shard_entries, update_index)
+from synth.dataset.index import (REPAIR_HINT, ManifestError, parse_manifest, read_manifest_bytes, shard_entries,
+                                 signatures, update_index)
 from synth.dataset.frame_json import jsonable
-from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, INDEX_FILE, KIND_TEXT, LOCK_FILE,
+from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, KIND_TEXT, LOCK_FILE,
                                   LOGS_DIR, MANIFEST_FILE, MAX_DATASET_JSON_BYTES, SHARDS_DIR, STAGING_DIR,
                                   check_shard_id, flock, lease_path, shard_dir, staging_dir, utc_now)
 from synth.dataset.lease import DEFAULT_TTL_S, Holder, read_holder
@@ -139,34 +139,25 @@ class Dataset:
 
     # -- state (always read from the files) --------------------------------------------------
     def committed_shards(self) -> set[str]:
-        """Planned shards that are committed: a directory under ``shards/`` that the index
-        lists (a commit signs the index before its rename, so the index is never behind).
+        """Planned shards that are committed: a directory under ``shards/`` that a commit
+        signed (its commit record, or its ``index.json`` entry; :mod:`synth.dataset.index`).
 
-        Read from the files each time; ``shards/`` is listed before the index is read, so a
-        commit in progress in another process is seen either whole or not at all. Raises a
-        :class:`SynthError` (run ``synth validate --repair-index``) when the index is damaged,
-        of another plan, or missing while shards exist, and when a planned shard's entry is not
-        a real directory or is not in the index: synth did not commit it, and nothing will
-        silently adopt it. Unplanned entries are left to ``synth validate``.
+        Read from the files each time; ``shards/`` is listed before the signatures are read
+        and a commit signs before its rename, so a commit in progress in another process is
+        seen whole or not at all. Raises a :class:`SynthError` (run ``synth validate
+        --repair-index``) when ``index.json`` is damaged or of another plan, and when a planned
+        shard's entry is unsigned or not a real directory: synth did not commit it, and
+        nothing will silently adopt it. Unplanned entries are left to ``synth validate``.
         """
         entries = shard_entries(self.root)
-        where = str(self.root / INDEX_FILE)
-        try:
-            idx = read_index(self.root)
-        except IndexDamaged as e:
-            raise SynthError(f"index.json is damaged ({e})", where, REPAIR_HINT) from None
-        if idx is None:
-            if any(k == "dir" and n in self.expected for n, k in entries.items()):
-                raise SynthError("index.json is missing but shards/ holds committed shards", where, REPAIR_HINT)
-            return set()
-        if idx["plan_hash"] != self.plan_hash:
-            raise SynthError("index.json belongs to another plan", where, REPAIR_HINT)
+        sigs = signatures(self.root, self.plan_hash)
         out = set()
         for name, kind in entries.items():
             if name not in self.expected:
                 continue
-            if name not in idx["shards"]:
-                raise SynthError(f"shards/{name} is not in index.json (synth did not commit it)", where, REPAIR_HINT)
+            if name not in sigs:
+                raise SynthError(f"shards/{name} has no commit record (synth did not commit it, or its index was "
+                                 "lost)", str(self.shard_dir(name)), REPAIR_HINT)
             if kind != "dir":
                 raise SynthError(f"shards/{name} is a {KIND_TEXT[kind]}, not a directory", str(self.shard_dir(name)),
                                  "restore the shard, or delete it and rerun the render")

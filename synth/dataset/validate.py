@@ -30,7 +30,7 @@ import numpy as np
 from synth.dataset.exr import decode_frame_exr, pixel_defects
 from synth.dataset.frame_json import validate_frame_json
 from synth.dataset.index import (REPAIR_HINT, IndexDamaged, ManifestError, dataset_digest, parse_manifest,
-                                 read_index, read_manifest_bytes, repair_index, shard_entries)
+                                 read_index, read_manifest_bytes, read_records, repair_index, shard_entries)
 from synth.dataset.layout import (FRAME_KEY_RE, KIND_TEXT, LOGS_DIR, MANIFEST_FILE, MAX_FRAME_JSON_BYTES, SHARD_ID_RE,
                                   SHARDS_DIR, STAGING_DIR,
                                   entry_kind, frame_files, utc_now)
@@ -137,9 +137,9 @@ def _stem(name: str) -> str | None:
 
 
 def validate_shard(root: str, shard: str, expected_keys: list[str] | None, quick: bool,
-                   index_entry: dict | None, has_index: bool = True) -> tuple[list[Defect], list[Defect], int]:
-    """Check one committed shard (a real directory under ``shards/``); returns (defects,
-    warnings, frames checked)."""
+                   signature: dict | None) -> tuple[list[Defect], list[Defect], int]:
+    """Check one committed shard (a real directory under ``shards/``) against the signature
+    its commit wrote; returns (defects, warnings, frames checked)."""
     d = Path(root) / SHARDS_DIR / shard
     defects: list[Defect] = []
     warnings: list[Defect] = []
@@ -150,12 +150,12 @@ def validate_shard(root: str, shard: str, expected_keys: list[str] | None, quick
         return [Defect(shard, None, "manifest", "no manifest.json: not a committed shard (leftover or damaged)")], [], 0
     except (OSError, ManifestError) as e:
         return [Defect(shard, None, "manifest", str(e))], [], 0
-    if has_index and index_entry is None:
-        defects.append(Defect(shard, None, "index", "not in index.json: synth did not commit this shard (or the index "
-                                                    f"lost it); {REPAIR_HINT}"))
-    elif index_entry is not None and index_entry.get("manifest_sha256") != sha256_bytes(mbytes):
-        defects.append(Defect(shard, None, "manifest", "manifest.json changed after commit (sha256 differs from "
-                                                       "index.json)"))
+    if signature is None:
+        defects.append(Defect(shard, None, "index", "no commit record: synth did not commit this shard (or its "
+                                                    f"signature was lost); {REPAIR_HINT}"))
+    elif signature.get("manifest_sha256") != sha256_bytes(mbytes):
+        defects.append(Defect(shard, None, "manifest", "manifest.json changed after commit (its sha256 differs from "
+                                                       "the commit record)"))
     frames = m["frames"]
     if expected_keys is not None:
         exp = set(expected_keys)
@@ -230,34 +230,43 @@ def _staging_warnings(root: Path) -> tuple[list[Defect], list[Defect]]:
     return defects, out
 
 
-def _index_checks(root: Path, rep: Report, plan_hash: str, dirs: list[str]) -> dict | None:
-    """Report what is wrong with ``index.json``; returns it when it can be compared with."""
+def _signature_checks(root: Path, rep: Report, plan_hash: str, dirs: list[str]) -> dict[str, dict]:
+    """Report what is wrong with ``index.json`` and the commit records; returns every shard's
+    signature (its commit record, else its index entry) to check the manifests against."""
     try:
         idx = read_index(root)
     except IndexDamaged as e:
         rep.defects.append(Defect(None, None, "index", f"index.json is damaged ({e}); {REPAIR_HINT}"))
-        return None
-    if idx is None:
-        if dirs:
-            rep.defects.append(Defect(None, None, "index", f"index.json is missing, so no shard's manifest can be "
-                                                           f"checked against its commit; {REPAIR_HINT}"))
-        return None
-    if idx["plan_hash"] != plan_hash:
-        rep.defects.append(Defect(None, None, "index", f"index.json belongs to another plan; {REPAIR_HINT}"))
-        return None
-    rep.digest = idx.get("digest")
-    if rep.digest is None:
-        rep.warnings.append(Defect(None, None, "index", "index.json has no digest (written by an older synth); "
-                                                        "--repair-index adds one"))
-    elif rep.digest != dataset_digest(idx["shards"]):
-        rep.defects.append(Defect(None, None, "index", "index.json's digest does not match its entries (edited?)"))
-    for s in sorted(set(idx["shards"]) - set(dirs)):
+        idx = None
+    else:
+        if idx is None and dirs:
+            rep.defects.append(Defect(None, None, "index", "index.json is missing (a render that resumes rewrites it "
+                                                           f"from the commit records; or {REPAIR_HINT})"))
+        elif idx is not None and idx["plan_hash"] != plan_hash:
+            rep.defects.append(Defect(None, None, "index", f"index.json belongs to another plan; {REPAIR_HINT}"))
+            idx = None
+    entries = (idx or {}).get("shards", {})
+    if idx is not None:
+        rep.digest = idx.get("digest")
+        if rep.digest is None:
+            rep.warnings.append(Defect(None, None, "index", "index.json has no digest (written by an older synth); "
+                                                            "--repair-index adds one"))
+        elif rep.digest != dataset_digest(entries):
+            rep.defects.append(Defect(None, None, "index", "index.json's digest does not match its entries (edited?)"))
+    records, problems = read_records(root, plan_hash)
+    for msg in problems:
+        rep.defects.append(Defect(None, None, "index", msg))
+    for s in sorted(set(records) & set(dirs)):
+        if idx is not None and entries.get(s) != records[s]:
+            rep.warnings.append(Defect(s, None, "index", "index.json is behind the shard's commit record (the next "
+                                                         "render rewrites it)"))
+    for s in sorted(set(entries) - set(dirs)):
         if entry_kind(root / STAGING_DIR / s / MANIFEST_FILE) == "file":
             rep.warnings.append(Defect(s, None, "index", "commit in progress or interrupted (the next render "
                                                          "finishes it)"))
         elif entry_kind(root / SHARDS_DIR / s) is None:
             rep.defects.append(Defect(s, None, "index", "index.json lists a shard that is not on disk"))
-    return idx
+    return {**entries, **records}
 
 
 def validate_dataset(root, *, quick: bool = False, partial: bool = False, jobs: int = 1,
@@ -288,13 +297,12 @@ def validate_dataset(root, *, quick: bool = False, partial: bool = False, jobs: 
                 dirs.append(n)
         else:
             dirs.append(n)
-    idx = _index_checks(root, rep, ds.plan_hash, dirs)
+    sigs = _signature_checks(root, rep, ds.plan_hash, dirs)
     for s in ds.expected:
         if s not in dirs:
             (rep.warnings if partial else rep.defects).append(
                 Defect(s, None, "missing-shard", f"planned shard not committed ({len(ds.expected[s])} frames)"))
-    indexed = (idx or {}).get("shards", {})
-    args = [(str(root), s, ds.expected.get(s), quick, indexed.get(s), idx is not None) for s in dirs]
+    args = [(str(root), s, ds.expected.get(s), quick, sigs.get(s)) for s in dirs]
     results = []
     if jobs > 1 and len(args) > 1:
         with ProcessPoolExecutor(max_workers=jobs) as ex:

@@ -74,6 +74,12 @@ def bad_index_entry(root: Path) -> None:
     (root / "index.json").write_text(json.dumps(idx))
 
 
+def lost_signatures(root: Path) -> None:
+    """index.json and the commit records deleted: nothing says what was committed."""
+    (root / "index.json").unlink()
+    __import__("shutil").rmtree(root / ".commits")
+
+
 def bad_expected(root: Path) -> None:
     info = json.loads((root / "dataset.json").read_text())
     info["expected"]["shard_000000"] = 5
@@ -212,9 +218,7 @@ CASES = [
          "different plan"),
     Case("render-index-entry-not-object", complete_ds(bad_index_entry), 2, "index.json is damaged"),
     Case("render-index-nested", complete_ds(set_json("index.json", DEEP)), 2, "nested"),
-    Case("render-index-missing", complete_ds(lambda r: (r / "index.json").unlink()), 2, "index.json is missing"),
-    Case("render-unindexed-shard", complete_ds(lambda r: set_json("index.json", {
-        **json.loads((r / "index.json").read_text()), "shards": {}})(r)), 2, "not in index.json"),
+    Case("render-signatures-lost", complete_ds(lost_signatures), 2, "has no commit record"),
     # synth plan
     Case("plan-seed-negative", a("plan", "-n", "1", "--seed", "-1", "--out", p("out")), 2, "--seed"),
     Case("plan-out-is-a-file", a("plan", "-n", "1", "--model", m, "--out", f("out", "x")), 2, "not a directory"),
@@ -238,6 +242,7 @@ CASES = [
     Case("validate-index-entry-not-object", a("validate", ds_with(bad_index_entry)), 1, "defect"),
     Case("validate-index-nested", a("validate", ds_with(set_json("index.json", DEEP))), 1, "defect"),
     Case("validate-index-missing", a("validate", ds_with(lambda r: (r / "index.json").unlink())), 1, "defect"),
+    Case("validate-signatures-lost", a("validate", ds_with(lost_signatures)), 1, "defect"),
     Case("validate-frame-symlink-outside", a("validate", ds_with(frame_symlink(None))), 1, "defect"),
     Case("validate-frame-symlink-dev-zero", a("validate", "--quick", ds_with(frame_symlink("/dev/zero"))), 1,
          "defect"),

@@ -132,7 +132,7 @@ def test_renders_started_together_share_one_plan_and_split_the_shards(tmp_path, 
     frames = Counter(log.read_text().split())
     assert len(frames) == 8 and set(frames.values()) == {1}  # every frame rendered once, by one of the runs
     assert sum(r["rendered"] for r in results) == 8
-    assert sorted(n for n in os.listdir(out) if n.startswith(".")) == [".lock", ".staging"]  # no temp plans left
+    assert sorted(n for n in os.listdir(out) if n.startswith(".")) == [".commits", ".lock", ".staging"]  # no temp plans
     assert validate_dataset(out).ok
 
 
@@ -204,12 +204,14 @@ def test_laundering_sequence(tmp_path, model):
     assert (ds / "index.json").read_bytes() == index
     assert synth("validate", ds).returncode == 1
 
-    (ds / "index.json").unlink()  # nor does losing the index
+    (ds / "index.json").unlink()  # nor does losing the index: the commit records still sign each shard
     p = synth("validate", ds)
-    assert p.returncode == 1 and "index.json is missing" in p.stdout
+    assert p.returncode == 1 and "index.json is missing" in p.stdout and "changed after commit" in p.stdout
+    p = synth(*datasets.render_args(2, model, ds))
+    assert p.returncode == 0 and not (ds / "index.json").exists(), p.stderr  # complete: nothing written
+    shutil.rmtree(ds / ".commits")  # and with every signature gone, nothing is adopted
     p = synth(*datasets.render_args(2, model, ds))
     assert p.returncode == 2 and "--repair-index" in error_line(p)
-    assert not (ds / "index.json").exists()
 
     p = synth("validate", "--repair-index", ds)  # the explicit repair signs what the manifests say, and says so
     assert p.returncode == 0, p.stdout + p.stderr
@@ -236,6 +238,6 @@ def test_a_shard_put_there_by_hand_is_not_adopted(tmp_path, model):
     other = datasets.fake_render(tmp_path / "other", model, n=2)
     shutil.copytree(other / "shards" / "shard_000001", ds / "shards" / "shard_000001")
     p = synth(*datasets.render_args(2, model, ds))
-    assert p.returncode == 2 and "shards/shard_000001 is not in index.json" in error_line(p)
+    assert p.returncode == 2 and "shards/shard_000001 has no commit record" in error_line(p)
     p = synth("validate", ds)
-    assert p.returncode == 1 and "shard_000001: index: not in index.json" in p.stdout
+    assert p.returncode == 1 and "shard_000001: index: no commit record" in p.stdout

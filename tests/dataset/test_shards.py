@@ -112,7 +112,8 @@ def test_commit_layout_manifest_and_index(tmp_path):
     assert ds.pending_shards() == ["shard_000000", "shard_000001"]
     ff.render_dataset(ds)
     root = tmp_path / "ds"
-    assert sorted(os.listdir(root)) == [".lock", ".staging", "dataset.json", "index.json", "shards"]
+    assert sorted(os.listdir(root)) == [".commits", ".lock", ".staging", "dataset.json", "index.json", "shards"]
+    assert sorted(os.listdir(root / ".commits")) == ["shard_000000.json", "shard_000001.json"]  # the signatures
     assert os.listdir(root / ".staging") == []  # nothing left behind (no locks either)
     info = json.loads((root / "dataset.json").read_text())
     assert info["plan_hash"] == HASH and info["expected"] == plan and info["meta"]["config"]["views"] == 3

@@ -152,9 +152,27 @@ def test_the_index_is_never_re_signed(ds):
 
 
 def test_digest_covers_every_manifest(ds):
+    """An index entry edited by hand: its digest no longer matches, and the commit record,
+    not the edited entry, is what the manifest is checked against."""
     idx = json.loads((ds / "index.json").read_text())
-    idx["shards"][S1]["committed"] = "edited"  # not signed: ignored
     idx["shards"][S1]["manifest_sha256"] = "0" * 64
     (ds / "index.json").write_text(json.dumps(idx))
+    rep = validate_dataset(ds)
+    assert [d.message for d in rep.defects] == ["index.json's digest does not match its entries (edited?)"]
+    assert [(w.shard, w.kind) for w in rep.warnings] == [(S1, "index")]
+
+
+def test_a_lost_index_is_rebuilt_from_the_commit_records_not_the_manifests(ds):
+    datasets.tamper_frame(ds)
+    (ds / "index.json").unlink()
+    assert found(ds) == {(None, None, "index"), (S0, None, "manifest")}  # index-less: fails
+    open_dataset(ds, HASH, ff.plan(2, 1, 2))  # what a resuming render does
+    assert found(ds) == {(S0, None, "manifest")}  # the tampered manifest is still caught
+
+
+def test_commit_records_are_checked(ds):
+    (ds / ".commits" / "shard_000001.json").write_text("{}")
+    (ds / ".commits" / "stray").write_text("x")
     msgs = [d.message for d in validate_dataset(ds).defects]
-    assert any("digest does not match" in m for m in msgs) and any("changed after commit" in m for m in msgs)
+    assert "'stray' is not a commit record" in " ".join(msgs) and any("not a commit record of this plan" in m
+                                                                      for m in msgs)
