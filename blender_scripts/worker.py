@@ -33,6 +33,7 @@ import numpy as np  # noqa: E402
 
 from renderer_jobs.events import EXIT_DISK_FULL, EXIT_INPUT, Commit, Error, Frame, Rss, Skip, Start, emit
 from synth.assets.classes import RECORD_ORDER
+from synth.dataset.exr import camera_attributes
 from synth.errors import SynthError
 
 
@@ -221,7 +222,9 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path, lease
                     if f["frame_id"] in done:
                         continue
                     out, fj = sc.render(f, tmp)
-                    st.write_frame(f["frame_id"], out["rgba"], out["depth"], out["normals"], out["segmentation"], fj)
+                    cam = fj["camera"]  # also in the EXR header, as OpenEXR's standard attributes
+                    st.write_frame(f["frame_id"], out["rgba"], out["depth"], out["normals"], out["segmentation"], fj,
+                                   exr_header=camera_attributes(cam["K"], cam["world_to_camera"], sc.width, sc.height))
                     rendered += 1
                     emit(Frame(shard=shard_id, key=f["frame_id"], render_seconds=out["render_seconds"]))
             sc.close()

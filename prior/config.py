@@ -1,5 +1,5 @@
 """Configs of the conditional NeRF face prior: the field (:class:`ModelConfig`) and the
-ray sampling (:class:`SamplingConfig`), each a plain dataclass with defaults.
+ray sampling (:class:`SamplingConfig`), each a frozen dataclass with documented defaults.
 
 Two presets (:data:`PRESETS`):
 
@@ -10,97 +10,84 @@ Two presets (:data:`PRESETS`):
   raw direction) for directions; 128 samples per level; a 64-d latent ``w``.
 - ``small``: the same architecture, narrow enough to train on a laptop CPU.
 
-The TOML / ``--set`` override machinery and the training config live elsewhere
-(``prior/train``); these classes hold only plain values so they round-trip through
-``dataclasses.asdict``.
+Each field is a :func:`synth.configkit.setting` (doc, bounds, choices); the TOML / ``--set``
+machinery is :mod:`synth.configkit` and the run config that adds the data and training
+sections is :mod:`prior.train.config`. ``validate`` checks the bounds and the rules between
+fields and raises :class:`synth.configkit.ConfigError` (a ``ValueError``).
 """
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
+from synth.configkit import ConfigError, check_section, setting
+from synth.seeds import MAX_SEED
 
-@dataclass
+#: bounds shared by the fields: at least one (layer, unit, step), at least two samples, not
+#: negative, a seed of the project's seed scheme
+SIZE, SAMPLES, NONNEG, SEED = (1, None), (2, None), (0, None), (0, MAX_SEED)
+
+
+@dataclass(frozen=True)
 class ModelConfig:
     """The conditional field. Conditioning per ray: ``codes`` (beta || psi, size read from
     the dataset) concatenated with the learned latent ``w`` (``latent_dim``)."""
 
-    latent_dim: int = 64
-    #: std of the normal initialisation of the codebook rows (auto-decoders start near 0)
-    latent_init_std: float = 0.01
-    #: positions are mapped to ``(x - scene_center) / scene_radius`` before the encoding, so
-    #: the head's bounding sphere should lie inside the unit ball (metres)
-    scene_center: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    scene_radius: float = 0.3
-    #: integrated positional encoding of positions: frequencies 2**0 .. 2**(pos_levels-1)
-    pos_levels: int = 12
-    #: positional encoding of directions: 2**0 .. 2**(dir_levels-1), plus the raw direction
-    dir_levels: int = 4
-    proposal_depth: int = 4
-    proposal_width: int = 256
-    #: one proposal MLP per proposal level (True) or one shared by all levels (paper: shared)
-    distinct_proposal: bool = False
-    nerf_depth: int = 8
-    nerf_width: int = 1024
-    #: the encoded position is concatenated to the input of this trunk layer (0-based;
-    #: 0 = no skip connection, since layer 0 sees it anyway)
-    skip_layer: int = 4
-    bottleneck_width: int = 256
-    view_width: int = 128
-    #: density = softplus(raw + density_bias) (mip-NeRF 360)
-    density_bias: float = -1.0
-    #: rgb = sigmoid(raw) * (1 + 2 p) - p (mip-NeRF)
-    rgb_padding: float = 0.001
-    #: seed of the weight and codebook initialisation (no global RNG is used)
-    init_seed: int = 0
+    latent_dim: int = setting(64, "size of the learned per-identity latent code w", SIZE)
+    latent_init_std: float = setting(0.01, "std of the normal initialisation of the latent codebook rows "
+                                     "(auto-decoders start near 0)", NONNEG)
+    scene_center: tuple[float, float, float] = setting(
+        (0.0, 0.0, 0.0), "centre of the scene sphere (metres, world); positions are encoded as "
+        "(x - scene_center) / scene_radius, so the heads should lie inside that sphere")
+    scene_radius: float = setting(0.3, "radius of the scene sphere (metres)", gt=0.0)
+    pos_levels: int = setting(12, "levels of the integrated positional encoding of positions: frequencies "
+                              "2**0 .. 2**(pos_levels-1)", SIZE)
+    dir_levels: int = setting(4, "levels of the positional encoding of view directions: frequencies "
+                              "2**0 .. 2**(dir_levels-1), plus the raw direction", NONNEG)
+    proposal_depth: int = setting(4, "layers of the proposal MLP", SIZE)
+    proposal_width: int = setting(256, "units per layer of the proposal MLP", SIZE)
+    distinct_proposal: bool = setting(False, "one proposal MLP per proposal level (true) or one shared by all "
+                                      "levels (false, as in the paper)")
+    nerf_depth: int = setting(8, "layers of the NeRF MLP's trunk", SIZE)
+    nerf_width: int = setting(1024, "units per layer of the NeRF MLP's trunk", SIZE)
+    skip_layer: int = setting(4, "trunk layer (0-based, below nerf_depth) whose input also gets the encoded "
+                              "position; 0 = no skip connection, since layer 0 sees it anyway", NONNEG)
+    bottleneck_width: int = setting(256, "width of the linear colour bottleneck after the trunk", SIZE)
+    view_width: int = setting(128, "units of the one view-conditioned colour layer", SIZE)
+    density_bias: float = setting(-1.0, "density = softplus(raw + density_bias), as in mip-NeRF 360")
+    rgb_padding: float = setting(0.001, "colour = sigmoid(raw) * (1 + 2 rgb_padding) - rgb_padding, as in "
+                                 "mip-NeRF")
+    init_seed: int = setting(0, "seed of the weight and codebook initialisation (no global RNG is used)", SEED)
 
-    def validate(self) -> None:
-        """Raise ValueError on sizes that cannot build a model."""
-        ints = {"latent_dim": self.latent_dim, "pos_levels": self.pos_levels,
-                "proposal_depth": self.proposal_depth, "proposal_width": self.proposal_width,
-                "nerf_depth": self.nerf_depth, "nerf_width": self.nerf_width,
-                "bottleneck_width": self.bottleneck_width, "view_width": self.view_width}
-        for name, value in ints.items():
-            if int(value) < 1:
-                raise ValueError(f"model.{name} = {value} must be at least 1")
-        if self.dir_levels < 0:
-            raise ValueError(f"model.dir_levels = {self.dir_levels} must be at least 0")
-        if not 0 <= self.skip_layer < self.nerf_depth:
-            raise ValueError(f"model.skip_layer = {self.skip_layer} must lie in [0, nerf_depth) "
-                             "(0: no skip connection)")
-        if not self.scene_radius > 0:
-            raise ValueError(f"model.scene_radius = {self.scene_radius} must be positive")
-        if not self.latent_init_std >= 0:
-            raise ValueError(f"model.latent_init_std = {self.latent_init_std} must be >= 0")
+    def validate(self, where: str | None = "model config") -> None:
+        """Raise :class:`ConfigError` (a ValueError) on values that cannot build a model."""
+        check_section(self, "model", where)
+        if not self.skip_layer < self.nerf_depth:
+            raise ConfigError(f"config value model.skip_layer = {self.skip_layer} must lie below model.nerf_depth "
+                              f"= {self.nerf_depth}", where, "lower skip_layer (0: no skip connection)")
 
 
-@dataclass
+@dataclass(frozen=True)
 class SamplingConfig:
     """How each ray is sampled: proposal levels, then one NeRF level (mip-NeRF 360)."""
 
-    #: samples (intervals) of each proposal level, in order; the paper samples twice
-    proposal_samples: tuple[int, ...] = (128, 128)
-    nerf_samples: int = 128
-    #: proposal weights are raised to bias(train_frac, anneal_slope) before resampling
-    #: (mip-NeRF 360: slope 10); 0 turns annealing off (exponent 1 throughout)
-    anneal_slope: float = 10.0
-    #: dilation of the proposal intervals in normalised ray distance s in [0, 1]:
-    #: bias + multiplier / (product of the sample counts of the levels so far)
-    dilation_bias: float = 0.0025
-    dilation_multiplier: float = 0.5
-    #: added to the proposal weights before annealing (0 = mip-NeRF 360's default)
-    resample_padding: float = 0.0
-    #: one jitter per ray (True) or one per sample (False) in stratified mode
-    single_jitter: bool = False
+    proposal_samples: tuple[int, ...] = setting((128, 128), "samples (intervals) per ray of each proposal "
+                                                "level, in order; the paper has two levels", SAMPLES)
+    nerf_samples: int = setting(128, "samples per ray of the final NeRF level", SAMPLES)
+    anneal_slope: float = setting(10.0, "proposal weights are raised to bias(train_frac, anneal_slope) before "
+                                  "resampling (mip-NeRF 360: slope 10); 0 turns annealing off", NONNEG)
+    dilation_bias: float = setting(0.0025, "the proposal intervals are dilated, in normalised ray distance "
+                                   "s in [0, 1], by dilation_bias + dilation_multiplier / (product of the "
+                                   "sample counts of the levels so far)", NONNEG)
+    dilation_multiplier: float = setting(0.5, "see dilation_bias", NONNEG)
+    resample_padding: float = setting(0.0, "added to the proposal weights before annealing (0 = mip-NeRF "
+                                      "360's default)", NONNEG)
+    single_jitter: bool = setting(False, "stratified sampling draws one jitter per ray (true) or one per "
+                                  "sample (false)")
 
-    def validate(self) -> None:
-        counts = (*self.proposal_samples, self.nerf_samples)
-        if any(int(n) < 2 for n in counts):
-            raise ValueError(f"sampling counts {counts} must each be at least 2")
-        for name in ("anneal_slope", "dilation_bias", "dilation_multiplier", "resample_padding"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"sampling.{name} = {getattr(self, name)} must be >= 0")
+    def validate(self, where: str | None = "sampling config") -> None:
+        """Raise :class:`ConfigError` (a ValueError) on values that cannot sample."""
+        check_section(self, "sampling", where)
 
     @property
     def samples_per_level(self) -> tuple[int, ...]:
@@ -130,8 +117,3 @@ def preset(name: str) -> tuple[ModelConfig, SamplingConfig]:
         return PRESETS[name]()
     except KeyError:
         raise ValueError(f"unknown preset {name!r}; known: {', '.join(sorted(PRESETS))}") from None
-
-
-def to_dict(cfg) -> dict:
-    """A JSON-ready dict of a config (tuples become lists)."""
-    return dataclasses.asdict(cfg)

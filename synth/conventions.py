@@ -17,7 +17,9 @@ coordinates with the top-left *corner* of the image at (0, 0), so the centre of 
 (Blender's and most NeRF code's convention). :func:`k_to_integer_centres` converts K to
 the "pixel centres at integers" convention (OpenCV calibration, COLMAP uses +0.5 like us).
 
-Blender cameras look along their local -Z with +Y up: ``c2w_blender = c2w_opencv @ diag(1, -1, -1, 1)``.
+Blender, OpenGL, USD and nerfstudio cameras look along their local -Z with +Y up:
+``c2w_opengl = c2w_opencv @ diag(1, -1, -1, 1)``. OpenEXR's standard ``worldToCamera``
+attribute uses x right, y up, z forward (left-handed; RenderMan's camera space).
 
 Joint rotations of the head model are local axis-angle vectors in the world axes of the
 rest pose: jaw opening is a positive rotation about +X; eye gaze yaw > 0 turns the gaze
@@ -28,8 +30,12 @@ from __future__ import annotations
 
 import numpy as np
 
-#: OpenCV camera axes <-> Blender camera axes (flip y and z); its own inverse.
-CV_TO_BLENDER = np.diag([1.0, -1.0, -1.0, 1.0])
+#: OpenCV camera axes <-> OpenGL camera axes (flip y and z); its own inverse. Blender, USD and
+#: nerfstudio cameras use the OpenGL axes (x right, y up, looking down -z).
+CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
+CV_TO_BLENDER = CV_TO_GL
+#: OpenCV camera axes -> OpenEXR/RenderMan camera axes (x right, y up, z forward: flip y).
+CV_TO_EXR = np.diag([1.0, -1.0, 1.0, 1.0])
 
 
 def _rad(x) -> np.ndarray:
@@ -143,13 +149,16 @@ def invert_rigid(M: np.ndarray) -> np.ndarray:
     return out
 
 
-def opencv_to_blender_c2w(c2w_cv: np.ndarray) -> np.ndarray:
-    """OpenCV camera-to-world -> Blender camera object matrix_world (looks along local -Z)."""
-    return np.asarray(c2w_cv, np.float64) @ CV_TO_BLENDER
+def opencv_to_opengl_c2w(c2w_cv: np.ndarray) -> np.ndarray:
+    """OpenCV camera-to-world -> OpenGL camera-to-world (looks along local -Z, +Y up): Blender's
+    camera ``matrix_world``, a USD camera's local-to-world transform and nerfstudio's
+    ``transform_matrix``. Its own inverse."""
+    return np.asarray(c2w_cv, np.float64) @ CV_TO_GL
 
 
-def blender_to_opencv_c2w(c2w_bl: np.ndarray) -> np.ndarray:
-    return np.asarray(c2w_bl, np.float64) @ CV_TO_BLENDER
+opengl_to_opencv_c2w = opencv_to_opengl_c2w
+opencv_to_blender_c2w = opencv_to_opengl_c2w
+blender_to_opencv_c2w = opencv_to_opengl_c2w
 
 
 # --------------------------------------------------------------------------- intrinsics
@@ -199,6 +208,58 @@ def blender_camera_params(K: np.ndarray, width: int, height: int, sensor_width_m
         "shift_x": (0.5 * width - float(K[0, 2])) / width,
         "shift_y": (float(K[1, 2]) - 0.5 * height) / width,
     }
+
+
+def nerfstudio_camera(K: np.ndarray, camera_to_world: np.ndarray) -> dict:
+    """nerfstudio's camera of a frame: ``fl_x fl_y cx cy`` and ``transform_matrix``.
+
+    nerfstudio shoots the ray of pixel (i, j) through (i + 0.5, j + 0.5) with (cx, cy) in the
+    same continuous coordinates (docs.nerf.studio, "Data conventions": pixel coordinates are
+    pixel centres), which is this module's convention: the intrinsics are K's numbers
+    unchanged. ``transform_matrix`` is the OpenGL camera-to-world (x right, y up, looking -z).
+    """
+    K = np.asarray(K, np.float64)
+    return {"fl_x": float(K[0, 0]), "fl_y": float(K[1, 1]), "cx": float(K[0, 2]), "cy": float(K[1, 2]),
+            "transform_matrix": opencv_to_opengl_c2w(camera_to_world)}
+
+
+def usd_camera_params(K: np.ndarray, width: int, height: int, sensor_width_mm: float = 36.0) -> dict:
+    """UsdGeomCamera lens and filmback attributes for a K of this module on a stage in metres.
+
+    USD measures ``focalLength``, the apertures and their offsets in tenths of a scene unit
+    (decimetres here: 36 mm is 0.36). A point at OpenGL camera coordinates (x, y, z), z < 0,
+    lands on the film at ``focalLength * (x, y) / -z``; the film spans the apertures centred
+    on the offsets, and pixel rows grow downward, so ``fx = W focalLength / horizontalAperture``,
+    ``cx = W/2 - W horizontalApertureOffset / horizontalAperture`` and
+    ``cy = H/2 + H verticalApertureOffset / verticalAperture`` (square pixels: fx = fy).
+    """
+    K = np.asarray(K, np.float64)
+    fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
+    unit = 100.0  # millimetres per tenth of a metre
+    h_ap = sensor_width_mm / unit
+    focal = fx * h_ap / width
+    v_ap = focal * height / fy
+    return {"focalLength": focal, "horizontalAperture": h_ap, "verticalAperture": v_ap,
+            "horizontalApertureOffset": (0.5 * width - cx) * h_ap / width,
+            "verticalApertureOffset": (cy - 0.5 * height) * v_ap / height}
+
+
+def exr_world_to_camera(world_to_camera: np.ndarray) -> np.ndarray:
+    """OpenEXR's ``worldToCamera`` (column-vector form): world -> x right, y up, z forward."""
+    return CV_TO_EXR @ np.asarray(world_to_camera, np.float64)
+
+
+def exr_world_to_ndc(K: np.ndarray, world_to_camera: np.ndarray, width: int, height: int) -> np.ndarray:
+    """OpenEXR's ``worldToNDC`` (column-vector form): homogeneous world points to NDC, where
+    (0, 0) and (1, 1) are the top-left and bottom-right corners of the image, so
+    ``ndc = (u / W, v / H)`` for the pixel coordinates (u, v) of :func:`project`. The third
+    row makes the matrix invertible: the third NDC coordinate is 1 / z (inverse planar depth)."""
+    K = np.asarray(K, np.float64)
+    P = np.array([[K[0, 0] / width, K[0, 1] / width, K[0, 2] / width, 0.0],
+                  [0.0, K[1, 1] / height, K[1, 2] / height, 0.0],
+                  [0.0, 0.0, 0.0, 1.0],
+                  [0.0, 0.0, 1.0, 0.0]])
+    return P @ np.asarray(world_to_camera, np.float64)
 
 
 def project(K: np.ndarray, world_to_camera: np.ndarray, points) -> tuple[np.ndarray, np.ndarray]:

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from synth.cli.main import main
-from synth.config import RENDER_PRESETS, Config, explain, load_config, to_toml
+from synth.config import RENDER_PRESETS, Config, explain, load_config, markdown, to_toml
 from synth.errors import SynthError
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "config.md"
@@ -91,6 +91,7 @@ def test_every_field_is_documented_and_docs_are_in_sync():
     text = DOCS.read_text()
     for key, *_ in rows:
         assert f"`{key}`" in text, f"docs/config.md lacks {key}: regenerate it (see its first lines)"
+    assert markdown() in text, "docs/config.md's table is stale: regenerate it (see its first lines)"
 
 
 def test_cli_config_show(tmp_path, capsys):
@@ -112,3 +113,35 @@ def test_cli_config_errors_are_one_line(tmp_path, capsys):
     assert len(err) == 1 and "camera.min_separation_deg" in err[0] and "out of range" in err[0]
     assert main(["config", "show", "--config", str(tmp_path / "missing.toml")]) == 2
     assert "not found" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("order", [1, -1])
+def test_override_order_does_not_matter(order):
+    """Every override is applied before the rules between keys are checked (issue 15, item 4)."""
+    sets = ['lighting.environment="hdri"', 'lighting.hdri_files=["studio.exr", "sky.exr"]',
+            "camera.radius_m=[0.02, 0.03]", "camera.near_m=0.01"][::order]
+    c = load_config(None, sets)
+    assert c.lighting.environment == "hdri" and c.lighting.hdri_files == ("studio.exr", "sky.exr")
+    assert c.camera.near_m == 0.01 and c.camera.radius_m == (0.02, 0.03)
+    assert main(["config", "show", *(a for s in sets for a in ("--set", s))]) == 0
+
+
+def test_an_override_may_repair_the_file(tmp_path):
+    f = tmp_path / "c.toml"
+    f.write_text("[lighting]\nenvironment = 'hdri'\n")
+    assert load_config(f, ["lighting.hdri_files=['a.exr']"]).lighting.hdri_files == ("a.exr",)
+
+
+def test_an_invalid_final_state_is_one_line(capsys):
+    sets = ["lighting.hdri_files=['a.exr']", 'lighting.environment="hdri"', "lighting.hdri_files=[]"]
+    assert main(["config", "show", *(a for s in sets for a in ("--set", s))]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "lighting.hdri_files is empty but lighting.environment = 'hdri'" in err[0]
+
+
+def test_config_file_that_is_not_utf8_is_one_line(tmp_path, capsys):
+    f = tmp_path / "c.toml"
+    f.write_bytes(b"[camera]\nfov_deg = 30 # \xe9\n")
+    assert main(["config", "show", "--config", str(f)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not UTF-8" in err[0] and str(f) in err[0]

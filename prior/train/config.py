@@ -10,94 +10,84 @@ validated, and saved with the run (``RUN/config.toml``) and in every checkpoint.
 from __future__ import annotations
 
 import dataclasses
-import difflib
-import tomllib
-import types
-import typing
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
-from prior.config import ModelConfig, SamplingConfig
+from prior.config import NONNEG, SEED, SIZE, ModelConfig, SamplingConfig
 from prior.config import preset as model_preset
+from synth import configkit
+from synth.configkit import ConfigError, setting
 from synth.errors import SynthError
 
 
-@dataclass
+@dataclass(frozen=True)
 class DataConfig:
     """Frames -> rays, codes and bounds (``prior/data``)."""
 
-    #: views per (identity, expression) never trained on (the highest view indices), for evaluation
-    holdout_views: int = 0
-    #: joints whose rotations (axis-angle, 3 values each) join the expression code in psi, in this order
-    joints: tuple[str, ...] = ("jaw", "eye_l", "eye_r")
-    #: each identity's bounding sphere is the tight sphere of its foreground points, radius * (1 + margin)
-    bounds_margin: float = 0.05
-    #: dtype of the decoded pixels kept in memory: float16 (the EXR's own precision) or float32
-    pixel_dtype: str = "float16"
-    #: set model.scene_center / model.scene_radius to a sphere holding every identity's bounds
-    fit_scene: bool = True
+    holdout_views: int = setting(0, "views per (identity, expression) never trained on (the highest view "
+                                 "indices), kept for evaluation", NONNEG)
+    joints: tuple[str, ...] = setting(("jaw", "eye_l", "eye_r"), "joints whose rotations (axis-angle, 3 values "
+                                      "each) join the expression code psi, in this order, each once")
+    bounds_margin: float = setting(0.05, "each identity's bounding sphere is the tight sphere of its "
+                                   "foreground points, its radius scaled by 1 + bounds_margin", NONNEG)
+    pixel_dtype: str = setting("float16", "dtype of the decoded pixels kept in memory (float16 is the EXR's "
+                               "own precision)", choices=("float16", "float32"))
+    fit_scene: bool = setting(True, "set model.scene_center and model.scene_radius to a sphere holding every "
+                              "identity's bounding sphere")
 
 
-@dataclass
+@dataclass(frozen=True)
 class TrainConfig:
     """The optimisation (``prior/train``)."""
 
-    #: total optimisation steps (the learning-rate schedule spans them)
-    steps: int = 1_000_000
-    #: run seed: every random draw (batches, stratified jitter) derives from (seed, step, rank)
-    seed: int = 0
-    #: a batch is identities x views x pixels rays (per step, summed over ranks and micro-batches)
-    identities_per_batch: int = 256
-    #: frames drawn per identity (any expression)
-    views_per_identity: int = 8
-    #: pixels drawn per frame
-    pixels_per_view: int = 64
-    #: share of each view's pixels drawn from its foreground (alpha > 0); 0 = uniform over the image
-    foreground_fraction: float = 0.0
-    #: micro-batches per step (gradients summed before the update); the batch is split among them
-    grad_accum: int = 1
-    #: learning rate at step 0 (after the warm-up factor) and at the last step; log-linear in between
-    lr_init: float = 2e-3
-    lr_final: float = 2e-5
-    #: linear warm-up from lr_init * warmup_start over these steps, then exponential decay
-    warmup_steps: int = 2500
-    warmup_start: float = 0.01
-    #: Adam's moment decays and epsilon
-    adam_beta1: float = 0.9
-    adam_beta2: float = 0.999
-    adam_eps: float = 1e-8
-    #: gradient-norm clipping, separately per parameter group (proposal MLP, NeRF MLP, codebook); 0 = off
-    grad_clip: float = 1e-3
-    #: weight of the proposal loss (Cafca: L1 + lambda_prop * L_prop)
-    proposal_weight: float = 1.0
-    #: stage 1 ("with background"): targets are composited over this constant colour (linear RGB) and the
-    #: model renders without a background term, so empty space inside the bounds must get density
-    background: tuple[float, float, float] = (0.5, 0.5, 0.5)
-    #: steps of stage 1; afterwards stage 2 ("without background"): targets over black. 0 = stage 2 only
-    background_steps: int = 50_000
-    #: stage 2 stops as collapsed when the mean opacity over foreground pixels stays below collapse_acc
-    #: for collapse_patience consecutive logged steps
-    collapse_acc: float = 1e-3
-    collapse_patience: int = 5
-    #: steps between log lines / metrics.jsonl entries, and between checkpoints
-    log_every: int = 100
-    checkpoint_every: int = 5000
-    #: TensorBoard preview images (one training view per identity shown) every this many steps; 0 = off
-    preview_every: int = 10_000
-    #: side of the preview images in pixels
-    preview_size: int = 64
-    #: checkpoints kept in RUN/checkpoints (the newest ones)
-    keep_checkpoints: int = 3
-    #: bf16 autocast for the MLPs (CUDA; on CPU only for tests); compositing and losses stay float32
-    bf16: bool = False
-    #: torch.compile the model (off by default; first steps are slow while it compiles)
-    compile: bool = False
-    #: rays per chunk when rendering whole images (previews, ``synth prior render``)
-    render_chunk: int = 4096
+    steps: int = setting(1_000_000, "total optimisation steps (the learning-rate schedule spans them)", SIZE)
+    seed: int = setting(0, "run seed: every random draw (batches, stratified jitter) derives from "
+                        "(seed, step, rank)", SEED)
+    identities_per_batch: int = setting(256, "identities per step (summed over ranks and micro-batches); a "
+                                        "batch has identities x views x pixels rays", SIZE)
+    views_per_identity: int = setting(8, "frames drawn per identity and step (any expression)", SIZE)
+    pixels_per_view: int = setting(64, "pixels (rays) drawn per frame", SIZE)
+    foreground_fraction: float = setting(0.0, "share of each view's pixels drawn from its foreground "
+                                         "(alpha > 0); 0 = uniform over the image", (0.0, 1.0))
+    grad_accum: int = setting(1, "micro-batches per step, gradients summed before the update; it must divide "
+                              "identities_per_batch", SIZE)
+    lr_init: float = setting(2e-3, "learning rate after the warm-up; it decays log-linearly to lr_final at "
+                             "the last step", gt=0.0)
+    lr_final: float = setting(2e-5, "learning rate at the last step (at most lr_init)", gt=0.0)
+    warmup_steps: int = setting(2500, "steps of linear warm-up from lr_init * warmup_start to lr_init",
+                                NONNEG)
+    warmup_start: float = setting(0.01, "learning-rate factor at step 0 of the warm-up", (None, 1.0), gt=0.0)
+    adam_beta1: float = setting(0.9, "Adam's first moment decay", (0.0, None), lt=1.0)
+    adam_beta2: float = setting(0.999, "Adam's second moment decay", (0.0, None), lt=1.0)
+    adam_eps: float = setting(1e-8, "Adam's epsilon", gt=0.0)
+    grad_clip: float = setting(1e-3, "gradient-norm clipping, separately per parameter group (proposal MLP, "
+                               "NeRF MLP, codebook); 0 = off", NONNEG)
+    proposal_weight: float = setting(1.0, "weight of the proposal loss (Cafca: L1 + lambda_prop * L_prop)",
+                                     NONNEG)
+    background: tuple[float, float, float] = setting(
+        (0.5, 0.5, 0.5), "stage 1 (\"with background\"): targets are composited over this constant colour "
+        "(linear RGB) and the model renders without a background term, so empty space inside the bounds must "
+        "get density")
+    background_steps: int = setting(50_000, "steps of stage 1; afterwards stage 2 (\"without background\"): "
+                                    "targets over black. 0 = stage 2 only", NONNEG)
+    collapse_acc: float = setting(1e-3, "stage 2 stops as collapsed when the mean opacity over foreground "
+                                  "pixels stays below this for collapse_patience logged steps", NONNEG)
+    collapse_patience: int = setting(5, "consecutive logged steps below collapse_acc that count as a "
+                                     "collapse", SIZE)
+    log_every: int = setting(100, "steps between log lines and metrics.jsonl entries", SIZE)
+    checkpoint_every: int = setting(5000, "steps between checkpoints", SIZE)
+    preview_every: int = setting(10_000, "steps between TensorBoard preview images (one training view per "
+                                 "identity shown); 0 = off", NONNEG)
+    preview_size: int = setting(64, "side of the preview images in pixels", SIZE)
+    keep_checkpoints: int = setting(3, "checkpoints kept in RUN/checkpoints (the newest ones)", SIZE)
+    bf16: bool = setting(False, "bf16 autocast for the MLPs (CUDA; on CPU only for tests); compositing and "
+                         "losses stay float32")
+    compile: bool = setting(False, "torch.compile the model (first steps are slow while it compiles)")
+    render_chunk: int = setting(4096, "rays per chunk when rendering whole images (previews, "
+                                "`synth prior render`)", SIZE)
 
 
-@dataclass
+@dataclass(frozen=True)
 class RunConfig:
     model: ModelConfig
     sampling: SamplingConfig
@@ -105,7 +95,7 @@ class RunConfig:
     train: TrainConfig = field(default_factory=TrainConfig)
 
     def to_dict(self) -> dict[str, dict[str, Any]]:
-        return {name: _plain(dataclasses.asdict(getattr(self, name))) for name in SECTIONS}
+        return configkit.to_dict(self)
 
     @property
     def rays_per_step(self) -> int:
@@ -113,8 +103,7 @@ class RunConfig:
         return t.identities_per_batch * t.views_per_identity * t.pixels_per_view
 
 
-SECTIONS: dict[str, type] = {"model": ModelConfig, "sampling": SamplingConfig, "data": DataConfig,
-                             "train": TrainConfig}
+SECTIONS: dict[str, type] = configkit.sections(RunConfig)
 
 
 def _small() -> tuple[DataConfig, TrainConfig]:
@@ -138,194 +127,59 @@ def preset(name: str) -> RunConfig:
     return RunConfig(model, sampling, data, train)
 
 
-# --------------------------------------------------------------------------- overrides
+# --------------------------------------------------------------------------- checks and overrides
 
 
-def _plain(v):
-    if isinstance(v, dict):
-        return {k: _plain(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_plain(x) for x in v]
-    return v
-
-
-def _coerce(value: Any, tp, key: str, where: str) -> Any:
-    """``value`` checked against the annotation ``tp`` (int, float, bool, str, tuples of them)."""
-    def bad(expected: str):
-        raise SynthError(f"config value {key} = {value!r} is not {expected}", where, f"write {key} as {expected}")
-
-    origin = typing.get_origin(tp)
-    if origin in (typing.Union, types.UnionType):
-        return _coerce(value, next(a for a in typing.get_args(tp) if a is not type(None)), key, where)
-    if origin is tuple:
-        args = typing.get_args(tp)
-        if not isinstance(value, (list, tuple)):
-            bad("a list")
-        if len(args) == 2 and args[1] is Ellipsis:
-            args = (args[0],) * len(value)
-        elif len(value) != len(args):
-            bad(f"a list of {len(args)} values")
-        return tuple(_coerce(v, a, key, where) for v, a in zip(value, args))
-    if tp is bool:
-        if not isinstance(value, bool):
-            bad("true or false")
-    elif tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            bad("an integer")
-    elif tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value \
-                or abs(value) == float("inf"):
-            bad("a finite number")
-        value = float(value)
-    elif tp is str and not isinstance(value, str):
-        bad("a string (in quotes)")
-    return value
-
-
-def _apply(cfg: RunConfig, data: dict, where: str) -> RunConfig:
-    """A copy of ``cfg`` with ``{section: {key: value}}`` applied (unknown names refused)."""
-    if not isinstance(data, dict):
-        raise SynthError("config must be a table of sections", where, f"sections: {', '.join(SECTIONS)}")
-    out = {name: getattr(cfg, name) for name in SECTIONS}
-    for sec, values in data.items():
-        if sec not in SECTIONS:
-            near = difflib.get_close_matches(sec, list(SECTIONS), n=1)
-            raise SynthError(f"unknown config section '{sec}'", where,
-                             (f"did you mean '{near[0]}'? " if near else "") + f"sections: {', '.join(SECTIONS)}")
-        if not isinstance(values, dict):
-            raise SynthError(f"config section '{sec}' must be a table", where, f"write [{sec}] and key = value lines")
-        hints = typing.get_type_hints(SECTIONS[sec])
-        kw = {}
-        for k, v in values.items():
-            if k not in hints:
-                near = difflib.get_close_matches(k, list(hints), n=1)
-                raise SynthError(f"unknown config key '{sec}.{k}'", where,
-                                 (f"did you mean '{sec}.{near[0]}'? " if near else "")
-                                 + f"keys of [{sec}]: {', '.join(hints)}")
-            kw[k] = _coerce(v, hints[k], f"{sec}.{k}", where)
-        out[sec] = dataclasses.replace(out[sec], **kw)
-    return RunConfig(**out)
-
-
-def parse_set(item: str) -> dict:
-    """``section.key=value`` (value read as TOML, else as a bare string) -> ``{section: {key: value}}``."""
-    lhs, eq, rhs = item.partition("=")
-    if not eq or "." not in lhs:
-        raise SynthError(f"bad override {item!r}", "--set", "write --set section.key=value, e.g. train.steps=200")
-    sec, key = (s.strip() for s in lhs.split(".", 1))
-    try:
-        value = tomllib.loads(f"v = {rhs.strip()}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = rhs.strip()
-    return {sec: {key: value}}
-
-
-def read_toml(path) -> dict:
-    p = Path(path)
-    try:
-        return tomllib.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise SynthError("config file not found", str(p), "check the --config path") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise SynthError(f"config file is not valid TOML: {e}", str(p), "fix the syntax") from None
+def _check_cross(cfg: RunConfig, where: str) -> None:
+    """The rules between fields (the bounds of each field are checked by configkit)."""
+    cfg.model.validate(where)
+    d, t = cfg.data, cfg.train
+    if len(set(d.joints)) != len(d.joints):
+        raise ConfigError(f"config value data.joints = {list(d.joints)} lists a joint twice", where,
+                          "name each joint once")
+    if t.identities_per_batch % t.grad_accum:
+        raise ConfigError(f"config value train.grad_accum = {t.grad_accum} does not divide "
+                          f"train.identities_per_batch = {t.identities_per_batch}", where,
+                          "choose a divisor of identities_per_batch")
+    if t.lr_final > t.lr_init:
+        raise ConfigError(f"config value train.lr_final = {t.lr_final} exceeds train.lr_init = {t.lr_init}", where,
+                          "choose lr_final <= lr_init")
 
 
 def validate(cfg: RunConfig, where: str) -> RunConfig:
-    """Raise a one-line SynthError for values that cannot train."""
-    try:
-        cfg.model.validate()
-        cfg.sampling.validate()
-    except ValueError as e:
-        raise SynthError(f"config: {e}", where, "fix the value") from None
-    d, t = cfg.data, cfg.train
-    checks = [
-        (d.holdout_views >= 0, "data.holdout_views must be >= 0"),
-        (d.bounds_margin >= 0, "data.bounds_margin must be >= 0"),
-        (d.pixel_dtype in ("float16", "float32"), "data.pixel_dtype must be 'float16' or 'float32'"),
-        (len(set(d.joints)) == len(d.joints), "data.joints lists a joint twice"),
-        (t.steps >= 1, "train.steps must be >= 1"),
-        (min(t.identities_per_batch, t.views_per_identity, t.pixels_per_view) >= 1,
-         "train.identities_per_batch, views_per_identity and pixels_per_view must be >= 1"),
-        (0.0 <= t.foreground_fraction <= 1.0, "train.foreground_fraction must lie in [0, 1]"),
-        (t.grad_accum >= 1 and t.identities_per_batch % t.grad_accum == 0,
-         "train.grad_accum must be >= 1 and divide train.identities_per_batch"),
-        (0 < t.lr_final <= t.lr_init, "train.lr_final must lie in (0, lr_init]"),
-        (t.warmup_steps >= 0 and 0 < t.warmup_start <= 1, "train.warmup_steps >= 0, warmup_start in (0, 1]"),
-        (0 <= t.adam_beta1 < 1 and 0 <= t.adam_beta2 < 1 and t.adam_eps > 0, "train.adam_* out of range"),
-        (t.grad_clip >= 0 and t.proposal_weight >= 0, "train.grad_clip and proposal_weight must be >= 0"),
-        (t.background_steps >= 0, "train.background_steps must be >= 0"),
-        (t.collapse_patience >= 1 and t.collapse_acc >= 0, "train.collapse_patience >= 1, collapse_acc >= 0"),
-        (min(t.log_every, t.checkpoint_every, t.keep_checkpoints, t.render_chunk, t.preview_size) >= 1
-         and t.preview_every >= 0, "train.log_every, checkpoint_every, keep_checkpoints, render_chunk, "
-                                   "preview_size must be >= 1 (preview_every >= 0)"),
-        (t.seed >= 0, "train.seed must be >= 0"),
-    ]
-    for ok, msg in checks:
-        if not ok:
-            raise SynthError(f"config: {msg}", where, "fix the value")
+    """Raise a one-line SynthError for values that cannot train (every field, then the rules
+    between them)."""
+    configkit.check(cfg, where)
+    _check_cross(cfg, where)
     return cfg
 
 
 def load(preset_name: str = "small", path=None, sets=()) -> RunConfig:
-    """preset <- TOML file <- ``--set`` overrides, validated."""
-    cfg = preset(preset_name)
-    if path is not None:
-        cfg = _apply(cfg, read_toml(path), str(path))
-    for item in sets:
-        cfg = _apply(cfg, parse_set(item), f"--set {item}")
-    return validate(cfg, "--set" if sets else str(path or f"preset {preset_name}"))
+    """preset <- TOML file <- every ``--set`` override (in order), then validated once."""
+    where = "--set" if sets else str(path or f"preset {preset_name}")
+    return configkit.load(preset(preset_name), path, sets, _check_cross, where)
 
 
 def from_dict(data: dict, where: str) -> RunConfig:
     """A saved config (every section complete) back into a RunConfig."""
     base = RunConfig(ModelConfig(), SamplingConfig(), DataConfig(), TrainConfig())
-    return validate(_apply(base, data, where), where)
+    return validate(configkit.apply(base, data, where), where)
 
 
 def with_sets(cfg: RunConfig, sets, allowed: tuple[str, ...] = tuple(SECTIONS)) -> RunConfig:
     """``cfg`` with ``--set`` overrides, each restricted to the ``allowed`` sections."""
     for item in sets:
-        d = parse_set(item)
-        sec = next(iter(d))
+        sec = next(iter(configkit.parse_override(item)))
         if sec not in allowed:
             raise SynthError(f"cannot change [{sec}] of an existing run", f"--set {item}",
                              f"only {', '.join(allowed)} may change on --resume; start a new run for the rest")
-        cfg = _apply(cfg, d, f"--set {item}")
-    return validate(cfg, "--set")
+    return configkit.load(cfg, None, sets, _check_cross, "--set")
 
 
 def to_toml(cfg: RunConfig) -> str:
-    import tomli_w
-
-    return tomli_w.dumps(cfg.to_dict())
-
-
-def _field_docs(cls) -> dict[str, str]:
-    """The ``#:`` comment lines above each field of a dataclass, joined."""
-    import inspect
-    import re
-
-    docs, pending = {}, []
-    for line in inspect.getsource(cls).splitlines():
-        s = line.strip()
-        if s.startswith("#:"):
-            pending.append(s[2:].strip())
-        elif m := re.match(r"^(\w+)\s*:", s):
-            if pending:
-                docs[m.group(1)] = " ".join(pending)
-            pending = []
-        else:
-            pending = []
-    return docs
+    return configkit.to_toml(cfg)
 
 
 def reference() -> str:
     """A markdown table of every config key: type, small / paper defaults, meaning."""
-    small, paper = preset("small").to_dict(), preset("paper").to_dict()
-    rows = ["| key | type | small | paper | meaning |", "|---|---|---|---|---|"]
-    for sec, cls in SECTIONS.items():
-        hints, docs = typing.get_type_hints(cls), _field_docs(cls)
-        for k in small[sec]:
-            tp = str(hints[k]).replace("typing.", "").replace("<class '", "").replace("'>", "")
-            rows.append(f"| `{sec}.{k}` | {tp} | `{small[sec][k]}` | `{paper[sec][k]}` | {docs.get(k, '')} |")
-    return "\n".join(rows)
+    return configkit.markdown({"small": preset("small"), "paper": preset("paper")})

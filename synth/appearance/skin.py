@@ -64,3 +64,22 @@ def _albedo_cached(melanin: float, haemoglobin: float) -> tuple[float, float, fl
 def skin_albedo(melanin: float, haemoglobin: float) -> tuple[float, float, float]:
     """Linear sRGB albedo for the given melanin / haemoglobin fractions (rounded inputs cache)."""
     return _albedo_cached(round(float(melanin), 4), round(float(haemoglobin), 4))
+
+
+#: Linear sRGB (Rec.709 primaries, D65) -> CIE XYZ, IEC 61966-2-1.
+_SRGB_TO_XYZ = np.array([[0.4124564, 0.3575761, 0.1804375],
+                         [0.2126729, 0.7151522, 0.0721750],
+                         [0.0193339, 0.1191920, 0.9503041]])
+_D65_XYZ = _SRGB_TO_XYZ.sum(axis=1)  # the white (1, 1, 1)
+
+
+def individual_typology_angle(linear_srgb) -> np.ndarray:
+    """The Individual Typology Angle (degrees) of linear sRGB colours (..., 3):
+    ``ITA = arctan((L* - 50) / b*)`` in CIELAB under D65 (the dermatology scale: > 55 very
+    light, 41-55 light, 28-41 intermediate, 10-28 tan, -30-10 brown, < -30 dark)."""
+    xyz = np.asarray(linear_srgb, np.float64) @ _SRGB_TO_XYZ.T / _D65_XYZ
+    eps, kappa = 216.0 / 24389.0, 24389.0 / 27.0
+    f = np.where(xyz > eps, np.cbrt(xyz), (kappa * xyz + 16.0) / 116.0)
+    L = 116.0 * f[..., 1] - 16.0
+    b = 200.0 * (f[..., 1] - f[..., 2])
+    return np.degrees(np.arctan2(L - 50.0, b))

@@ -1,4 +1,5 @@
-"""The asset catalogue (``assets_manifest/``): reading and checking it.
+"""The asset catalogue (``assets_manifest/`` at the repository's top level; ``synth/assets_manifest`` is a
+link to it, so a wheel carries it as package data): reading and checking it.
 
 One TOML file per registered class (``hair.toml``, ``glasses.toml``, ...; the classes are
 :data:`synth.assets.classes.NAMES`) holds the class's ``presence`` probability and its
@@ -35,7 +36,9 @@ MAX_PARAMETERS = 14
 
 
 def default_manifest_dir() -> Path:
-    return Path(__file__).resolve().parents[2] / "assets_manifest"
+    """The catalogue shipped with synth: ``synth/assets_manifest`` (in a checkout a link to the top-level
+    ``assets_manifest/``; in a wheel a copy of it, package data)."""
+    return Path(__file__).resolve().parent.parent / "assets_manifest"
 
 
 @lru_cache(maxsize=1)

@@ -47,7 +47,8 @@ def format_parameter(name: str, spec: dict) -> str:
 def list_cmd(
     cls: Optional[str] = typer.Option(None, "--class", help="Only this asset class."),
     manifest_dir: Optional[Path] = typer.Option(None, "--manifest-dir", "-d",
-                                                help="Catalogue folder (default: the repository's assets_manifest/)."),
+                                                help="Catalogue folder (default: assets_manifest/, "
+                                                     "installed with the package)."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
 ) -> None:
     """List the catalogue's assets: class, id, generator, weight, tags, parameters, licence."""
@@ -89,7 +90,8 @@ def list_cmd(
 @assets_app.command("validate")
 def validate_cmd(
     manifest_dir: Optional[Path] = typer.Option(None, "--manifest-dir", "-d",
-                                                help="Catalogue folder (default: the repository's assets_manifest/)."),
+                                                help="Catalogue folder (default: assets_manifest/, "
+                                                     "installed with the package)."),
     as_json: bool = typer.Option(False, "--json", help="Print the report as JSON."),
 ) -> None:
     """Check every entry: schema, unique ids, all classes present, rule tags, ranges, choices,

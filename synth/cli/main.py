@@ -28,7 +28,22 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
 )
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from synth import __version__
+
+        typer.echo(f"synth {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(version: bool = typer.Option(False, "--version", callback=_print_version, is_eager=True,
+                                       help="Print the version and exit.")) -> None:
+    """Procedural synthetic face data with Blender (Cafca-style), and tools around it."""
 
 
 def _register() -> None:
@@ -40,7 +55,8 @@ def _register() -> None:
 
     for mod, attr in (("synth.cli.config_cmd", "register"), ("synth.cli.plan_cmd", "register"),
                       ("synth.cli.render_cmd", "register"), ("synth.cli.dataset_cmd", "register"),
-                      ("synth.cli.assets_cmd", "register"), ("prior.cli", "register")):
+                      ("synth.cli.assets_cmd", "register"), ("synth.cli.export_cmd", "register"),
+                      ("synth.cli.report_cmd", "register"), ("prior.cli", "register")):
         try:
             m = importlib.import_module(mod)
         except ModuleNotFoundError as e:

@@ -23,6 +23,7 @@ def plan_cmd(
     jobs: Optional[int] = typer.Option(None, "--jobs", "-j", help="Processes (default: up to 4 cores); "
                                        "never changes the output."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print only the plan hash."),
+    as_json: bool = typer.Option(False, "--json", help="Print the plan's hash, counts and summary as JSON."),
 ) -> None:
     """Write the sampling plan: identity and expression codes, joint rotations, assets, cameras
     (K, world_to_camera) and per-frame seeds, one JSON spec per shard, plus a summary."""
@@ -35,6 +36,16 @@ def plan_cmd(
     dt = time.perf_counter() - t0
     if quiet:
         typer.echo(header["plan_hash"])
+        return
+    if as_json:
+        import json
+
+        model = {k: header["model"][k] for k in ("name", "sha256", "path", "identity_dims", "expression_dims")}
+        typer.echo(json.dumps({"out": str(out), "plan_hash": header["plan_hash"], "run_seed": header["run_seed"],
+                               "first_identity": header["first_identity"], "num_identities": header["num_identities"],
+                               "num_frames": header["num_frames"], "num_shards": len(header["shards"]),
+                               "bytes": sum(s["bytes"] for s in header["shards"]), "model": model,
+                               "summary": summ, "seconds": round(dt, 3)}, indent=1))
         return
     from rich.console import Console
     from rich.table import Table

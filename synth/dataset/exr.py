@@ -9,12 +9,15 @@ Channels (one single-part scanline file, sorted by name as OpenEXR stores them):
                            depth, not ray length); ``0.0`` = no surface (background)
 ``normal.X/Y/Z``   HALF    unit surface normal in world space (Blender world: Z up,
                            metres); ``(0, 0, 0)`` = background
-``segmentation.id`` UINT   class ID from :mod:`synth.dataset.segmentation` (0 = background)
+``segmentation.id`` UINT   class ID from :mod:`synth.dataset.segmentation` (0 = background),
+                           the integer itself: not normalised, not a colour
 =================  ======  ==========================================================
 
 The header carries ``chromaticities`` (Rec.709 primaries, D65 white) and
 ``colorInteropID = "lin_rec709_scene"``, the conventions as string attributes
-(``synthFormat``, ``depthConvention``, ``normalConvention``) and any string/int/float
+(``synthFormat``, ``depthConvention``, ``normalConvention``, ``segmentationConvention``),
+the camera as OpenEXR's standard ``worldToCamera`` and ``worldToNDC`` matrices when the
+caller passes them (:func:`camera_attributes`; the worker does), and any string/int/float
 attributes the caller passes (e.g. the frame key). Compression is ZIP (lossless, readable by
 every OpenEXR >= 1.x reader; see docs/frame-format.md for the size/speed comparison).
 
@@ -56,10 +59,15 @@ REC709_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
 COLOR_INTEROP_ID = "lin_rec709_scene"
 DEPTH_CONVENTION = "camera-space z along the optical axis (OpenCV camera, +z forward), metres; 0 = background"
 NORMAL_CONVENTION = "unit normal, world space (Blender world, Z up); 0,0,0 = background"
+SEGMENTATION_CONVENTION = ("UINT class id, the integer itself (not normalised to [0, 1]); 0 = background; "
+                           "ids: synth.dataset.segmentation")
+#: OpenEXR's standard camera attributes (ImfStandardAttributes.h), stored as M44f.
+CAMERA_ATTRIBUTES = ("worldToCamera", "worldToNDC")
 
 _RESERVED = {"channels", "compression", "dataWindow", "displayWindow", "lineOrder", "pixelAspectRatio",
              "screenWindowCenter", "screenWindowWidth", "type", "chromaticities", "colorInteropID",
-             "synthFormat", "depthConvention", "normalConvention", "name", "tiles", "version", "chunkCount"}
+             "synthFormat", "depthConvention", "normalConvention", "segmentationConvention", "name", "tiles",
+             "version", "chunkCount"}
 
 
 def _openexr():
@@ -134,11 +142,19 @@ def encode_frame_exr(rgba, depth, normals, segmentation, header: dict | None = N
         "synthFormat": FORMAT,
         "depthConvention": DEPTH_CONVENTION,
         "normalConvention": NORMAL_CONVENTION,
+        "segmentationConvention": SEGMENTATION_CONVENTION,
     }
     for k, v in (header or {}).items():
         if not isinstance(k, str) or not k or k in _RESERVED:
             raise SynthError(f"EXR header attribute name {k!r} is reserved or invalid", where,
                              "pick another attribute name")
+        if k in CAMERA_ATTRIBUTES:
+            m = np.asarray(v)
+            if m.shape != (4, 4) or m.dtype != np.float32 or not np.isfinite(m).all():
+                raise SynthError(f"EXR header attribute {k!r} must be a finite 4x4 float32 matrix", where,
+                                 "make it with synth.dataset.exr.camera_attributes")
+            hdr[k] = np.ascontiguousarray(m)
+            continue
         if isinstance(v, bool) or not isinstance(v, (str, int, float)):
             raise SynthError(f"EXR header attribute {k!r} has type {type(v).__name__}", where,
                              "pass str, int or float values (put structured data in the frame JSON)")
@@ -146,6 +162,29 @@ def encode_frame_exr(rgba, depth, normals, segmentation, header: dict | None = N
     buf = io.BytesIO()
     OpenEXR.File(hdr, channels).write(buf)
     return buf.getvalue()
+
+
+def camera_attributes(K, world_to_camera, width: int, height: int) -> dict[str, np.ndarray]:
+    """OpenEXR's standard camera attributes of a frame, ready for the ``header`` argument.
+
+    ``worldToCamera`` maps world points to OpenEXR's camera space (x right, y up, z forward,
+    left-handed); ``worldToNDC`` maps them to the image plane with (0, 0) and (1, 1) at its
+    top-left and bottom-right corners (:func:`synth.conventions.exr_world_to_ndc`). Imath
+    multiplies row vectors (``p' = p M``, translation in the last row), so the stored matrices
+    are the transposes of the column-vector ones; :func:`read_camera_attributes` undoes that.
+    """
+    from synth.conventions import exr_world_to_camera, exr_world_to_ndc
+
+    return {"worldToCamera": exr_world_to_camera(world_to_camera).T.astype(np.float32),
+            "worldToNDC": exr_world_to_ndc(K, world_to_camera, width, height).T.astype(np.float32)}
+
+
+def read_camera_attributes(header: dict) -> dict[str, np.ndarray] | None:
+    """The column-vector (4, 4) float64 ``worldToCamera`` and ``worldToNDC`` of a header read by
+    :func:`read_frame_exr` (its ``"header"``), or None when the file has none."""
+    if not all(k in header for k in CAMERA_ATTRIBUTES):
+        return None
+    return {k: np.asarray(header[k], np.float64).reshape(4, 4).T for k in CAMERA_ATTRIBUTES}
 
 
 def write_frame_exr(path, rgba, depth, normals, segmentation, header: dict | None = None, *,
@@ -159,7 +198,8 @@ def write_frame_exr(path, rgba, depth, normals, segmentation, header: dict | Non
       1e10 where no surface was hit) are stored as ``0.0`` = background. NaN or negative: refused.
     - ``normals``: (H, W, 3) world-space unit normals (Blender world, Z up), stored as HALF.
     - ``segmentation``: (H, W) integer class IDs (:mod:`synth.dataset.segmentation`), stored as UINT.
-    - ``header``: extra attributes (str -> str | int | float), e.g. ``{"synthFrameKey": key}``.
+    - ``header``: extra attributes (str -> str | int | float), e.g. ``{"synthFrameKey": key}``,
+      and the camera attributes of :func:`camera_attributes`.
     """
     path = Path(path)
     data = encode_frame_exr(rgba, depth, normals, segmentation, header, where=str(path), compression=compression)
@@ -305,5 +345,6 @@ def pixel_defects(px: dict) -> list[str]:
     return out
 
 
-__all__ = ["CHANNELS", "REC709_CHROMATICITIES", "HALF_MAX", "BACKGROUND_DEPTH", "encode_frame_exr",
-           "write_frame_exr", "read_frame_exr", "decode_frame_exr", "read_frame_exr_header", "pixel_defects"]
+__all__ = ["CHANNELS", "REC709_CHROMATICITIES", "HALF_MAX", "BACKGROUND_DEPTH", "camera_attributes",
+           "encode_frame_exr", "read_camera_attributes", "write_frame_exr", "read_frame_exr", "decode_frame_exr",
+           "read_frame_exr_header", "pixel_defects"]

@@ -195,7 +195,7 @@ CASES = [
     Case("render-out-holds-user-files", lambda d, fx: render_args(d, fx, user_dir(d, fx)), 2,
          "not empty and holds no dataset.json"),
     Case("render-config-not-utf8", a("render", "-n", "1", "--config", f("c.toml", LATIN), "--out", p("out")), 2,
-         "not valid UTF-8"),
+         "not UTF-8"),
     Case("render-config-missing", a("render", "-n", "1", "--config", p("nope.toml"), "--out", p("out")), 2, "nope"),
     Case("render-config-nested", a("render", "-n", "1", "--config", f("c.toml", DEEP_TOML), "--out", p("out")), 2,
          "nested too deeply"),
@@ -226,7 +226,7 @@ CASES = [
     Case("plan-start-negative", a("plan", "-n", "1", "--start", "-1", "--model", m, "--out", p("out")), 2,
          "identity indices"),
     Case("plan-config-not-utf8", a("plan", "-n", "1", "--config", f("c.toml", LATIN), "--out", p("out")), 2,
-         "not valid UTF-8"),
+         "not UTF-8"),
     Case("plan-nul-in-manifest-dir", a("plan", "-n", "1", "--config", f("c.toml", '[assets]\nmanifest_dir = '
                                                                        '"a\\u0000b"\n'), "--out", p("out")), 2,
          "a\\x00b"),

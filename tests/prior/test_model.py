@@ -17,10 +17,9 @@ CODE_DIM = 5
 
 
 def tiny_configs(**model_overrides):
-    model = ModelConfig(scene_radius=0.25, pos_levels=6, dir_levels=2, proposal_depth=2, proposal_width=16,
-                        nerf_depth=3, nerf_width=32, skip_layer=2, bottleneck_width=16, view_width=8)
-    for k, v in model_overrides.items():
-        setattr(model, k, v)
+    model = ModelConfig(**{**dict(scene_radius=0.25, pos_levels=6, dir_levels=2, proposal_depth=2, proposal_width=16,
+                                  nerf_depth=3, nerf_width=32, skip_layer=2, bottleneck_width=16, view_width=8),
+                           **model_overrides})
     return model, SamplingConfig(proposal_samples=(8, 8), nerf_samples=12)
 
 

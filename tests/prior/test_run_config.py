@@ -36,17 +36,50 @@ def test_presets_and_override_order(tmp_path):
     (["train.background=[1, 2]"], "list of 3"),
     (["train.bf16=1"], "true or false"),
     (["steps=3"], "bad override"),
-    (["train.steps=0"], "train.steps must be >= 1"),
+    (["train.steps=0"], "train.steps = 0 must be >= 1"),
     (["train.lr_final=1.0"], "lr_final"),
-    (["train.grad_accum=3"], "divide train.identities_per_batch"),
+    (["train.grad_accum=3"], "does not divide train.identities_per_batch"),
     (["data.pixel_dtype=float64"], "pixel_dtype"),
     (["model.skip_layer=9"], "skip_layer"),
-    (["sampling.nerf_samples=1"], "at least 2"),
+    (["sampling.nerf_samples=1"], "nerf_samples = 1 must be >= 2"),
+    (["sampling.proposal_samples=[8, 1]"], "proposal_samples = 1 must be >= 2"),
+    (["train.adam_beta1=1.0"], r"adam_beta1 = 1.0 is out of range \[0.0, 1.0\)"),
+    (["data.joints=['jaw', 'jaw']"], "lists a joint twice"),
 ])
 def test_bad_values_are_one_line_errors(sets, match):
     with pytest.raises(SynthError, match=match) as e:
         rc.load("small", None, sets)
     assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("order", [1, -1])
+def test_override_order_does_not_matter(order):
+    """Each state along the way may break a rule between keys; only the final one is judged."""
+    sets = ["train.lr_final=0.01", "train.lr_init=0.1", "train.identities_per_batch=6", "train.grad_accum=3",
+            "model.skip_layer=5", "model.nerf_depth=6"][::order]
+    cfg = rc.load("small", None, sets)
+    assert (cfg.train.lr_init, cfg.train.lr_final, cfg.train.grad_accum) == (0.1, 0.01, 3)
+    assert (cfg.model.skip_layer, cfg.model.nerf_depth) == (5, 6)
+    with pytest.raises(SynthError, match=r"lr_final = 0.5 exceeds train.lr_init = 0.1 \(--set\)"):
+        rc.load("small", None, [*sets, "train.lr_final=0.5"])
+
+
+def test_seeds_are_bounded_like_every_seed_of_the_project():
+    assert rc.load("small", None, [f"model.init_seed={2**64 - 1}", f"train.seed={2**64 - 1}"]).train.seed == 2**64 - 1
+    for key in ("model.init_seed", "train.seed"):
+        with pytest.raises(SynthError, match=rf"{key} = {2**64} is out of range"):
+            rc.load("small", None, [f"{key}={2**64}"])
+
+
+def test_model_configs_refuse_bad_sizes_as_value_errors():
+    from prior.config import ModelConfig, SamplingConfig
+
+    with pytest.raises(ValueError, match="model.nerf_width = 0 must be >= 1"):
+        ModelConfig(nerf_width=0).validate()
+    with pytest.raises(ValueError, match="must lie below model.nerf_depth"):
+        ModelConfig(skip_layer=8).validate()
+    with pytest.raises(ValueError, match="sampling.nerf_samples = 1 must be >= 2"):
+        SamplingConfig(nerf_samples=1).validate()
 
 
 def test_errors_in_files_and_presets(tmp_path):
@@ -61,6 +94,11 @@ def test_errors_in_files_and_presets(tmp_path):
     bad.write_text("train = 3\n")
     with pytest.raises(SynthError, match="must be a table"):
         rc.load("small", bad)
+    bad.write_bytes(b"[train]\nsteps = 3 # \xe9\n")
+    with pytest.raises(SynthError, match="not UTF-8"):
+        rc.load("small", bad)
+    with pytest.raises(SynthError, match="not found"):
+        rc.load("small", tmp_path)  # a directory
 
 
 def test_resume_may_change_only_train():
@@ -74,3 +112,4 @@ def test_docs_list_every_key():
     text = DOCS.read_text(encoding="utf-8")
     for line in rc.reference().splitlines()[2:]:
         assert line.split("|")[1].strip() in text, line
+    assert rc.reference() in text, "docs/prior.md's config table is stale: regenerate it"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from synth.assets.classes import RECORD_ORDER
-from synth.dataset.exr import CHANNELS
+from synth.dataset.exr import CHANNELS, camera_attributes
 from synth.dataset.layout import frame_key, parse_frame_key, shard_name
 
 
@@ -77,5 +77,8 @@ def render_dataset(ds, size: int = 16, shards=None) -> None:
             done = st.frames_done()
             for key in st.expected_keys:
                 if key not in done:
-                    st.write_frame(key, *pixels(key, size), frame_json(key, size))
+                    fj = frame_json(key, size)
+                    cam = fj["camera"]
+                    st.write_frame(key, *pixels(key, size), fj,
+                                   exr_header=camera_attributes(cam["K"], cam["world_to_camera"], size, size))
             st.commit(manifest_extra={"seeds": {"run": 0}, "versions": {"blender": "none"}})

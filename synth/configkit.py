@@ -1,0 +1,343 @@
+"""Typed dataclass configs with documented fields, presets, TOML files and ``--set`` overrides.
+
+A *config* is a frozen dataclass whose fields are *sections*; a section is a frozen dataclass
+whose fields are declared with :func:`setting` (default, one-line doc, optional bounds and
+choices). This module is the one home of the machinery both the renderer's config
+(:mod:`synth.config`) and the prior's (:mod:`prior.config`, :mod:`prior.train.config`) use:
+
+- :func:`coerce`: a value checked against a type hint (``int``, ``float``, ``bool``, ``str``,
+  ``X | None``, fixed tuples and ``tuple[X, ...]``) and the field's bounds and choices;
+- :func:`read_toml` and :func:`parse_override` (``section.key=value``, the value read as TOML,
+  else as a bare string), each failure one line;
+- :func:`apply`: ``{section: {key: value}}`` onto a config (unknown names refused with a
+  did-you-mean);
+- :func:`load`: base <- TOML file <- every ``--set`` in order, *then* the field checks and the
+  config's own cross-field rules, once; so the order of ``--set`` flags never matters;
+- :func:`to_dict`, :func:`to_toml`, :func:`reference` and :func:`markdown` for the saved form,
+  ``synth config show`` and the docs tables.
+
+Bounds are inclusive (``range=(low, high)``, ``None`` = unbounded) unless given as ``gt`` /
+``lt`` (exclusive); on a tuple they apply to every number. A numeric pair is a ``[low, high]``
+interval (low <= high) unless declared ``ordered=False``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import tomllib
+import types
+import typing
+from pathlib import Path
+from typing import Any, Callable
+
+from synth.errors import SynthError
+
+#: config files larger than this are refused before parsing (a config is a few KiB)
+MAX_FILE_BYTES = 1 << 20
+
+
+class ConfigError(SynthError, ValueError):
+    """A refused config value: one line for the CLI (exit 2), a ValueError for library callers."""
+
+
+def setting(default, doc: str, range=None, *, gt=None, lt=None, choices=None,  # noqa: A002 - metadata key
+            ordered: bool = True) -> Any:
+    """A documented dataclass field.
+
+    ``range=(low, high)``: inclusive bounds (either may be None); ``gt`` / ``lt``: exclusive
+    bounds instead. ``choices``: the allowed values (of every element, for a tuple).
+    ``ordered=False``: a numeric pair is not an interval (e.g. a resolution)."""
+    lo, hi = range if range is not None else (None, None)
+    if (gt is not None and lo is not None) or (lt is not None and hi is not None):
+        raise TypeError("give each bound once: range=(low, high) or gt=/lt=")
+    md: dict[str, Any] = {"doc": doc, "ordered": ordered}
+    if any(b is not None for b in (lo, hi, gt, lt)):
+        md["range"] = (gt if gt is not None else lo, lt if lt is not None else hi)
+        md["open"] = (gt is not None, lt is not None)
+    if choices is not None:
+        md["choices"] = tuple(choices)
+    if isinstance(default, (list, tuple)):
+        return dataclasses.field(default_factory=lambda d=tuple(default): d, metadata=md)
+    return dataclasses.field(default=default, metadata=md)
+
+
+def sections(config_cls: type) -> dict[str, type]:
+    """Section name -> section dataclass, in declaration order."""
+    hints = typing.get_type_hints(config_cls)
+    return {f.name: hints[f.name] for f in dataclasses.fields(config_cls)}
+
+
+# --------------------------------------------------------------------------- values
+
+
+def type_name(tp) -> str:
+    """``int``, ``float | None``, ``tuple[float, float]``, ``tuple[str, ...]``."""
+    return tp.__name__ if isinstance(tp, type) else str(tp).replace("typing.", "")
+
+
+def _interval(md: dict) -> tuple[str, str, str]:
+    """The bounds of a field as (doc note, what is wrong, what to do): ``range 0 .. 1``,
+    ``range >= 1``, ``range 0 < x <= 1``."""
+    (lo, hi), (lo_open, hi_open) = md["range"], md["open"]
+    if lo is not None and hi is not None:
+        if not (lo_open or hi_open):
+            return f"range {lo} .. {hi}", f"is out of range [{lo}, {hi}]", f"choose a value between {lo} and {hi}"
+        cond = f"{lo} {'<' if lo_open else '<='} x {'<' if hi_open else '<='} {hi}"
+        interval = f"{'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}"
+        return f"range {cond}", f"is out of range {interval}", f"choose a value in {interval}"
+    cond = f"{'>' if lo_open else '>='} {lo}" if lo is not None else f"{'<' if hi_open else '<='} {hi}"
+    return f"range {cond}", f"must be {cond}", f"choose a value {cond}"
+
+
+def _in_bounds(value, md: dict) -> bool:
+    (lo, hi), (lo_open, hi_open) = md["range"], md["open"]
+    return ((lo is None or (value > lo if lo_open else value >= lo))
+            and (hi is None or (value < hi if hi_open else value <= hi)))
+
+
+def coerce(value: Any, tp, key: str, md: dict | None = None, where: str | None = None) -> Any:
+    """``value`` checked against the type hint ``tp`` and the field metadata ``md`` (bounds,
+    choices, ordered pairs); returns the typed value (lists become tuples, ints in a float
+    field become floats). Raises :class:`ConfigError` naming ``key``."""
+    md = md or {}
+    origin = typing.get_origin(tp)
+
+    def bad(what: str, fix: str):
+        raise ConfigError(f"config value {key} = {value!r} {what}", where, fix)
+
+    if origin in (typing.Union, types.UnionType):
+        if value is None:
+            return None
+        return coerce(value, next(a for a in typing.get_args(tp) if a is not type(None)), key, md, where)
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if not isinstance(value, (list, tuple)):
+            bad("is not a list", f"write it as a list, e.g. {key}=[...]")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(coerce(v, args[0], key, md, where) for v in value)
+        if len(value) != len(args):
+            bad(f"is not a list of {len(args)} values", f"write [{', '.join(type_name(a) for a in args)}]")
+        items = tuple(coerce(v, a, key, md, where) for v, a in zip(value, args))
+        if len(args) == 2 and md.get("ordered", True) and args[0] in (int, float) and items[0] > items[1]:
+            bad("is an empty range (low > high)", "give [low, high] with low <= high")
+        return items
+    if tp is bool:
+        if not isinstance(value, bool):
+            bad("is not true or false", "write true or false")
+    elif tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            bad("is not an integer", "write a whole number")
+    elif tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            bad("is not a number", "write a number")
+        try:
+            value = float(value)
+        except OverflowError:
+            value = math.inf
+        if not math.isfinite(value):
+            bad("is not a finite number", "write a finite number")
+    elif tp is str:
+        if not isinstance(value, str):
+            bad("is not a string", "write it in quotes")
+    if "range" in md and tp in (int, float) and not _in_bounds(value, md):
+        bad(*_interval(md)[1:])
+    if "choices" in md and value not in md["choices"]:
+        bad("is not allowed", f"choose one of {', '.join(map(str, md['choices']))}")
+    return value
+
+
+def check(cfg: Any, where: str | None) -> None:
+    """Every field of every section of ``cfg`` (however it was built) checked by :func:`coerce`."""
+    for name in sections(type(cfg)):
+        check_section(getattr(cfg, name), name, where)
+
+
+def check_section(section: Any, name: str, where: str | None) -> None:
+    """Every field of one section (named ``name`` in messages) checked by :func:`coerce`."""
+    hints = typing.get_type_hints(type(section))
+    for f in dataclasses.fields(section):
+        coerce(getattr(section, f.name), hints[f.name], f"{name}.{f.name}", dict(f.metadata), where)
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def _did_you_mean(name: str, known: list[str], prefix: str = "") -> str:
+    near = difflib.get_close_matches(name, known, n=1)
+    return f"did you mean '{prefix}{near[0]}'? " if near else ""
+
+
+def apply(cfg: Any, data: Any, where: str) -> Any:
+    """A copy of ``cfg`` with ``{section: {key: value}}`` applied, each value coerced and checked
+    on its own (cross-field rules are the caller's, after the last override)."""
+    known = sections(type(cfg))
+    if not isinstance(data, dict):
+        raise ConfigError("config must be a table of sections", where, f"sections: {', '.join(known)}")
+    out = {name: getattr(cfg, name) for name in known}
+    for sec, values in data.items():
+        if sec not in known:
+            raise ConfigError(f"unknown config section '{sec}'", where,
+                              f"{_did_you_mean(sec, list(known))}known sections: {', '.join(known)}")
+        if not isinstance(values, dict):
+            raise ConfigError(f"config section '{sec}' must be a table", where, f"write [{sec}] and key = value lines")
+        fields = {f.name: f for f in dataclasses.fields(known[sec])}
+        hints = typing.get_type_hints(known[sec])
+        kw = {}
+        for k, v in values.items():
+            if k not in fields:
+                raise ConfigError(f"unknown config key '{sec}.{k}'", where,
+                                  f"{_did_you_mean(k, list(fields), f'{sec}.')}known keys in [{sec}]: "
+                                  f"{', '.join(fields)}")
+            kw[k] = coerce(v, hints[k], f"{sec}.{k}", dict(fields[k].metadata), where)
+        out[sec] = dataclasses.replace(out[sec], **kw)
+    return dataclasses.replace(cfg, **out)
+
+
+def parse_override(item: str, example: str | None = None) -> dict[str, dict[str, Any]]:
+    """``section.key=value`` -> ``{section: {key: value}}``; the value is read as TOML, else
+    taken as a bare string (``--set render.preset=ci``). ``example``: shown in the refusal."""
+    lhs, eq, rhs = item.partition("=")
+    if not eq or "." not in lhs:
+        raise ConfigError(f"bad override '{item}'", "--set",
+                          "write --set section.key=value" + (f", e.g. {example}" if example else ""))
+    sec, key = (s.strip() for s in lhs.split(".", 1))
+    try:
+        value = tomllib.loads(f"v = {rhs.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = rhs.strip()
+    except RecursionError:
+        raise ConfigError("override value is nested too deeply", f"--set {sec}.{key}", "write a flat value") from None
+    return {sec: {key: value}}
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """A TOML config file as a dict; a missing, unreadable, oversized, non-UTF-8 or malformed
+    file is one :class:`ConfigError` line."""
+    p = Path(path)
+    where = str(p)
+    try:
+        found = p.is_file()
+        size = p.stat().st_size if found else 0
+        raw = p.read_bytes() if found and size <= MAX_FILE_BYTES else b""
+    except (OSError, ValueError) as err:  # ValueError: a NUL byte in the path
+        raise ConfigError(f"config file cannot be read: {getattr(err, 'strerror', None) or err}", where,
+                          "check the --config path and its permissions") from None
+    if not found:
+        raise ConfigError("config file not found", where, "check the --config path")
+    if size > MAX_FILE_BYTES:
+        raise ConfigError(f"config file is larger than {MAX_FILE_BYTES} bytes", where,
+                          "pass a TOML config file (a few KiB)")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"config file is not UTF-8 text (byte {err.start})", where,
+                          "save it as UTF-8 TOML") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"config file is not valid TOML: {err}", where, "fix the syntax") from None
+    except RecursionError:
+        raise ConfigError("config file is not valid TOML: nested too deeply", where, "fix the syntax") from None
+
+
+def _example(cfg: Any) -> str:
+    """``section.key=value`` of the config's first key, for refusals of malformed overrides."""
+    sec = next(iter(sections(type(cfg))))
+    f = dataclasses.fields(getattr(cfg, sec))[0]
+    return f"{sec}.{f.name}={_scalar_toml(getattr(getattr(cfg, sec), f.name))}"
+
+
+def load(base: Any, path: str | Path | None = None, overrides=(),
+         cross_check: Callable[[Any, str], None] | None = None, where: str | None = None) -> Any:
+    """``base`` <- TOML file <- every ``--set`` override, in order; *then* every field and the
+    cross-field rules ``cross_check(cfg, where)`` are checked once, so no intermediate state is
+    judged and the order of overrides does not matter. ``where`` names the final state in
+    errors (default: ``--set`` if there are overrides, else the file)."""
+    cfg = base
+    if path is not None:
+        cfg = apply(cfg, read_toml(path), str(path))
+    for item in overrides:
+        cfg = apply(cfg, parse_override(item, _example(cfg)), f"--set {item}")
+    where = where or ("--set" if overrides else str(path) if path is not None else "defaults")
+    check(cfg, where)
+    if cross_check is not None:
+        cross_check(cfg, where)
+    return cfg
+
+
+# --------------------------------------------------------------------------- output
+
+
+def _plain(v):
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    return v
+
+
+def to_dict(cfg: Any, drop_none: bool = True) -> dict[str, dict[str, Any]]:
+    """Nested plain dict (tuples as lists); unset (None) values dropped unless ``drop_none=False``."""
+    out: dict[str, dict[str, Any]] = {}
+    for sec in sections(type(cfg)):
+        s = getattr(cfg, sec)
+        values = ((f.name, getattr(s, f.name)) for f in dataclasses.fields(s))
+        out[sec] = {k: _plain(v) for k, v in values if v is not None or not drop_none}
+    return out
+
+
+def _scalar_toml(v: Any) -> str:
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_scalar_toml(x) for x in v) + "]"
+    import tomli_w
+
+    return tomli_w.dumps({"v": v})[4:].rstrip("\n")
+
+
+def to_toml(cfg: Any) -> str:
+    """TOML text of a config, one line per key (unset values omitted); :func:`read_toml` and
+    :func:`apply` read it back to the same config."""
+    blocks = []
+    for sec, values in to_dict(cfg).items():
+        blocks.append(f"[{sec}]\n" + "".join(f"{k} = {_scalar_toml(v)}\n" for k, v in values.items()))
+    return "\n".join(blocks)
+
+
+def meaning(md) -> str:
+    """A field's doc with its bounds and choices."""
+    doc = md.get("doc", "")
+    if "range" in md:
+        doc += f" [{_interval(md)[0]}]"
+    if "choices" in md:
+        doc += f" [one of: {', '.join(map(str, md['choices']))}]"
+    return doc
+
+
+def _shown(v) -> str:
+    return "unset" if v is None else repr(_plain(v))
+
+
+def reference(columns: dict[str, Any]) -> list[tuple[str, ...]]:
+    """(key, type, one value per column, meaning) for every field; ``columns`` maps a column
+    title to a config (all of one class), e.g. ``{"default": Config()}``."""
+    cfgs = list(columns.values())
+    rows = []
+    for sec, cls in sections(type(cfgs[0])).items():
+        hints = typing.get_type_hints(cls)
+        for f in dataclasses.fields(cls):
+            values = tuple(_shown(getattr(getattr(c, sec), f.name)) for c in cfgs)
+            rows.append((f"{sec}.{f.name}", type_name(hints[f.name]), *values, meaning(f.metadata)))
+    return rows
+
+
+def markdown(columns: dict[str, Any]) -> str:
+    """The markdown table of :func:`reference` (``|`` in a cell escaped)."""
+    def cell(s: str) -> str:
+        return s.replace("|", "\\|")
+
+    head = ["key", "type", *columns, "meaning"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for key, tp, *values, doc in reference(columns):
+        shown = " | ".join(f"`{cell(v)}`" for v in values)
+        lines.append(f"| `{key}` | {cell(tp)} | {shown} | {cell(doc)} |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,37 @@
+"""Which frames an export covers, and where it may write."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from synth.dataset.layout import parse_frame_key
+from synth.dataset.reader import FrameRef, list_frames
+from synth.errors import SynthError
+
+
+def select_frames(source, *, shards: list[str] | None = None, identity: int | None = None,
+                  expression: int | None = None) -> list[FrameRef]:
+    """The committed frames of a dataset (or the frames of one shard directory), optionally only
+    those of some shards, one identity and/or one expression index, sorted by (shard, key)."""
+    refs = list_frames(source, shards=shards)
+    out = []
+    for r in refs:
+        i, e, _ = parse_frame_key(r.key)
+        if (identity is None or i == identity) and (expression is None or e == expression):
+            out.append(r)
+    if not out:
+        what = ", ".join(f"{n} {v}" for n, v in (("identity", identity), ("expression", expression)) if v is not None)
+        raise SynthError(f"no committed frames{' of ' + what if what else ''}", str(source),
+                         "check the indices (synth report DIR lists what is committed), or render first")
+    return out
+
+
+def check_new_output(out: Path, what: str) -> None:
+    """An export writes into a new (or empty) path only: it never mixes with older files."""
+    out = Path(out)
+    if out.is_dir() and any(out.iterdir()):
+        raise SynthError(f"{what} output directory is not empty", str(out), "pass a new or empty --out")
+    if out.exists() and not out.is_dir():
+        raise SynthError(f"{what} output exists and is not a directory", str(out), "pass a new --out directory")
+    if not out.parent.is_dir():
+        raise SynthError(f"the parent of the {what} output does not exist", str(out.parent), "create it first")

@@ -1,0 +1,139 @@
+"""The built meshes of an identity's shell assets, per expression, for the USD export.
+
+The render worker builds every asset in Blender from numpy geometry (:mod:`synth.assets.fit`)
+fitted to the identity's neutral head, and re-fits it at each expression. The meshes of the
+classes whose geometry *is* that numpy (garments and headwear: fitted shells; glasses: the
+frame and lenses posed by contact) are rebuilt here the same way, from the plan's choice, the
+rig's seed (:func:`synth.assets.classes.rig_rng`) and the head model, and checked against what
+the render recorded (vertex and face counts). Not rebuilt, and said so in the result:
+
+- strand classes (hair, beard, eyebrows, eyelashes): Blender's Geometry Nodes style their
+  curves at render time (clump, frizz), so the numpy strands are not what was rendered;
+- shader layers (skin, iris, makeup): no geometry of their own (they colour the head);
+- assets from external ``.blend`` packs: their meshes live in Blender files.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from synth.assets.classes import CLASSES, RECORD_ORDER, rig_rng
+
+
+@dataclass
+class AssetMesh:
+    """One mesh of a built asset: triangles per expression (topology may change per expression)."""
+
+    cls: str
+    name: str
+    segmentation_id: int
+    points: list[np.ndarray] = field(default_factory=list)  # per expression, (n, 3) metres
+    faces: list[np.ndarray] = field(default_factory=list)  # per expression, (m, 3) int
+
+
+@dataclass
+class HeadPose:
+    """The head at one expression: what a rig reads."""
+
+    vertices: np.ndarray
+    landmarks: dict[str, np.ndarray]
+
+
+def _entry(record: dict) -> dict:
+    return {k: v for k, v in record.items() if k != "build"}
+
+
+def _shell(module: str, cls: str, data, rest: HeadPose, poses: list[HeadPose], record: dict, run_seed: int,
+           identity: int):
+    """A fitted shell (``synth.assets.fit.<module>``: ``<module>_shell`` and ``CLEARANCE``), as
+    ``blender_scripts/assets/garment.py`` builds it."""
+    import importlib
+
+    from synth.assets.fit.body import Body, fit_shell
+
+    fit = importlib.import_module(f"synth.assets.fit.{module}")
+    make, CLEARANCE = getattr(fit, f"{module}_shell"), fit.CLEARANCE
+    body = Body(rest.vertices, data.triangles, data.regions, rest.landmarks["ibug68"])
+    fitted = fit_shell(body, make(body, _entry(record), rig_rng(run_seed, identity, cls)), CLEARANCE)
+    built = record.get("build") or {}
+    for k in ("vertices", "faces"):
+        if k in built and built[k] != fitted.info.get(k):
+            return None, f"rebuilt {k} {fitted.info.get(k)} differ from the render's {built[k]}"
+    mesh = AssetMesh(cls, fitted.name, CLASSES[cls].segmentation_id)
+    for p in poses:
+        mesh.points.append(fitted.follow(p.vertices, data.triangles))
+        mesh.faces.append(np.asarray(fitted.F, np.int64))
+    return [mesh], None
+
+
+def _close(a, b, atol: float = 1e-5) -> bool:
+    """Recorded numbers (rounded, through JSON) against rebuilt ones."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_close(a[k], b[k], atol) for k in a)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_close(x, y, atol) for x, y in zip(a, b))
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool):
+        return abs(float(a) - float(b)) <= atol
+    return a == b
+
+
+def _glasses(cls: str, data, rest: HeadPose, poses: list[HeadPose], record: dict, run_seed: int, identity: int):
+    from synth.assets.fit.glasses.front import build_front
+    from synth.assets.fit.glasses.solve import FRAME_PARTS, fit_glasses
+    from synth.assets.fit.glasses.spec import frame_spec
+
+    entry = _entry(record)
+    spec = frame_spec(str(entry["id"]), dict(entry.get("params") or {}), rig_rng(run_seed, identity, "glasses"))
+    front = build_front(spec)
+    recorded = (record.get("build") or {}).get("pose")
+    rebuilt = fit_glasses(rest.vertices, data.triangles, data.regions, rest.landmarks, spec, front=front).info["pose"]
+    if recorded is not None and not _close(recorded, rebuilt):
+        return None, "the rebuilt pose on the neutral head differs from the render's record"
+    sid = CLASSES["glasses"].segmentation_id
+    frame, lenses = AssetMesh("glasses", "glasses_frame", sid), AssetMesh("glasses", "glasses_lenses", sid)
+    for p in poses:
+        fit = fit_glasses(p.vertices, data.triangles, data.regions, p.landmarks, spec, front=front)
+        for mesh, keys in ((frame, FRAME_PARTS), (lenses, ("lens",))):
+            parts = [fit.parts[k] for k in keys if k in fit.parts and len(fit.parts[k][0])]
+            offsets = np.cumsum([0] + [len(V) for V, _ in parts])
+            mesh.points.append(np.concatenate([np.asarray(V, np.float64) for V, _ in parts]))
+            mesh.faces.append(np.concatenate([np.asarray(F, np.int64) + o for (_, F), o in zip(parts, offsets)]))
+    return [frame, lenses], None
+
+
+#: procedural generator -> how its geometry is rebuilt (synth.assets.classes lists the generators)
+REBUILD = {
+    "garment_shell": lambda *a: _shell("garment", *a),
+    "headwear_shell": lambda *a: _shell("headwear", *a),
+    "glasses_frame": _glasses,
+}
+
+
+def asset_meshes(data, rest: HeadPose, poses: list[HeadPose], assets: dict, run_seed: int | None,
+                 identity: int) -> tuple[list[AssetMesh], dict[str, str]]:
+    """(meshes, skipped class -> why) for the frame JSON's ``assets`` record of one identity;
+    ``poses`` are the head at each exported expression, ``rest`` the neutral head."""
+    meshes: list[AssetMesh] = []
+    skipped: dict[str, str] = {}
+    for cls in RECORD_ORDER:
+        rec = assets.get(cls)
+        if not rec:
+            continue
+        gen = str(rec.get("generator", ""))
+        if not gen.startswith("procedural:"):
+            skipped[cls] = "from an external pack (its mesh lives in a .blend file)"
+        elif CLASSES[cls].shader_layer:
+            skipped[cls] = "a shader layer on the head (no geometry of its own)"
+        elif gen.removeprefix("procedural:") not in REBUILD:
+            skipped[cls] = "made in Blender (strands: styled by Geometry Nodes at render time); not rebuilt"
+        elif run_seed is None:
+            skipped[cls] = "the plan (DIR/plan) is missing, so the rig's seed is unknown"
+        else:
+            out, why = REBUILD[gen.removeprefix("procedural:")](cls, data, rest, poses, rec, run_seed, identity)
+            if out is None:
+                skipped[cls] = why
+            else:
+                meshes.extend(out)
+    return meshes, skipped
