@@ -30,8 +30,8 @@ def check_counts(cfg: Config, first_identity: int, n_identities: int) -> None:
     if n_identities < 1:
         raise SynthError(f"--identities must be at least 1, got {n_identities}", "--identities", "plan one or more")
     if first_identity < 0 or first_identity + n_identities > 1_000_000:
-        raise SynthError("identity indices must lie in [0, 1000000) (frame keys have 6 digits)", "--start",
-                         "plan fewer identities")
+        raise SynthError("identity indices must lie in [0, 1000000) (frame keys have 6 digits)",
+                         "--identities, --start", "plan fewer identities")
     if d.expressions_per_identity > 100 or d.views_per_expression > 100:
         raise SynthError("expressions_per_identity and views_per_expression must be at most 100 (frame keys have "
                          "2 digits)", "dataset", "lower them")
