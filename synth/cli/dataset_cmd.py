@@ -73,8 +73,23 @@ def _finish(rep) -> None:
     from synth.dataset.validate import DefectsFound
 
     if not rep.ok:
-        raise DefectsFound(f"{len(rep.defects)} defect(s) found", rep.root,
-                           "re-render the affected shards (delete them from shards/ and rerun the render)")
+        raise DefectsFound(f"{len(rep.defects)} defect(s) found", rep.root, _fix(rep))
+
+
+def _fix(rep) -> str:
+    """What to do about the kinds of defect found."""
+    kinds = {d.kind for d in rep.defects}
+    fixes = []
+    if kinds & {"unexpected-entry", "unexpected-shard"}:
+        fixes.append("move away what does not belong to the dataset (listed above)")
+    if "index" in kinds:
+        fixes.append("for the index lines, --repair-index signs the manifests as they are now (only if you trust "
+                     "them)")
+    if kinds == {"missing-shard"}:
+        fixes.append("rerun the render to commit the missing shards")
+    elif kinds - {"unexpected-entry", "unexpected-shard", "index"}:
+        fixes.append("re-render the affected shards (delete them from shards/ and rerun the render)")
+    return "; ".join(fixes)
 
 
 def preview_cmd(

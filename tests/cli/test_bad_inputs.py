@@ -273,6 +273,23 @@ CASES = [
     # synth assets
     Case("assets-validate-missing-dir", a("assets", "validate", "--manifest-dir", p("nope")), 2, "not found"),
     Case("assets-list-dir-is-a-file", a("assets", "list", "--manifest-dir", f("am", "x")), 2, ""),
+    # synth export
+    Case("export-nerfstudio-missing", a("export", "nerfstudio", p("nope"), "-o", p("ns")), 2, "not a dataset"),
+    Case("export-nerfstudio-out-not-empty", a("export", "nerfstudio", ds_with(lambda r: None), "-o", user_dir), 2,
+         "not empty"),
+    Case("export-nerfstudio-no-such-identity", a("export", "nerfstudio", ds_with(lambda r: None), "-i", "99", "-o",
+                                                 p("ns")), 2, "no committed frames of identity 99"),
+    Case("export-usd-bad-extension", a("export", "usd", ds_with(lambda r: None), "-o", p("x.txt")), 2,
+         "USD file name"),
+    Case("export-usd-unknown-shard", a("export", "usd", ds_with(lambda r: None), "-s", "shard_000009", "-o",
+                                       p("x.usda")), 2, "shard_000009"),
+    # synth report
+    Case("report-missing", a("report", p("nope")), 2, "not found"),
+    Case("report-a-file", a("report", f("afile", "x")), 2, "not a directory"),
+    Case("report-index-damaged", a("report", ds_with(bad_index_entry), "-o", p("r.html")), 2, "index.json"),
+    Case("report-max-shards-zero", a("report", ds_with(lambda r: None), "--max-shards", "0"), 2, "--max-shards"),
+    Case("report-out-dir-missing", a("report", ds_with(lambda r: None), "-o", p("nodir/r.html")), 2,
+         "cannot write the report"),
     # synth prior
     Case("prior-info-missing", a("prior", "info", p("nope")), 2, ""),
     Case("prior-render-missing", a("prior", "render", p("nope"), "-i", "0", "-e", "0", "-o", p("o")), 2, ""),
@@ -301,7 +318,7 @@ def fx(tmp_path_factory) -> Fixtures:
 def test_the_table_covers_every_subcommand():
     assert len(CASES) >= 40 and len({c.id for c in CASES}) == len(CASES)
     heads = {c.id.split("-")[0] for c in CASES}
-    assert heads >= {"render", "plan", "validate", "preview", "config", "model", "assets", "prior"}
+    assert heads >= {"render", "plan", "validate", "preview", "config", "model", "assets", "prior", "export", "report"}
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
