@@ -211,9 +211,9 @@ class StagingShard:
         Checks that exactly the planned frames are present (``expected_keys``, when given, must
         equal the plan's), fsyncs every file, writes ``manifest.json`` (frames, sha256 and size of
         every file, plan hash, versions, plus ``manifest_extra`` such as seeds), then, under the
-        dataset lock, signs the manifest into the index and renames the staging directory to
-        ``shards/<id>`` (:func:`synth.dataset.index.commit_shard`). Nothing is committed when
-        anything is missing.
+        dataset lock, signs the manifest (its commit record), renames the staging directory to
+        ``shards/<id>`` and adds the shard to ``index.json``
+        (:func:`synth.dataset.index.commit_shard`). Nothing is committed when anything is missing.
         """
         self._need_lock()
         where = str(self.dir)
@@ -261,7 +261,7 @@ class StagingShard:
         target = self.target
         target.parent.mkdir(exist_ok=True)
 
-        def rename() -> None:  # under the dataset lock, after the index signed the manifest
+        def rename() -> None:  # under the dataset lock, after the commit record signed the manifest
             if os.path.lexists(target):
                 raise ShardCommitted(f"shard {self.shard_id} is already committed", str(target),
                                      "committed shards are never modified")

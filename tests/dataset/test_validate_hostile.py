@@ -1,6 +1,6 @@
 """``synth validate`` against a careless or hostile dataset: symbolic links, devices, FIFOs and
-stray entries are reported and never followed or opened; every read is bounded; the index
-that signed each manifest at commit cannot be bypassed (docs/reliability.md)."""
+stray entries are reported and never followed or opened; every read is bounded; the commit
+records that signed each manifest at commit cannot be bypassed (docs/reliability.md)."""
 
 from __future__ import annotations
 
@@ -176,3 +176,19 @@ def test_commit_records_are_checked(ds):
     msgs = [d.message for d in validate_dataset(ds).defects]
     assert "'stray' is not a commit record" in " ".join(msgs) and any("not a commit record of this plan" in m
                                                                       for m in msgs)
+
+
+def test_a_lost_index_update_costs_nothing(ds):
+    """Two commits whose read-modify-writes of index.json raced (flock not honoured across
+    hosts): the later write lost the other shard's entry. The shard stays committed (its
+    commit record signs it), validate only warns, and the next open puts the entry back."""
+    from synth.dataset.index import new_index
+    from synth.dataset.shards import load_dataset
+
+    full = json.loads((ds / "index.json").read_text())
+    (ds / "index.json").write_text(json.dumps(new_index(HASH, {S0: full["shards"][S0]})))
+    assert load_dataset(ds).committed_shards() == {S0, S1}
+    rep = validate_dataset(ds)
+    assert rep.ok and [(w.shard, w.kind) for w in rep.warnings] == [(S1, "index")]
+    open_dataset(ds, HASH, ff.plan(2, 1, 2))
+    assert json.loads((ds / "index.json").read_text()) == full
