@@ -68,21 +68,18 @@ def _register() -> None:
 
 _register()
 
-#: errno -> (what, what to do) for operating-system errors.
-_OS_ERRORS = {
-    errno.EROFS: ("read-only file system", "write somewhere writable (another --out or -o)"),
-    errno.EACCES: ("permission denied", "check the permissions, or write somewhere else"),
-    errno.EPERM: ("operation not permitted", "check the permissions, or write somewhere else"),
-    errno.ENOENT: ("no such file or directory", "check the path"),
-    errno.ENOTDIR: ("a component of the path is not a directory", "check the path"),
-    errno.EISDIR: ("is a directory, a file was expected", "pass a file"),
-    errno.ELOOP: ("too many levels of symbolic links", "check the path"),
-    errno.ENAMETOOLONG: ("file name too long", "use a shorter path"),
-    errno.EEXIST: ("already exists", "choose a new path"),
-    errno.ENOTEMPTY: ("directory not empty", "choose a new or empty directory"),
-    errno.EMFILE: ("too many open files", "raise the limit (ulimit -n) and rerun"),
-    errno.EIO: ("input/output error", "check the disk (dmesg), then rerun"),
-}
+#: What to do about an operating-system error, by errno (the line's "what" is its strerror).
+_FIXES = (
+    ("write somewhere writable (another --out or -o)", errno.EROFS),
+    ("check the permissions, or write somewhere else", errno.EACCES, errno.EPERM),
+    ("check the path", errno.ENOENT, errno.ENOTDIR, errno.ELOOP),
+    ("pass a file, not a directory", errno.EISDIR),
+    ("use a shorter path", errno.ENAMETOOLONG),
+    ("choose a new or empty path", errno.EEXIST, errno.ENOTEMPTY),
+    ("raise the limit (ulimit -n) and rerun", errno.EMFILE),
+    ("check the disk (dmesg), then rerun", errno.EIO),
+)
+_FIX = {code: fix for fix, *codes in _FIXES for code in codes}
 
 
 def _where(e: OSError) -> str | None:
@@ -126,8 +123,12 @@ def translate(e: BaseException):
     if isinstance(e, OSError):
         if is_disk_full(e):
             return disk_full(_where(e) or ".", e)
-        what, fix = _OS_ERRORS.get(e.errno, (e.strerror or type(e).__name__, "check the path and the file system"))
-        return SynthError(what, _where(e), fix)
+        if e.strerror or e.errno:
+            what = e.strerror or os.strerror(e.errno)
+            what = what[:1].lower() + what[1:]
+        else:
+            what = str(e) or type(e).__name__
+        return SynthError(what, _where(e), _FIX.get(e.errno, "check the path and the file system"))
     if isinstance(e, UnicodeError):
         reason = getattr(e, "reason", str(e))
         return SynthError(f"text is not valid UTF-8 ({reason})", _file_in_traceback(e),
