@@ -258,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         plan = load_plan(Path(args.plan))
-        ds = open_dataset(Path(args.dataset), plan.plan_hash, plan.expected())
+        ds = open_dataset(Path(args.dataset), plan.plan_hash, plan.expected(), shard_format=plan.shard_format)
         data = plan.model_data()
         hm = HeadModel(data)
         model_info = {"name": data.name, "sha256": plan.model_sha256()}

@@ -205,7 +205,7 @@ def render_plan(out: Path, plan_dir: Path, backend: Backend, shards_per_worker: 
         return {"wall_seconds": 0.0, "render_seconds": 0.0, "frames_rendered": 0, "frames_before": done["frames"],
                 "worker_starts": 0, "peak_worker_rss_mb": 0.0, **done}
     plan.verify()  # the whole plan, before any worker starts (and before the dataset is created)
-    ds = open_dataset(out, plan.plan_hash, plan.expected(),
+    ds = open_dataset(out, plan.plan_hash, plan.expected(), shard_format=plan.shard_format,
                       meta={"plan_dir": os.path.relpath(plan_dir, out), "run_seed": plan.seed,
                             "render": plan.render_settings(), "model": plan.header["model"]})
     pending = ds.pending_shards()

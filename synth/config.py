@@ -42,6 +42,9 @@ class DatasetConfig:
     identities_per_shard: int = _f(1, "identities in one shard (one worker job)", (1, 100000))
     expressions_per_identity: int = _f(13, "expressions sampled per identity (paper: 13)", (1, 1000))
     views_per_expression: int = _f(30, "viewpoints rendered per expression (paper: 30)", (1, 100000))
+    shard_format: str = _f("dir", "how a committed shard is stored: 'dir' = a directory of KEY.exr/KEY.json; "
+                           "'tar' = one tar of them, for WebDataset-style streaming (docs/shard-format.md)",
+                           choices=("dir", "tar"))
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,8 @@ def validate_cmd(
     Exit code 0 when clean, 1 when defects were found, 2 for usage errors.
     """
     from synth.dataset.shards import load_dataset
-    from synth.dataset.validate import describe_change, repair, validate_dataset
+    from synth.dataset.validate import validate_dataset
+    from synth.dataset.validate_index import describe_change, repair
 
     load_dataset(directory)  # not a dataset: one line, exit 2
     if repair_index:
@@ -70,7 +71,7 @@ def validate_cmd(
 
 def _finish(rep) -> None:
     """Exit code 1 when defects were found (raised as an error so every entry point sees it)."""
-    from synth.dataset.validate import DefectsFound
+    from synth.dataset.defects import DefectsFound
 
     if not rep.ok:
         raise DefectsFound(f"{len(rep.defects)} defect(s) found", rep.root, _fix(rep))

@@ -5,8 +5,10 @@ Modules, bottom to top (each imports only from its own line and the lines above)
 - ``layout``: names and paths (frame keys, shard names); crash-safe writes come from ``synth.io``
 - ``segmentation``, ``labels``, ``exr``, ``exr_check``, ``frame_json``: the two files of a
   frame (docs/frame-format.md) and the labels in them
-- ``index``, ``staging``, ``shards``: shards, atomic commits, the index (docs/shard-format.md)
-- ``validate``, ``preview``: ``synth validate`` and ``synth preview``
+- ``tarshard``, ``index``, ``staging``, ``shards``: shards, atomic commits, the index, the tar
+  form of a shard (docs/shard-format.md)
+- ``reader``, ``validate``, ``tar_validate``, ``preview``: the training-side reader (docs/reading.md),
+  ``synth validate`` (of both shard forms) and ``synth preview``
 
 Nothing here imports from ``synth.plan``, ``synth.cli``, ``synth.render`` or ``blender_scripts``.
 """

@@ -1,8 +1,9 @@
 """What is committed, and with which manifest: commit records and ``DIR/index.json``.
 
-A commit signs its shard: before it renames the staging directory into ``shards/`` it writes
-the **commit record** ``.commits/<shard>.json`` (the sha256 and size of the manifest, the frame
-and byte counts), then, after the rename, adds the same entry to ``index.json`` (the records of
+A commit signs its shard: before its commit point (the rename of the staging directory into
+``shards/``, or for a tar shard the write of ``shards/<id>.tar.json``,
+:mod:`synth.dataset.tarshard`) it writes the **commit record** ``.commits/<shard>.json`` (the sha256 and size of the manifest, the frame
+and byte counts), then, after the commit point, adds the same entry to ``index.json`` (the records of
 every shard in one file, with ``digest``, a sha256 over every ``shard_id manifest_sha256``
 line: one number that changes when any committed shard does). Both writes are atomic; the
 record is one file per shard, so commits on several hosts never lose each other's signatures
@@ -12,11 +13,13 @@ A shard's **signature** is its commit record, else its ``index.json`` entry (dat
 before commit records). Signatures are written only by a commit, never from what happens to
 be on disk:
 
-- a shard directory without a signature was not committed by synth: nothing adopts it;
+- a shard (a directory, or a tar and its manifest) without a signature was not committed by
+  synth: nothing adopts it;
 - a manifest changed after its commit is never re-signed: ``synth validate`` reports it and a
   rerun of the render cannot launder it;
 - :func:`update_index` (every time a dataset is opened for writing) rebuilds ``index.json``
-  from the signatures (never from the manifests), forgetting shards whose directory is gone;
+  from the signatures (never from the manifests), forgetting shards no longer on disk in
+  either form;
   a damaged ``index.json`` is left for the explicit repair;
 - :func:`repair_index` (``synth validate --repair-index``) is the one way to sign what the
   manifests now say; it reports every change, and ``synth validate`` logs it.
@@ -30,8 +33,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from synth.dataset.layout import (COMMITS_DIR, INDEX_FILE, INDEX_FORMAT, LOCK_FILE, MANIFEST_FILE, MAX_INDEX_BYTES,
-                                  MAX_MANIFEST_BYTES, MAX_RECORD_BYTES, SHARD_FORMAT, SHARD_ID_RE, SHARDS_DIR,
-                                  entry_kind, flock)
+                                  MAX_MANIFEST_BYTES, MAX_RECORD_BYTES, SHARD_FORMAT, SHARD_ID_RE, entry_kind, flock)
+from synth.dataset.tarshard import present_shards
 from synth.errors import SynthError
 from synth.io import FileRefused, atomic_write_json, loads_json, read_bounded, read_json, sha256_bytes
 
@@ -51,40 +54,43 @@ def _is_count(v) -> bool:
     return isinstance(v, int) and not isinstance(v, bool) and v >= 0
 
 
-def parse_manifest(data: bytes, shard_id: str) -> dict:
-    """Parse and sanity-check a manifest's bytes; raises :class:`ManifestError`."""
+def parse_manifest(data: bytes, shard_id: str, name: str = MANIFEST_FILE) -> dict:
+    """Parse and sanity-check a manifest's bytes (``name``: the file's name, for messages: a
+    tar shard's is ``<id>.tar.json``); raises :class:`ManifestError`."""
     try:
         m = loads_json(data)
     except ValueError as e:
-        raise ManifestError(f"manifest.json does not parse: {e}") from None
+        raise ManifestError(f"{name} does not parse: {e}") from None
     if not isinstance(m, dict) or m.get("format") != SHARD_FORMAT:
-        raise ManifestError(f"manifest.json is not a {SHARD_FORMAT} manifest")
+        raise ManifestError(f"{name} is not a {SHARD_FORMAT} manifest")
     if m.get("shard_id") != shard_id:
-        raise ManifestError(f"manifest.json names shard {str(m.get('shard_id'))[:80]!r}, not {shard_id!r}")
+        raise ManifestError(f"{name} names shard {str(m.get('shard_id'))[:80]!r}, not {shard_id!r}")
     if not isinstance(m.get("frames"), list) or not isinstance(m.get("files"), dict) \
             or not all(isinstance(k, str) for k in m["frames"]):
-        raise ManifestError("manifest.json lacks a 'frames' list of keys or a 'files' object")
-    for name, ent in m["files"].items():
-        if "/" in name or "\\" in name or "\0" in name or name.startswith(".") or name == MANIFEST_FILE:
-            raise ManifestError(f"manifest.json lists an invalid file name {name[:80]!r}")
+        raise ManifestError(f"{name} lacks a 'frames' list of keys or a 'files' object")
+    for fname, ent in m["files"].items():
+        if "/" in fname or "\\" in fname or "\0" in fname or fname.startswith(".") or fname == MANIFEST_FILE:
+            raise ManifestError(f"{name} lists an invalid file name {fname[:80]!r}")
         if not isinstance(ent, dict) or not isinstance(ent.get("sha256"), str) or not _is_count(ent.get("bytes")):
-            raise ManifestError(f"manifest.json entry for {name!r} lacks sha256/bytes")
+            raise ManifestError(f"{name} entry for {fname[:80]!r} lacks sha256/bytes")
     return m
 
 
-def read_manifest_bytes(shard_dir: Path) -> bytes:
-    """``shard_dir/manifest.json``: a regular file (never a symlink) of bounded size. Raises
-    OSError (FileNotFoundError when absent) or ManifestError."""
+def read_manifest_bytes(path: Path) -> bytes:
+    """A manifest's bytes (``shards/<id>/manifest.json`` or ``shards/<id>.tar.json``): a
+    regular file (never a symlink) of bounded size. Raises OSError (FileNotFoundError when
+    absent) or ManifestError."""
     try:
-        return read_bounded(Path(shard_dir) / MANIFEST_FILE, MAX_MANIFEST_BYTES, follow_symlinks=False)
+        return read_bounded(path, MAX_MANIFEST_BYTES, follow_symlinks=False)
     except FileRefused as e:
-        raise ManifestError(f"manifest.json {e.what}") from None
+        raise ManifestError(f"{Path(path).name} {e.what}") from None
 
 
-def index_entry(shard_dir: Path) -> dict:
-    """Read ``shard_dir/manifest.json`` into an index entry; raises OSError/ManifestError."""
-    data = read_manifest_bytes(shard_dir)
-    return manifest_entry(data, parse_manifest(data, Path(shard_dir).name))
+def manifest_index_entry(path: Path, shard_id: str) -> dict:
+    """The signature of the manifest at ``path`` (a directory's or a tar shard's) as it is
+    now; raises OSError/ManifestError."""
+    data = read_manifest_bytes(path)
+    return manifest_entry(data, parse_manifest(data, shard_id, Path(path).name))
 
 
 def manifest_entry(data: bytes, manifest: dict) -> dict:
@@ -167,21 +173,6 @@ def _write_record(root: Path, plan_hash: str, shard_id: str, entry: dict, durabl
                       durable=durable)
 
 
-def shard_entries(root: Path) -> dict[str, str]:
-    """Every entry under ``shards/`` (not following links) -> its kind (:func:`entry_kind`)."""
-    base = Path(root) / SHARDS_DIR
-    try:
-        names = os.listdir(base)
-    except FileNotFoundError:
-        return {}
-    return {n: entry_kind(base / n) for n in sorted(names)}
-
-
-def shard_dirs(root: Path) -> list[str]:
-    """Names under ``shards/`` that are shard ids and real directories (no symlinks)."""
-    return [n for n, k in shard_entries(root).items() if k == "dir" and SHARD_ID_RE.match(n)]
-
-
 def new_index(plan_hash: str, shards: dict) -> dict:
     shards = dict(sorted(shards.items()))
     return {"format": INDEX_FORMAT, "plan_hash": plan_hash, "num_shards": len(shards),
@@ -206,9 +197,10 @@ def signatures(root: Path, plan_hash: str) -> dict[str, dict]:
 
 def commit_shard(root: Path, plan_hash: str, shard_id: str, entry: dict, rename: Callable[[], None], *,
                  durable: bool = True) -> dict:
-    """Sign ``entry`` (the commit record), ``rename()`` the shard into place, then add it to
-    ``index.json``; under the dataset lock. If the rename fails the record is taken back.
-    Returns the new index."""
+    """Sign ``entry`` (the commit record), ``rename()`` the shard into place (the commit point:
+    the staging directory's rename, or a tar shard's manifest), then add it to ``index.json``;
+    under the dataset lock. If ``rename()`` fails the record is taken back. Returns the new
+    index."""
     root = Path(root)
     with flock(root / LOCK_FILE):
         sigs = signatures(root, plan_hash)
@@ -224,20 +216,21 @@ def commit_shard(root: Path, plan_hash: str, shard_id: str, entry: dict, rename:
                 atomic_write_json(rec, loads_json(before), durable=durable)
             raise
         sigs[shard_id] = entry
-        idx = new_index(plan_hash, {s: e for s, e in sigs.items() if entry_kind(root / SHARDS_DIR / s) == "dir"})
+        on_disk = present_shards(root)
+        idx = new_index(plan_hash, {s: e for s, e in sigs.items() if s in on_disk})
         atomic_write_json(root / INDEX_FILE, idx, durable=durable)
     return idx
 
 
 def update_index(root: Path, plan_hash: str, *, durable: bool = True) -> dict:
-    """Under the dataset lock, rewrite ``index.json`` from the signatures of the shards whose
-    directory exists (it creates the empty index of a new dataset, recovers an entry a lost
+    """Under the dataset lock, rewrite ``index.json`` from the signatures of the shards present
+    in either form (it creates the empty index of a new dataset, recovers an entry a lost
     update dropped, forgets shards deleted to be re-rendered). Never signs a manifest.
     Raises :class:`SynthError` when ``index.json`` is damaged or of another plan."""
     root = Path(root)
     with flock(root / LOCK_FILE):
         sigs = signatures(root, plan_hash)
-        idx = new_index(plan_hash, {s: sigs[s] for s in shard_dirs(root) if s in sigs})
+        idx = new_index(plan_hash, {s: sigs[s] for s in present_shards(root) if s in sigs})
         try:
             old = read_index(root)
         except IndexDamaged:
@@ -248,8 +241,9 @@ def update_index(root: Path, plan_hash: str, *, durable: bool = True) -> dict:
 
 
 def repair_index(root: Path, plan_hash: str) -> tuple[dict, list[dict]]:
-    """Sign every shard directory's manifest as it is now: commit records and ``index.json``
-    rebuilt from the manifests (explicitly: this is the one place that signs what is on disk).
+    """Sign every present shard's manifest (a directory's, or a tar shard's ``<id>.tar.json``)
+    as it is now: commit records and ``index.json`` rebuilt from the manifests (explicitly:
+    this is the one place that signs what is on disk).
     Returns the new index and the changes, each ``{"shard", "change": "added" | "removed" |
     "changed" | "skipped", ...}``; ``"shard": None`` is ``index.json`` itself."""
     root = Path(root)
@@ -268,13 +262,13 @@ def repair_index(root: Path, plan_hash: str) -> tuple[dict, list[dict]]:
         records, _ = read_records(root, plan_hash)
         before = {**(old or {}).get("shards", {}), **records}
         shards = {}
-        for s in shard_dirs(root):
+        on_disk = present_shards(root)
+        for s, mp in on_disk.items():
             try:
-                shards[s] = index_entry(root / SHARDS_DIR / s)
+                shards[s] = manifest_index_entry(mp, s)
             except (OSError, ManifestError) as e:
                 changes.append({"shard": s, "change": "skipped", "reason": f"not signed: {e}"})
-        on_disk = set(shard_dirs(root))
-        for s in sorted((set(before) & on_disk) | set(shards)):
+        for s in sorted((set(before) & set(on_disk)) | set(shards)):
             a, b = before.get(s), shards.get(s)
             if a is None and b is not None:
                 changes.append({"shard": s, "change": "added", "new": b["manifest_sha256"]})

@@ -10,6 +10,8 @@
       logs/                 worker and task logs of `synth render` (one file per attempt)
       plan/                 the plan ``synth render`` made (docs/plan-format.md)
       shards/<shard>/       committed, read-only: KEY.exr, KEY.json, manifest.json
+      shards/<shard>.tar    or, with dataset.shard_format = "tar", one tar of them and its
+      shards/<shard>.tar.json  manifest (synth.dataset.tarshard)
       .staging/<shard>/     in progress (same files, no manifest yet)
       .staging/<shard>.lease claim of the process rendering that shard (synth.dataset.lease)
 """

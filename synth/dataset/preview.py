@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from synth.dataset.exr import read_frame_exr
-from synth.dataset.layout import frame_files, parse_frame_key
+from synth.dataset.layout import parse_frame_key
+from synth.dataset.reader import FrameRef, list_frames
 from synth.dataset.segmentation import PALETTE
 from synth.dataset.shards import load_dataset
 from synth.errors import SynthError
@@ -59,12 +60,13 @@ def depth_tile(depth: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     return np.repeat(g[..., None], 3, axis=-1)
 
 
-def _frame_tiles(path: Path, tile: int):
+def _frame_tiles(ref: FrameRef, tile: int):
+    """Colour, segmentation and depth tiles of one frame (a directory's or a tar shard's)."""
     from PIL import Image
 
     try:
-        px = read_frame_exr(path, verify=True)
-    except SynthError:
+        px = read_frame_exr(ref.exr_bytes(), verify=True, where=str(ref.json_path.with_suffix(".exr")))
+    except (SynthError, OSError):
         bad = np.zeros((tile, tile, 3), np.uint8)
         bad[..., 0] = 160
         return [Image.fromarray(bad)] * 3
@@ -108,11 +110,11 @@ def contact_sheet(root, shard_id: str | None = None, out=None, *, max_views: int
         if max_views < 1:
             raise SynthError(f"--max-views {max_views} must be at least 1", None, "pass a positive number")
         views = views[:max_views]
-    sd = ds.shard_dir(shard_id)
+    refs = {r.key: r for r in list_frames(ds.root, shards=[shard_id])}
     cells: dict[tuple[int, int], list] = {}
     for k, (_, e, v) in parsed.items():
         if v in views:
-            cells[(e, v)] = _frame_tiles(sd / frame_files(k)[0], tile)
+            cells[(e, v)] = _frame_tiles(refs[k], tile)
     tw = max((t[0].size[0] for t in cells.values()), default=tile)
     gap, pad, label_w, label_h = 2, 8, 44, 16
     cell_w = 3 * tw + 2 * gap
@@ -153,12 +155,12 @@ def overview_sheet(root, out=None, *, views: int = 3, max_shards: int | None = N
     shards = committed[:max_shards] if max_shards else committed
     rows = []
     for sid in shards:
-        keys = sorted(ds.read_manifest(sid)["frames"])
-        parsed = [(k, parse_frame_key(k)) for k in keys]
+        refs = list_frames(ds.root, shards=[sid])
+        parsed = [(r, parse_frame_key(r.key)) for r in refs]
         i0 = min(p[0] for _, p in parsed)
         e0 = min(p[1] for _, p in parsed if p[0] == i0)
-        sel = [k for k, p in parsed if p[0] == i0 and p[1] == e0][:views]
-        rows.append((sid, i0, [_frame_tiles(ds.shard_dir(sid) / frame_files(k)[0], tile)[:2] for k in sel]))
+        sel = [r for r, p in parsed if p[0] == i0 and p[1] == e0][:views]
+        rows.append((sid, i0, [_frame_tiles(r, tile)[:2] for r in sel]))
     tw = max(t[0].size[0] for _, _, r in rows for t in r)
     gap, pad, label_h = 2, 8, 14
     block_w = views * (2 * tw + gap + pad)

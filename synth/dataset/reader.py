@@ -10,12 +10,14 @@
 
 Sources:
 
-- a dataset directory (``DIR/shards/<shard>/``): every *committed* shard, in shard-id order,
-  frames in key order; staging directories are never read;
+- a dataset directory: every *committed* shard, directory (``DIR/shards/<shard>/``) or tar
+  (``DIR/shards/<shard>.tar`` with its manifest ``<shard>.tar.json``), in shard-id order, frames
+  in key order; staging directories are never read;
 - one shard directory (committed or not: any ``KEY.json`` with its ``KEY.exr``);
 - a tar file or any binary stream of a tar (WebDataset style: members ``[prefix/]KEY.json`` and
   ``[prefix/]KEY.exr``, the two of a frame adjacent or not), read in one forward pass;
-- an iterable of WebDataset sample dicts (``{"__key__": KEY, "json": bytes, "exr": bytes}``).
+- an iterable of WebDataset sample dicts (``{"__key__": KEY, "json": bytes, "exr": bytes}``);
+  :func:`decode_sample` decodes one, e.g. ``webdataset.WebDataset(urls).map(decode_sample)``.
 
 Thread- and fork-safe: decoding works on bytes in memory and never redirects stdout/stderr, so
 frames can be read from several threads or DataLoader workers at once. Schema validation is
@@ -41,12 +43,10 @@ import numpy as np
 from synth.dataset.exr import decode_frame_exr
 from synth.dataset.frame_json import check_frame_json
 from synth.dataset.layout import (FRAME_KEY_RE, MANIFEST_FILE, MAX_EXR_BYTES, MAX_FRAME_JSON_BYTES, MAX_MANIFEST_BYTES,
-                                  SHARDS_DIR, SHARD_ID_RE)
+                                  SHARD_ID_RE, SHARDS_DIR)
+from synth.dataset.tarshard import MAX_MEMBER_BYTES, TAR_MANIFEST_SUFFIX, TAR_SUFFIX, manifest_paths, read_member
 from synth.errors import SynthError
 from synth.io import FileRefused, loads_json, read_bounded, read_json
-
-#: Largest frame member read from a tar stream (bytes); a larger one is refused, not read.
-MAX_MEMBER_BYTES = 1 << 30
 
 
 def _meta_field(section: str | None, key: str, kind, doc: str) -> cached_property:
@@ -142,27 +142,67 @@ def decode_frame(json_bytes: bytes, exr_bytes: bytes, *, key: str | None = None,
 def read_frame(json_path, *, shard: str | None = None, validate: bool = False) -> Frame:
     """Read ``KEY.json`` and the ``KEY.exr`` beside it."""
     p = Path(json_path)
+    jb, eb = _frame_file(p, MAX_FRAME_JSON_BYTES), _frame_file(p.with_suffix(".exr"), MAX_EXR_BYTES)
+    return decode_frame(jb, eb, key=p.stem, shard=shard or p.parent.name, validate=validate, where=str(p))
+
+
+def _frame_file(path: Path, max_bytes: int) -> bytes:
+    """A frame file's bytes (a regular file of at most ``max_bytes``), or a :class:`SynthError`."""
     try:
-        jb, eb = read_bounded(p, MAX_FRAME_JSON_BYTES), read_bounded(p.with_suffix(".exr"), MAX_EXR_BYTES)
+        return read_bounded(path, max_bytes)
     except FileNotFoundError as e:
         raise SynthError("frame file not found", str(e.filename), "check the path (or re-render the frame)") from None
     except FileRefused as e:
         raise SynthError(f"frame file refused: it {e.what}", os.fsdecode(e.path), "re-render the frame") from None
-    return decode_frame(jb, eb, key=p.stem, shard=shard or p.parent.name, validate=validate, where=str(p))
 
 
 # --------------------------------------------------------------------------- listing
 
 
+class TarMembers(NamedTuple):
+    """Where a frame's two files are inside a tar shard: (offset, size) of each member's data."""
+
+    tar: Path
+    json: tuple[int, int]
+    exr: tuple[int, int]
+
+
 class FrameRef(NamedTuple):
-    """Where one frame lives on disk (for random access and samplers)."""
+    """Where one frame lives on disk (for random access and samplers).
+
+    ``json_path`` is ``KEY.json`` of a directory shard; for a tar shard it is the tar's path
+    joined with the member name (a name for messages, not a file to open) and ``tar`` locates
+    the members. Use :meth:`json_bytes`, :meth:`exr_bytes` and :meth:`read` for either form.
+    """
 
     shard: str
     key: str
     json_path: Path
+    tar: TarMembers | None = None
+
+    def json_bytes(self) -> bytes:
+        if self.tar is not None:
+            return read_member(self.tar.tar, *self.tar.json, where=str(self.json_path))
+        return _frame_file(self.json_path, MAX_FRAME_JSON_BYTES)
+
+    def exr_bytes(self) -> bytes:
+        if self.tar is not None:
+            return read_member(self.tar.tar, *self.tar.exr, where=str(self.json_path.with_suffix(".exr")))
+        return _frame_file(self.json_path.with_suffix(".exr"), MAX_EXR_BYTES)
+
+    def meta(self) -> dict:
+        """The frame JSON alone (no pixels decoded)."""
+        try:
+            return loads_json(self.json_bytes())
+        except ValueError as e:
+            raise SynthError(f"frame JSON does not parse: {str(e)[:120]}", str(self.json_path),
+                             "run `synth validate` on the dataset") from None
 
     def read(self, *, validate: bool = False) -> Frame:
-        return read_frame(self.json_path, shard=self.shard, validate=validate)
+        if self.tar is None:
+            return read_frame(self.json_path, shard=self.shard, validate=validate)
+        return decode_frame(self.json_bytes(), self.exr_bytes(), key=self.key, shard=self.shard, validate=validate,
+                            where=str(self.json_path))
 
 
 def _shard_keys(shard_dir: Path) -> list[str]:
@@ -180,30 +220,53 @@ def _shard_keys(shard_dir: Path) -> list[str]:
                   and (shard_dir / (n[:-5] + ".exr")).is_file())
 
 
+def _tar_refs(manifest_path: Path, shard: str) -> list[FrameRef]:
+    """The frames of a committed tar shard, located by its manifest's member offsets."""
+    tar = manifest_path.with_name(shard + TAR_SUFFIX)
+    try:
+        m = read_json(manifest_path, max_bytes=MAX_MANIFEST_BYTES, follow_symlinks=False)
+        files = m["files"]
+        out = []
+        for k in sorted(str(k) for k in m["frames"] if FRAME_KEY_RE.match(str(k))):
+            j, e = files[f"{k}.json"], files[f"{k}.exr"]
+            out.append(FrameRef(shard, k, tar / f"{k}.json",
+                                TarMembers(tar, (j["offset"], j["bytes"]), (e["offset"], e["bytes"]))))
+        return out
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise SynthError(f"tar shard manifest is unusable ({type(e).__name__}: {str(e)[:80]})", str(manifest_path),
+                         "run `synth validate` on the dataset") from None
+
+
 def list_frames(source, *, shards: Iterable[str] | None = None) -> list[FrameRef]:
-    """Every frame of a dataset directory (committed shards only) or of one shard directory,
-    sorted by (shard, key). ``shards`` restricts a dataset to those shard ids."""
+    """Every frame of a dataset directory (committed shards, directories or tars) or of one
+    shard directory, sorted by (shard, key). ``shards`` restricts a dataset to those shard ids."""
     root = Path(source)
     if not root.is_dir():
         raise SynthError("not a dataset or shard directory", str(root), "pass the --out directory of synth render")
-    if (root / SHARDS_DIR).is_dir():
-        wanted = set(shards) if shards is not None else None
-        names = sorted(n for n in os.listdir(root / SHARDS_DIR) if SHARD_ID_RE.match(n)
-                       and (root / SHARDS_DIR / n / MANIFEST_FILE).is_file() and (wanted is None or n in wanted))
-        dirs = [root / SHARDS_DIR / n for n in names]
-        if wanted is not None and len(dirs) != len(wanted):
-            missing = sorted(wanted - set(names))
-            raise SynthError(f"shard(s) not committed in this dataset: {', '.join(missing[:5])}", str(root),
-                             "render them first, or leave them out")
-    else:
-        dirs = [root]
-    return [FrameRef(d.name, k, d / f"{k}.json") for d in dirs for k in _shard_keys(d)]
+    if not (root / SHARDS_DIR).is_dir():
+        return [FrameRef(root.name, k, root / f"{k}.json") for k in _shard_keys(root)]
+    wanted = set(shards) if shards is not None else None
+    found: dict[str, Path] = {}
+    for sid, mp in manifest_paths(root):  # a shard in both forms (a defect): its directory
+        if (wanted is None or sid in wanted) and mp.is_file():
+            found.setdefault(sid, mp)
+    if wanted is not None and len(found) != len(wanted):
+        missing = sorted(wanted - set(found))
+        raise SynthError(f"shard(s) not committed in this dataset: {', '.join(missing[:5])}", str(root),
+                         "render them first, or leave them out")
+    refs = []
+    for sid, mp in sorted(found.items()):
+        if mp.name.endswith(TAR_MANIFEST_SUFFIX):
+            refs += _tar_refs(mp, sid)
+        else:
+            refs += [FrameRef(sid, k, mp.parent / f"{k}.json") for k in _shard_keys(mp.parent)]
+    return refs
 
 
 # --------------------------------------------------------------------------- iteration
 
 
-def _iter_tar(stream: IO[bytes], validate: bool, where: str) -> Iterator[Frame]:
+def _iter_tar(stream: IO[bytes], validate: bool, where: str, shard: str | None = None) -> Iterator[Frame]:
     pending: dict[str, dict[str, bytes]] = {}
     try:
         tf = tarfile.open(fileobj=stream, mode="r|*")
@@ -223,7 +286,7 @@ def _iter_tar(stream: IO[bytes], validate: bool, where: str) -> Iterator[Frame]:
             parts[ext] = data
             if len(parts) == 2:
                 del pending[stem]
-                prefix = m.name.rsplit("/", 2)[-2] if m.name.count("/") else None
+                prefix = m.name.rsplit("/", 2)[-2] if m.name.count("/") else shard
                 yield decode_frame(parts["json"], parts["exr"], key=stem, shard=prefix, validate=validate,
                                    where=f"{where}:{stem}")
     if pending:
@@ -236,9 +299,10 @@ def iter_frames(source, *, shards: Iterable[str] | None = None, validate: bool =
     or an iterable of WebDataset sample dicts (see the module docstring)."""
     if isinstance(source, (str, os.PathLike)):
         p = Path(source)
-        if p.is_file():
+        if p.is_file():  # a tar; one named like a tar shard (shard_000042.tar) names the frames' shard
+            sid = p.name[:-len(TAR_SUFFIX)] if p.name.endswith(TAR_SUFFIX) else None
             with open(p, "rb") as f:
-                yield from _iter_tar(f, validate, str(p))
+                yield from _iter_tar(f, validate, str(p), sid if sid and SHARD_ID_RE.match(sid) else None)
             return
         for ref in list_frames(p, shards=shards):
             yield ref.read(validate=validate)
@@ -247,12 +311,25 @@ def iter_frames(source, *, shards: Iterable[str] | None = None, validate: bool =
         yield from _iter_tar(source, validate, getattr(source, "name", "<stream>"))
         return
     for sample in source:
-        key = sample.get("__key__")
-        if "json" not in sample or "exr" not in sample:
-            raise SynthError(f"sample {key!r} lacks 'json' or 'exr'", "<samples>",
-                             "pass WebDataset samples with both members")
-        k = str(key).rsplit("/", 1)[-1] if key is not None else None
-        yield decode_frame(sample["json"], sample["exr"], key=k, validate=validate, where=f"<samples>:{key}")
+        yield decode_sample(sample, validate=validate)
+
+
+def decode_sample(sample: dict, *, validate: bool = False) -> Frame:
+    """A :class:`Frame` from one WebDataset sample ``{"__key__": KEY, "json": bytes, "exr":
+    bytes}`` (undecoded, as ``webdataset.WebDataset(urls)`` yields them): the reader's bytes
+    decoder, e.g. ``WebDataset(urls).map(decode_sample)``. The shard is taken from
+    ``__url__`` when it names a tar shard (``.../shard_000042.tar``)."""
+    key = sample.get("__key__")
+    if not isinstance(sample.get("json"), (bytes, bytearray)) or not isinstance(sample.get("exr"), (bytes, bytearray)):
+        raise SynthError(f"sample {key!r} lacks 'json' or 'exr' bytes", "<samples>",
+                         "pass undecoded WebDataset samples with both members (no .decode())")
+    k = str(key).rsplit("/", 1)[-1] if key is not None else None
+    url = str(sample.get("__url__") or "")
+    name = url.rsplit("/", 1)[-1]
+    sid = name[:-len(TAR_SUFFIX)] if name.endswith(TAR_SUFFIX) else ""
+    return decode_frame(bytes(sample["json"]), bytes(sample["exr"]), key=k,
+                        shard=sid if SHARD_ID_RE.match(sid) else None, validate=validate,
+                        where=f"{url or '<samples>'}:{key}")
 
 
 # --------------------------------------------------------------------------- rays
@@ -300,5 +377,5 @@ def rays(frame: Frame, *, pixels=None, dtype=np.float32) -> Rays:
     return camera_rays(frame.K, frame.camera_to_world, frame.width, frame.height, pixels=pixels, dtype=dtype)
 
 
-__all__ = ["Frame", "FrameRef", "Rays", "camera_rays", "decode_frame", "iter_frames", "list_frames", "read_frame",
-           "rays"]
+__all__ = ["Frame", "FrameRef", "Rays", "TarMembers", "camera_rays", "decode_frame", "decode_sample", "iter_frames",
+           "list_frames", "read_frame", "rays"]

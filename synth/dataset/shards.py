@@ -18,10 +18,12 @@ Crash safety (kill -9 at any instant):
   size, so an interrupted frame is redone and a finished one never is;
 - a commit fsyncs every file, writes ``manifest.json`` (sha256 of every file) atomically,
   fsyncs, then renames the whole staging directory to ``shards/<id>`` in one ``rename(2)``:
-  a shard is either committed complete or not at all;
-- the commit signs the manifest's sha256 into ``index.json`` under the dataset lock just before
-  that rename (:mod:`synth.dataset.index`), so the index is never behind the files and never
-  re-signs a manifest that changed after its commit;
+  a shard is either committed complete or not at all (a tar shard, ``dataset.shard_format =
+  "tar"``: the tar is built and fsynced first, and the atomic write of its manifest
+  ``shards/<id>.tar.json`` is the commit point; :mod:`synth.dataset.tarshard`);
+- the commit signs the manifest's sha256 (its commit record, :mod:`synth.dataset.index`)
+  under the dataset lock just before that commit point, so the signatures are never behind
+  the files and a manifest that changed after its commit is never re-signed;
 - a shard is claimed with a lease file (:mod:`synth.dataset.lease`) that a process on another
   host can see and, once its holder is gone, break: flock is not reliable on NFS or Lustre.
 """
@@ -34,14 +36,16 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import synth
-from synth.dataset.index import (REPAIR_HINT, ManifestError, parse_manifest, read_manifest_bytes, shard_entries,
-                                 signatures, update_index)
+from synth.dataset.index import (REPAIR_HINT, ManifestError, parse_manifest, read_manifest_bytes, signatures,
+                                 update_index)
 from synth.dataset.frame_json import jsonable
-from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, KIND_TEXT, LOCK_FILE,
-                                  LOGS_DIR, MANIFEST_FILE, MAX_DATASET_JSON_BYTES, SHARDS_DIR, STAGING_DIR,
-                                  check_shard_id, flock, lease_path, shard_dir, staging_dir, utc_now)
+from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, KIND_TEXT, LOCK_FILE, LOGS_DIR,
+                                  MAX_DATASET_JSON_BYTES, SHARDS_DIR, STAGING_DIR, check_shard_id, flock, lease_path,
+                                  shard_dir, staging_dir, utc_now)
 from synth.dataset.lease import DEFAULT_TTL_S, Holder, read_holder
 from synth.dataset.staging import ShardBusy, ShardCommitted, StagingShard
+from synth.dataset.tarshard import (SHARD_FORMATS, TAR_MANIFEST_SUFFIX, check_shard_format, manifest_file,
+                                   shard_entries)
 from synth.errors import SynthError
 from synth.io import atomic_write_json, is_temp_name, read_json
 
@@ -86,6 +90,8 @@ def _read_dataset_json(root: Path) -> dict:
     try:
         if _normalise_expected(d["expected"]) != d["expected"]:
             raise SynthError("its expected shards are not sorted lists of frame keys")
+        if d.get("shard_format", "dir") not in SHARD_FORMATS:
+            raise SynthError(f"its shard_format is not one of {', '.join(SHARD_FORMATS)}")
     except SynthError as e:
         raise SynthError(f"dataset.json is damaged: {e.what}", str(p), fix) from None
     return d
@@ -110,7 +116,7 @@ def check_out_dir(root: Path) -> dict | None:
     return None
 
 
-def _check_same_plan(root: Path, info: dict, plan_hash: str, exp: dict) -> None:
+def _check_same_plan(root: Path, info: dict, plan_hash: str, exp: dict, shard_format: str | None) -> None:
     if info["plan_hash"] != plan_hash:
         raise SynthError(f"{root} holds a dataset from a different plan (hash {info['plan_hash'][:16]}, "
                          f"this plan {plan_hash[:16]})", str(root / DATASET_FILE),
@@ -118,6 +124,19 @@ def _check_same_plan(root: Path, info: dict, plan_hash: str, exp: dict) -> None:
     if info["expected"] != exp:
         raise SynthError("dataset.json's expected shards differ from this plan's although the hashes match",
                          str(root / DATASET_FILE), "the plan hash must cover the shard layout; use a new --out")
+    if shard_format is not None and info.get("shard_format", "dir") != shard_format:
+        raise SynthError(f"{root} stores shards as {info.get('shard_format', 'dir')!r}, not {shard_format!r}",
+                         str(root / DATASET_FILE), "use a new --out, or the dataset's shard format")
+
+
+def _shard_names(kinds: dict[str, str]) -> dict[str, tuple[str, str]]:
+    """The names under ``shards/`` that a committed shard would have -> (shard id, the kind it
+    must be): ``<id>`` a directory, ``<id>.tar.json`` a regular file."""
+    out = {}
+    for n in kinds:
+        sid = n[:-len(TAR_MANIFEST_SUFFIX)] if n.endswith(TAR_MANIFEST_SUFFIX) else n
+        out[n] = (sid, "dir" if sid == n else "file")
+    return out
 
 
 class Dataset:
@@ -128,6 +147,8 @@ class Dataset:
         self.info = info
         self.plan_hash: str = info["plan_hash"]
         self.expected: dict[str, list[str]] = {k: list(v) for k, v in info["expected"].items()}
+        #: How new commits store a shard: "dir" or "tar" (readers accept both forms).
+        self.shard_format: str = info.get("shard_format", "dir")
         self.writable = writable
 
     # -- paths -------------------------------------------------------------------------------
@@ -139,29 +160,33 @@ class Dataset:
 
     # -- state (always read from the files) --------------------------------------------------
     def committed_shards(self) -> set[str]:
-        """Planned shards that are committed: a directory under ``shards/`` that a commit
-        signed (its commit record, or its ``index.json`` entry; :mod:`synth.dataset.index`).
+        """Planned shards that are committed: a directory under ``shards/``, or a tar shard's
+        manifest ``shards/<id>.tar.json``, that a commit signed (its commit record, or its
+        ``index.json`` entry; :mod:`synth.dataset.index`).
 
         Read from the files each time; ``shards/`` is listed before the signatures are read
-        and a commit signs before its rename, so a commit in progress in another process is
-        seen whole or not at all. Raises a :class:`SynthError` (run ``synth validate
+        and a commit signs before its commit point, so a commit in progress in another process
+        is seen whole or not at all. Raises a :class:`SynthError` (run ``synth validate
         --repair-index``) when ``index.json`` is damaged or of another plan, and when a planned
-        shard's entry is unsigned or not a real directory: synth did not commit it, and
-        nothing will silently adopt it. Unplanned entries are left to ``synth validate``.
+        shard's entry is unsigned or not a real directory (a regular file for a tar manifest):
+        synth did not commit it, and nothing will silently adopt it. Unplanned entries are left
+        to ``synth validate``.
         """
-        entries = shard_entries(self.root)
+        kinds = shard_entries(self.root).kinds
         sigs = signatures(self.root, self.plan_hash)
         out = set()
-        for name, kind in entries.items():
-            if name not in self.expected:
+        for name, (sid, want) in _shard_names(kinds).items():
+            kind = kinds[name]
+            if sid not in self.expected:
                 continue
-            if name not in sigs:
+            where = str(self.root / SHARDS_DIR / name)
+            if sid not in sigs:
                 raise SynthError(f"shards/{name} has no commit record (synth did not commit it, or its index was "
-                                 "lost)", str(self.shard_dir(name)), REPAIR_HINT)
-            if kind != "dir":
-                raise SynthError(f"shards/{name} is a {KIND_TEXT[kind]}, not a directory", str(self.shard_dir(name)),
+                                 "lost)", where, REPAIR_HINT)
+            if kind != want:
+                raise SynthError(f"shards/{name} is a {KIND_TEXT[kind]}, not a {KIND_TEXT[want]}", where,
                                  "restore the shard, or delete it and rerun the render")
-            out.add(name)
+            out.add(sid)
         return out
 
     def pending_shards(self) -> list[str]:
@@ -170,11 +195,12 @@ class Dataset:
         return [s for s in self.expected if s not in done]
 
     def read_manifest(self, shard_id: str) -> dict:
-        p = self.shard_dir(shard_id) / MANIFEST_FILE
+        p = manifest_file(self.root, check_shard_id(shard_id))
         try:
-            return parse_manifest(read_manifest_bytes(p.parent), shard_id)
+            return parse_manifest(read_manifest_bytes(p), shard_id, p.name)
         except FileNotFoundError:
-            raise SynthError(f"shard {shard_id} is not committed", str(p.parent), "render it first") from None
+            raise SynthError(f"shard {shard_id} is not committed", str(self.shard_dir(shard_id)), "render it first") \
+                from None
         except ManifestError as e:
             raise SynthError(str(e), str(p), "run `synth validate`; re-render the shard into a new --out") from None
 
@@ -195,7 +221,7 @@ class Dataset:
         if shard_id not in self.expected:
             raise SynthError(f"shard {shard_id} is not in this dataset's plan", str(self.root),
                              "use a shard id from the plan")
-        st = StagingShard(self.root, self.plan_hash, shard_id, self.expected[shard_id], lease_ttl)
+        st = StagingShard(self.root, self.plan_hash, shard_id, self.expected[shard_id], lease_ttl, self.shard_format)
         st._open()
         return st
 
@@ -229,12 +255,15 @@ class Dataset:
         return f"Dataset({str(self.root)!r}, plan_hash={self.plan_hash[:12]}..., shards={len(self.expected)})"
 
 
-def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], meta: dict | None = None) -> Dataset:
+def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], meta: dict | None = None, *,
+                 shard_format: str | None = None) -> Dataset:
     """Create the dataset directory for a plan, or reopen it to resume.
 
     - ``plan_hash``: a stable hash of the plan (``synth plan`` records it in its plan.json).
     - ``expected``: shard id -> the frame keys planned for that shard.
     - ``meta``: JSON-able facts recorded once in dataset.json (plan path, config, versions).
+    - ``shard_format``: ``"dir"`` or ``"tar"`` (``dataset.shard_format``), recorded in
+      dataset.json; ``None``: as recorded there (``"dir"`` for a new dataset).
 
     Refuses (:class:`SynthError`) a directory that holds a dataset from another plan, and a
     non-empty directory that is not a dataset. Safe when several workers open it at once.
@@ -243,9 +272,11 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
     if not isinstance(plan_hash, str) or not plan_hash:
         raise SynthError("plan hash is empty", str(root), "pass the plan's hash")
     exp = _normalise_expected(expected)
+    if shard_format is not None:
+        check_shard_format(shard_format, str(root))
     found = check_out_dir(root)  # refuse before anything is created
     if found is not None:
-        _check_same_plan(root, found, plan_hash, exp)
+        _check_same_plan(root, found, plan_hash, exp, shard_format)
     try:
         root.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -254,7 +285,7 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
     with flock(root / LOCK_FILE):
         info = check_out_dir(root)  # again, under the lock: another process may have created it
         if info is not None:
-            _check_same_plan(root, info, plan_hash, exp)
+            _check_same_plan(root, info, plan_hash, exp, shard_format)
         else:
             info = {
                 "format": DATASET_FORMAT,
@@ -264,6 +295,7 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
                 "python": platform.python_version(),
                 "num_shards": len(exp),
                 "num_frames": sum(len(v) for v in exp.values()),
+                "shard_format": shard_format or "dir",
                 "meta": jsonable(meta or {}),
                 "expected": exp,
             }

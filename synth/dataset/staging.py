@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import platform
+import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -20,6 +21,8 @@ from synth.dataset.index import commit_shard, manifest_entry
 from synth.dataset.layout import (MANIFEST_FILE, MAX_FRAME_JSON_BYTES, SHARD_FORMAT, frame_files, lease_path, shard_dir,
                                   staging_dir, utc_now)
 from synth.dataset.lease import DEFAULT_TTL_S, Lease, LeaseBusy
+from synth.dataset.tarshard import (build_tar_shard, check_shard_format, committed_forms, place_tar_shard,
+                                   tar_manifest_path)
 from synth.errors import SynthError
 from synth.io import (atomic_write_bytes, atomic_write_json, dumps_json, file_digest, fsync_dir, is_temp_name,
                       read_json, sha256_bytes)
@@ -35,7 +38,8 @@ class ShardCommitted(SynthError):
     """The shard is already committed; committed shards are never modified."""
 
 
-_RESERVED_MANIFEST = {"format", "shard_id", "plan_hash", "frames", "files", "created", "synth_version", "writer"}
+_RESERVED_MANIFEST = {"format", "shard_id", "plan_hash", "frames", "files", "created", "synth_version", "writer",
+                      "container"}
 
 
 def _writer_versions() -> dict:
@@ -53,12 +57,13 @@ class StagingShard:
     """One shard being rendered: ``.staging/<id>/`` plus the lease ``.staging/<id>.lease``
     (:mod:`synth.dataset.lease`: a claim that holds across hosts sharing the dataset).
 
-    Made by ``Dataset.staging`` (the dataset root, its plan hash, the shard's planned keys and
-    the lease's ttl).
+    Made by ``Dataset.staging`` (the dataset root, its plan hash, the shard's planned keys, the
+    lease's ttl and the dataset's shard format: ``"dir"`` or ``"tar"``, :mod:`synth.dataset.tarshard`).
     """
 
     def __init__(self, root: Path, plan_hash: str, shard_id: str, expected_keys: Sequence[str],
-                 lease_ttl: float = DEFAULT_TTL_S):
+                 lease_ttl: float = DEFAULT_TTL_S, shard_format: str = "dir"):
+        self.shard_format = check_shard_format(shard_format)
         self.root = Path(root)
         self.plan_hash = plan_hash
         self.shard_id = shard_id
@@ -84,7 +89,7 @@ class StagingShard:
             busy.holder = e.holder
             raise busy from None
         try:
-            if self.target.exists():
+            if committed_forms(self.root, self.shard_id):
                 raise ShardCommitted(f"shard {self.shard_id} is already committed", str(self.target),
                                      "committed shards are never modified; skip it")
             self.dir.mkdir(exist_ok=True)
@@ -213,7 +218,9 @@ class StagingShard:
         every file, plan hash, versions, plus ``manifest_extra`` such as seeds), then, under the
         dataset lock, signs the manifest (its commit record), renames the staging directory to
         ``shards/<id>`` and adds the shard to ``index.json``
-        (:func:`synth.dataset.index.commit_shard`). Nothing is committed when anything is missing.
+        (:func:`synth.dataset.index.commit_shard`). A tar shard is written as ``shards/<id>.tar``
+        and ``shards/<id>.tar.json`` instead (:meth:`_commit_tar`). Nothing is committed when
+        anything is missing.
         """
         self._need_lock()
         where = str(self.dir)
@@ -236,7 +243,8 @@ class StagingShard:
                              "remove them (only KEY.exr and KEY.json belong to a shard)")
         files = {}
         for name in sorted(wanted):
-            digest, size = file_digest(self.dir / name, sync=durable, follow_symlinks=False)
+            digest, size = file_digest(self.dir / name, sync=durable and self.shard_format == "dir",
+                                       follow_symlinks=False)  # a tar shard: the tar is fsynced instead
             files[name] = {"sha256": digest, "bytes": size}
         manifest = {
             "format": SHARD_FORMAT,
@@ -253,6 +261,8 @@ class StagingShard:
             data = dumps_json(manifest)
         except (TypeError, ValueError) as e:
             raise SynthError(f"manifest_extra is not JSON-serialisable: {e}", where, "pass plain data") from None
+        if self.shard_format == "tar":  # one tar and its manifest instead of a directory
+            return self._commit_tar(manifest, durable)
         atomic_write_bytes(self.dir / MANIFEST_FILE, data, durable=durable)
         for name in list(files) + [MANIFEST_FILE]:
             os.chmod(self.dir / name, 0o444)  # read-only by convention (and by mode)
@@ -262,12 +272,7 @@ class StagingShard:
         target.parent.mkdir(exist_ok=True)
 
         def rename() -> None:  # under the dataset lock, after the commit record signed the manifest
-            if os.path.lexists(target):
-                raise ShardCommitted(f"shard {self.shard_id} is already committed", str(target),
-                                     "committed shards are never modified")
-            if not self._lease.held():  # broken by another host after a missed heartbeat: let it commit
-                raise ShardBusy(f"shard {self.shard_id}: this process's claim was broken by another process; "
-                                "not committed", str(self.dir), "the other process finishes the shard")
+            self._check_commit(target)
             os.rename(self.dir, target)  # the commit point
             self._committed = True
             if durable:
@@ -277,5 +282,44 @@ class StagingShard:
         commit_shard(self.root, self.plan_hash, self.shard_id, manifest_entry(data, manifest), rename,
                      durable=durable)
         self.close()  # anyone who takes the lease now sees the committed shard
+        manifest["manifest_sha256"] = sha256_bytes(data)
+        return manifest
+
+    def _check_commit(self, where: Path) -> None:
+        """The last checks before the commit point (under the dataset lock): the shard is not
+        committed in either form, and this process still holds its lease."""
+        if committed_forms(self.root, self.shard_id):
+            raise ShardCommitted(f"shard {self.shard_id} is already committed", str(where),
+                                 "committed shards are never modified")
+        if not self._lease.held():  # broken by another host after a missed heartbeat: let it commit
+            raise ShardBusy(f"shard {self.shard_id}: this process's claim was broken by another process; "
+                            "not committed", str(self.dir), "the other process finishes the shard")
+
+    def _commit_tar(self, manifest: dict, durable: bool) -> dict:
+        """The tar form of the commit: build the tar under a temporary name (which completes the
+        manifest: member offsets, ``container``), sign the manifest, then, under the dataset
+        lock, rename the tar into place and write its manifest (the commit point;
+        :mod:`synth.dataset.tarshard`); the staging directory is removed after it."""
+        mp = tar_manifest_path(self.root, self.shard_id)
+        if committed_forms(self.root, self.shard_id):  # before the work of building the tar
+            raise ShardCommitted(f"shard {self.shard_id} is already committed", str(mp),
+                                 "committed shards are never modified")
+        tmp = build_tar_shard(self.dir, self.root, self.shard_id, manifest, durable=durable)
+        try:
+            data = dumps_json(manifest)
+
+            def place() -> None:  # under the dataset lock, after the commit record signed the manifest
+                self._check_commit(mp)
+                place_tar_shard(tmp, self.root, self.shard_id, data, durable=durable)
+                self._committed = True
+
+            commit_shard(self.root, self.plan_hash, self.shard_id, manifest_entry(data, manifest), place,
+                         durable=durable)
+        finally:
+            tmp.unlink(missing_ok=True)  # renamed away when committed
+        shutil.rmtree(self.dir, ignore_errors=True)
+        if durable:
+            fsync_dir(self.dir.parent)
+        self.close()
         manifest["manifest_sha256"] = sha256_bytes(data)
         return manifest

@@ -3,14 +3,19 @@
 Checks (docs/shard-format.md, "Validation"; docs/reliability.md):
 
 - dataset: ``dataset.json`` parses; every planned shard is committed (``--partial``: missing
-  shards are warnings); ``shards/`` holds nothing but shard directories (a stray file, tar or
-  symlink is a defect, and is never opened); no unplanned shard directories; ``index.json``
-  exists, parses, lists exactly the shard directories, signs each manifest's current sha256
-  and its digest matches its entries (an index-less dataset fails until ``--repair-index``);
+  shards are warnings); ``shards/`` holds nothing but shard directories and tar shards (a
+  ``<id>.tar`` with its ``<id>.tar.json``): a stray file, tar or symlink is a defect and is
+  never opened, a tar without its manifest (a killed commit) and leftover temporary files are
+  warnings; no unplanned shards, none in both forms; ``index.json`` exists, parses, lists
+  exactly the shards, signs each manifest's current sha256 and its digest matches its entries
+  (an index-less dataset fails until ``--repair-index``; :mod:`synth.dataset.validate_index`);
   staging leftovers are warnings;
-- shard: ``manifest.json`` parses, lists exactly the planned frames and their two files; no
-  missing or extra files; every file is a regular file (``lstat``: symbolic links, devices and
-  FIFOs are refused, never followed); sizes and sha256 match (hashing skipped with ``quick``);
+- shard: the manifest (``manifest.json``, or ``<id>.tar.json`` of a tar shard) is a regular
+  file of bounded size, parses, is the one its commit signed, lists exactly the planned frames
+  and their two files; a directory shard has no missing or extra files and every file is a
+  regular file (``lstat``: symbolic links, devices and FIFOs are refused, never followed);
+  sizes and sha256 match (hashing skipped with ``quick``); a tar shard's tar and members are
+  checked by :mod:`synth.dataset.tar_validate`;
 - frame: the JSON parses (depth- and size-bounded: every read is bounded by the size the
   manifest declares) and validates (schema + consistency, :mod:`synth.dataset.frame_json`) and
   names its key; the EXR opens with every channel, the JSON's size and the right pixel types;
@@ -19,67 +24,24 @@ Checks (docs/shard-format.md, "Validation"; docs/reliability.md):
 
 from __future__ import annotations
 
-import json
 import os
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from synth.dataset.defects import Defect, Report
 from synth.dataset.exr import decode_frame_exr, pixel_defects
 from synth.dataset.frame_json import validate_frame_json
-from synth.dataset.index import (REPAIR_HINT, IndexDamaged, ManifestError, dataset_digest, parse_manifest,
-                                 read_index, read_manifest_bytes, read_records, repair_index, shard_entries)
-from synth.dataset.layout import (FRAME_KEY_RE, KIND_TEXT, LOGS_DIR, MANIFEST_FILE, MAX_FRAME_JSON_BYTES, SHARD_ID_RE,
-                                  SHARDS_DIR, STAGING_DIR,
-                                  entry_kind, frame_files, utc_now)
+from synth.dataset.index import REPAIR_HINT, ManifestError, parse_manifest, read_manifest_bytes
+from synth.dataset.layout import (FRAME_KEY_RE, KIND_TEXT, MANIFEST_FILE, MAX_FRAME_JSON_BYTES, SHARD_ID_RE,
+                                  SHARDS_DIR, STAGING_DIR, entry_kind, frame_files)
 from synth.dataset.shards import load_dataset
+from synth.dataset.tar_validate import check_tar_shard
+from synth.dataset.tarshard import TAR_MANIFEST_SUFFIX, TAR_SUFFIX, shard_entries, tar_manifest_path
+from synth.dataset.validate_index import check_signatures
 from synth.errors import SynthError
 from synth.io import file_digest, is_temp_name, loads_json, read_bounded, sha256_bytes
-
-#: Where ``synth validate --repair-index`` appends what each repair changed (JSON lines).
-REPAIR_LOG = "index-repairs.jsonl"
-
-
-class DefectsFound(SynthError):
-    """Validation found defects: the CLI exits with code 1 (not 2: the input was usable)."""
-
-    exit_code = 1
-
-
-@dataclass(frozen=True)
-class Defect:
-    shard: str | None
-    key: str | None
-    kind: str
-    message: str
-
-    def line(self) -> str:
-        where = "/".join(p for p in (self.shard, self.key) if p) or "dataset"
-        return f"{where}: {self.kind}: {self.message}"
-
-
-@dataclass
-class Report:
-    root: str
-    defects: list[Defect] = field(default_factory=list)
-    warnings: list[Defect] = field(default_factory=list)
-    shards_expected: int = 0
-    frames_expected: int = 0
-    shards_checked: int = 0
-    frames_checked: int = 0
-    hashed: bool = True
-    digest: str | None = None  # index.json's digest over every committed manifest
-
-    @property
-    def ok(self) -> bool:
-        return not self.defects
-
-    def to_json(self) -> dict:
-        d = asdict(self)
-        d["ok"] = self.ok
-        return d
 
 
 def _read(path: Path, declared: int, cap: int | None = None) -> bytes:
@@ -88,17 +50,18 @@ def _read(path: Path, declared: int, cap: int | None = None) -> bytes:
     return read_bounded(path, min(declared, cap) if cap is not None else declared, follow_symlinks=False)
 
 
-def _check_frame(shard_dir: Path, shard: str, key: str, listed: dict, readable: set[str]) -> list[Defect]:
-    """Content checks of one frame; only files in ``readable`` (regular, the declared size) are read."""
+def check_frame_data(shard: str, key: str, json_bytes: bytes | None, exr_bytes: bytes | None,
+                     where: str) -> list[Defect]:
+    """The content defects of one frame from the bytes of its JSON and its EXR (``where``
+    names the EXR); ``None`` for a file that cannot be read (reported elsewhere)."""
     out: list[Defect] = []
-    exr, js = frame_files(key)
+    js = frame_files(key)[1]
     fj = None
-    if js in readable:
+    if json_bytes is not None:
         try:
-            fj = loads_json(_read(shard_dir / js, listed[js]["bytes"], MAX_FRAME_JSON_BYTES))
-        except (ValueError, OSError) as e:
-            why = e.strerror if isinstance(e, OSError) else e
-            out.append(Defect(shard, key, "json", f"{js} does not parse: {why}"))
+            fj = loads_json(json_bytes)
+        except ValueError as e:
+            out.append(Defect(shard, key, "json", f"{js} does not parse: {e}"))
     if fj is not None:
         errs = validate_frame_json(fj)
         for e in errs[:5]:
@@ -107,15 +70,12 @@ def _check_frame(shard_dir: Path, shard: str, key: str, listed: dict, readable: 
             out.append(Defect(shard, key, "json", f"{js}: ... and {len(errs) - 5} more schema error(s)"))
         if isinstance(fj, dict) and fj.get("frame_id") != key:
             out.append(Defect(shard, key, "json", f"{js}: frame_id is {str(fj.get('frame_id'))[:80]!r}"))
-    if exr not in readable:
+    if exr_bytes is None:
         return out
     try:
-        px = decode_frame_exr(_read(shard_dir / exr, listed[exr]["bytes"]), str(shard_dir / exr), verify=True)
+        px = decode_frame_exr(exr_bytes, where, verify=True)
     except SynthError as e:
         out.append(Defect(shard, key, "exr", e.what))
-        return out
-    except (ValueError, OSError) as e:
-        out.append(Defect(shard, key, "exr", f"{exr} cannot be read: {e.strerror if isinstance(e, OSError) else e}"))
         return out
     if isinstance(fj, dict) and isinstance(fj.get("image"), dict):
         want = (fj["image"].get("width"), fj["image"].get("height"))
@@ -132,29 +92,45 @@ def _check_frame(shard_dir: Path, shard: str, key: str, listed: dict, readable: 
     return out
 
 
+def _check_frame(shard_dir: Path, shard: str, key: str, listed: dict, readable: set[str]) -> list[Defect]:
+    """Content checks of one frame of a directory shard; only files in ``readable`` (regular,
+    the declared size) are read."""
+    out: list[Defect] = []
+    data: dict[str, bytes | None] = {}
+    for name, cap, kind in zip(frame_files(key), (None, MAX_FRAME_JSON_BYTES), ("exr", "json")):
+        data[kind] = None
+        if name in readable:
+            try:
+                data[kind] = _read(shard_dir / name, listed[name]["bytes"], cap)
+            except (ValueError, OSError) as e:
+                out.append(Defect(shard, key, kind, f"{name} cannot be read: "
+                                                    f"{e.strerror if isinstance(e, OSError) else e}"))
+    where = str(shard_dir / frame_files(key)[0])
+    return out + check_frame_data(shard, key, data["json"], data["exr"], where)
+
+
 def _stem(name: str) -> str | None:
     return name.rsplit(".", 1)[0] if not name.startswith(".") else None
 
 
-def validate_shard(root: str, shard: str, expected_keys: list[str] | None, quick: bool,
-                   signature: dict | None) -> tuple[list[Defect], list[Defect], int]:
-    """Check one committed shard (a real directory under ``shards/``) against the signature
-    its commit wrote; returns (defects, warnings, frames checked)."""
-    d = Path(root) / SHARDS_DIR / shard
+def check_manifest(mp: Path, shard: str, expected_keys: list[str] | None,
+                   signature: dict | None) -> tuple[dict | None, list[Defect]]:
+    """Read a shard's manifest (bounded, never through a link) and check it against the
+    signature its commit wrote and against the plan: (the manifest, or None when unusable;
+    defects)."""
     defects: list[Defect] = []
-    warnings: list[Defect] = []
     try:
-        mbytes = read_manifest_bytes(d)
-        m = parse_manifest(mbytes, shard)
+        mbytes = read_manifest_bytes(mp)
+        m = parse_manifest(mbytes, shard, mp.name)
     except FileNotFoundError:
-        return [Defect(shard, None, "manifest", "no manifest.json: not a committed shard (leftover or damaged)")], [], 0
+        return None, [Defect(shard, None, "manifest", f"no {mp.name}: not a committed shard (leftover or damaged)")]
     except (OSError, ManifestError) as e:
-        return [Defect(shard, None, "manifest", str(e))], [], 0
+        return None, [Defect(shard, None, "manifest", str(e))]
     if signature is None:
         defects.append(Defect(shard, None, "index", "no commit record: synth did not commit this shard (or its "
                                                     f"signature was lost); {REPAIR_HINT}"))
     elif signature.get("manifest_sha256") != sha256_bytes(mbytes):
-        defects.append(Defect(shard, None, "manifest", "manifest.json changed after commit (its sha256 differs from "
+        defects.append(Defect(shard, None, "manifest", f"{mp.name} changed after commit (its sha256 differs from "
                                                        "the commit record)"))
     frames = m["frames"]
     if expected_keys is not None:
@@ -163,14 +139,32 @@ def validate_shard(root: str, shard: str, expected_keys: list[str] | None, quick
             defects.append(Defect(shard, k, "missing-frame", "planned frame not in the manifest"))
         for k in sorted(set(frames) - exp):
             defects.append(Defect(shard, k[:80], "extra-frame", "frame not in the plan"))
-    listed = dict(m["files"])
     want_files = {n for k in frames for n in frame_files(k)}
-    for n in sorted(want_files - set(listed)):
+    for n in sorted(want_files - set(m["files"])):
         defects.append(Defect(shard, _stem(n), "manifest", f"{n} not listed in the manifest"))
+    return m, defects
+
+
+def validate_shard(root: str, shard: str, expected_keys: list[str] | None, quick: bool,
+                   signature: dict | None) -> tuple[list[Defect], list[Defect], int]:
+    """Check one committed shard (a real directory under ``shards/``, else a tar shard) against
+    the signature its commit wrote; returns (defects, warnings, frames checked)."""
+    d = Path(root) / SHARDS_DIR / shard
+    if entry_kind(d) != "dir":  # a tar shard (synth.dataset.tar_validate)
+        m, defects = check_manifest(tar_manifest_path(root, shard), shard, expected_keys, signature)
+        if m is None:
+            return defects, [], 0
+        found, checked = check_tar_shard(
+            root, shard, m, quick, lambda k, j, e: defects.extend(check_frame_data(shard, k, j, e, f"{shard}/{k}.exr")))
+        return defects + [Defect(shard, k, kind, msg) for k, kind, msg in found], [], checked
+    m, defects = check_manifest(d / MANIFEST_FILE, shard, expected_keys, signature)
+    if m is None:
+        return defects, [], 0
+    listed = dict(m["files"])
     try:
         on_disk = {n: entry_kind(d / n) for n in os.listdir(d) if n != MANIFEST_FILE}
     except OSError as e:
-        return defects + [Defect(shard, None, "io", f"cannot list the shard: {e.strerror}")], warnings, 0
+        return defects + [Defect(shard, None, "io", f"cannot list the shard: {e.strerror}")], [], 0
     for n in sorted(set(listed) - set(on_disk)):
         defects.append(Defect(shard, _stem(n), "missing-file", f"{n} is listed but missing"))
     for n in sorted(set(on_disk) - set(listed)):
@@ -197,14 +191,56 @@ def validate_shard(root: str, shard: str, expected_keys: list[str] | None, quick
                 continue
         readable.add(n)
     checked = 0
-    for key in frames:
+    for key in m["frames"]:
         if FRAME_KEY_RE.match(key):  # only files named in the manifest, found regular and of its size, are read
             defects.extend(_check_frame(d, shard, key, listed, readable))
             checked += 1
-    return defects, warnings, checked
+    return defects, [], checked
 
 
-def _staging_warnings(root: Path) -> tuple[list[Defect], list[Defect]]:
+def _shards_listing(root: Path, rep: Report, expected: dict) -> list[str]:
+    """Report what ``shards/`` holds besides the planned shards (never opening it); returns
+    the shards present in either form, to validate (a shard in both forms: its directory)."""
+    kind = entry_kind(root / SHARDS_DIR)
+    if kind not in (None, "dir"):
+        rep.defects.append(Defect(None, None, "unexpected-entry",
+                                  f"{SHARDS_DIR} is a {KIND_TEXT[kind]}, not a directory (not followed)"))
+    if kind != "dir":
+        return []
+    ents = shard_entries(root)
+    stray = dict(ents.others)
+    stray.update({f"{s}{TAR_SUFFIX}": "file" for s in ents.orphans if s not in expected})  # no commit makes those
+    for n, k in sorted(stray.items()):
+        rep.defects.append(Defect(None, None, "unexpected-entry",
+                                  f"{SHARDS_DIR}/{n[:120]!r} is a {KIND_TEXT[k]}: only shard directories and tar "
+                                  f"shards (<id>{TAR_SUFFIX} with <id>{TAR_MANIFEST_SUFFIX}) belong there (not opened)"))
+    for s in ents.orphans:
+        if s in expected:
+            rep.warnings.append(Defect(s, None, "staging", f"{SHARDS_DIR}/{s}{TAR_SUFFIX} has no manifest: a commit "
+                                                           "was interrupted (not committed; the next render replaces "
+                                                           "it)"))
+    for n in ents.temps:
+        rep.warnings.append(Defect(None, None, "staging", f"leftover temporary file {SHARDS_DIR}/{n[:120]} (safe to "
+                                                          "delete)"))
+    present = []
+    for n in ents.dirs:
+        if not SHARD_ID_RE.match(n) or n not in expected:
+            rep.defects.append(Defect(n[:120], None, "unexpected-shard", "shard directory not in the plan"))
+        if SHARD_ID_RE.match(n):
+            present.append(n)
+    for s in ents.tars:
+        if s not in expected:
+            rep.defects.append(Defect(s, None, "unexpected-shard", "tar shard not in the plan"))
+        if s in present:
+            rep.defects.append(Defect(s, None, "unexpected-shard", f"committed twice: {SHARDS_DIR}/{s}/ and "
+                                                                   f"{SHARDS_DIR}/{s}{TAR_MANIFEST_SUFFIX} (the "
+                                                                   "directory is read; remove one)"))
+        else:
+            present.append(s)
+    return sorted(present)
+
+
+def _staging_warnings(root: Path, committed: set[str]) -> tuple[list[Defect], list[Defect]]:
     """(defects, warnings) about ``.staging``: leftovers are warnings, links are defects."""
     st = root / STAGING_DIR
     kind = entry_kind(st)
@@ -217,56 +253,20 @@ def _staging_warnings(root: Path) -> tuple[list[Defect], list[Defect]]:
         k = entry_kind(st / n)
         if k == "dir":
             files = os.listdir(st / n)
-            if files:
+            if n in committed:  # a tar commit killed after its commit point, before removing the staging
+                out.append(Defect(n, None, "staging", f"{STAGING_DIR}/{n} is a leftover of the committed shard "
+                                                      "(safe to delete)"))
+            elif files:
                 nj = sum(f.endswith(".json") for f in files)
                 out.append(Defect(n, None, "staging", f"uncommitted work: {nj} frame JSON(s), {len(files)} file(s) "
-                                                      "in .staging (resume the render to finish it)"))
+                                                      f"in {STAGING_DIR} (resume the render to finish it)"))
         elif k == "file" and (n.endswith((".lock", ".lease")) or is_temp_name(n)):
             continue
         elif k == "file":
-            out.append(Defect(None, None, "staging", f"stray file .staging/{n}"))
+            out.append(Defect(None, None, "staging", f"stray file {STAGING_DIR}/{n}"))
         else:
-            defects.append(Defect(None, None, "unexpected-entry", f".staging/{n} is a {KIND_TEXT[k]}"))
+            defects.append(Defect(None, None, "unexpected-entry", f"{STAGING_DIR}/{n} is a {KIND_TEXT[k]}"))
     return defects, out
-
-
-def _signature_checks(root: Path, rep: Report, plan_hash: str, dirs: list[str]) -> dict[str, dict]:
-    """Report what is wrong with ``index.json`` and the commit records; returns every shard's
-    signature (its commit record, else its index entry) to check the manifests against."""
-    try:
-        idx = read_index(root)
-    except IndexDamaged as e:
-        rep.defects.append(Defect(None, None, "index", f"index.json is damaged ({e}); {REPAIR_HINT}"))
-        idx = None
-    else:
-        if idx is None and dirs:
-            rep.defects.append(Defect(None, None, "index", "index.json is missing (a render that resumes rewrites it "
-                                                           f"from the commit records; or {REPAIR_HINT})"))
-        elif idx is not None and idx["plan_hash"] != plan_hash:
-            rep.defects.append(Defect(None, None, "index", f"index.json belongs to another plan; {REPAIR_HINT}"))
-            idx = None
-    entries = (idx or {}).get("shards", {})
-    if idx is not None:
-        rep.digest = idx.get("digest")
-        if rep.digest is None:
-            rep.warnings.append(Defect(None, None, "index", "index.json has no digest (written by an older synth); "
-                                                            "--repair-index adds one"))
-        elif rep.digest != dataset_digest(entries):
-            rep.defects.append(Defect(None, None, "index", "index.json's digest does not match its entries (edited?)"))
-    records, problems = read_records(root, plan_hash)
-    for msg in problems:
-        rep.defects.append(Defect(None, None, "index", msg))
-    for s in sorted(set(records) & set(dirs)):
-        if idx is not None and entries.get(s) != records[s]:
-            rep.warnings.append(Defect(s, None, "index", "index.json is behind the shard's commit record (the next "
-                                                         "render rewrites it)"))
-    for s in sorted(set(entries) - set(dirs)):
-        if entry_kind(root / STAGING_DIR / s / MANIFEST_FILE) == "file":
-            rep.warnings.append(Defect(s, None, "index", "commit in progress or interrupted (the next render "
-                                                         "finishes it)"))
-        elif entry_kind(root / SHARDS_DIR / s) is None:
-            rep.defects.append(Defect(s, None, "index", "index.json lists a shard that is not on disk"))
-    return {**entries, **records}
 
 
 def validate_dataset(root, *, quick: bool = False, partial: bool = False, jobs: int = 1,
@@ -280,29 +280,13 @@ def validate_dataset(root, *, quick: bool = False, partial: bool = False, jobs: 
     rep = Report(root=str(root), hashed=not quick)
     rep.shards_expected = len(ds.expected)
     rep.frames_expected = sum(len(v) for v in ds.expected.values())
-    kind = entry_kind(root / SHARDS_DIR)
-    entries = shard_entries(root) if kind == "dir" else {}
-    if kind not in (None, "dir"):
-        rep.defects.append(Defect(None, None, "unexpected-entry",
-                                  f"{SHARDS_DIR} is a {KIND_TEXT[kind]}, not a directory (not followed)"))
-    dirs = []
-    for n, k in entries.items():
-        if k != "dir":
-            rep.defects.append(Defect(None, None, "unexpected-entry",
-                                      f"{SHARDS_DIR}/{n[:120]!r} is a {KIND_TEXT[k]}: only shard directories belong "
-                                      "there (not opened)"))
-        elif not SHARD_ID_RE.match(n) or n not in ds.expected:
-            rep.defects.append(Defect(n[:120], None, "unexpected-shard", "shard directory not in the plan"))
-            if SHARD_ID_RE.match(n):
-                dirs.append(n)
-        else:
-            dirs.append(n)
-    sigs = _signature_checks(root, rep, ds.plan_hash, dirs)
+    present = _shards_listing(root, rep, ds.expected)
+    sigs = check_signatures(root, rep, ds.plan_hash, present)
     for s in ds.expected:
-        if s not in dirs:
+        if s not in present:
             (rep.warnings if partial else rep.defects).append(
                 Defect(s, None, "missing-shard", f"planned shard not committed ({len(ds.expected[s])} frames)"))
-    args = [(str(root), s, ds.expected.get(s), quick, sigs.get(s)) for s in dirs]
+    args = [(str(root), s, ds.expected.get(s), quick, sigs.get(s)) for s in present]
     results = []
     if jobs > 1 and len(args) > 1:
         with ProcessPoolExecutor(max_workers=jobs) as ex:
@@ -321,29 +305,7 @@ def validate_dataset(root, *, quick: bool = False, partial: bool = False, jobs: 
         rep.warnings.extend(warns)
         rep.frames_checked += n
         rep.shards_checked += 1
-    defs, warns = _staging_warnings(root)
+    defs, warns = _staging_warnings(root, set(present))
     rep.defects.extend(defs)
     rep.warnings.extend(warns)
     return rep
-
-
-def repair(root) -> list[dict]:
-    """``synth validate --repair-index``: rebuild ``index.json`` from the manifests (signing what
-    they now say), append the changes to ``DIR/logs/index-repairs.jsonl`` and return them."""
-    ds = load_dataset(root)
-    _, changes = repair_index(ds.root, ds.plan_hash)
-    if changes:
-        log = ds.root / LOGS_DIR
-        log.mkdir(exist_ok=True)
-        with open(log / REPAIR_LOG, "a", encoding="utf-8") as f:
-            f.write(json.dumps({"time": utc_now(), "pid": os.getpid(), "changes": changes}) + "\n")
-    return changes
-
-
-def describe_change(c: dict) -> str:
-    """One line for a change made by :func:`repair`."""
-    what = c["shard"] or "index.json"
-    detail = c.get("reason") or ""
-    if "old" in c or "new" in c:
-        detail = f"manifest sha256 {c.get('old', '-')[:16]} -> {c.get('new', '-')[:16]}"
-    return f"{what}: {c['change']}" + (f" ({detail})" if detail else "")

@@ -39,7 +39,7 @@ from synth.dataset.segmentation import NAMES, PALETTE, polygon_classes
 from synth.errors import SynthError
 from synth.export.select import select_frames
 from synth.export.usd_assets import HeadPose, asset_meshes
-from synth.io import loads_json, sha256_file
+from synth.io import sha256_file
 
 try:  # the `export` extra; export_usd says how to install it
     from pxr import Gf, Sdf, Usd, UsdGeom, Vt
@@ -180,7 +180,7 @@ def export_usd(source, out, *, shard: str | None = None, model=None, assets: boo
         raise SynthError("the output's folder does not exist", str(out.parent), "create it first")
     shard = shard or _first_committed(root)
     refs = select_frames(root, shards=[shard])
-    metas = [loads_json(r.json_path.read_bytes()) for r in refs]
+    metas = [r.meta() for r in refs]
     data, run_seed = _resolve_model(root, model, metas)
     hm = HeadModel(data)
     by_identity: dict[int, dict[int, dict[int, dict]]] = defaultdict(lambda: defaultdict(dict))

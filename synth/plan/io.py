@@ -257,6 +257,11 @@ class Plan:
         """shard id -> frame keys (what a dataset directory expects)."""
         return {s: self.frame_keys(s) for s in self._shards}
 
+    @property
+    def shard_format(self) -> str:
+        """How committed shards are stored: ``"dir"`` or ``"tar"`` (plans made before the option: dir)."""
+        return str(self.config["dataset"].get("shard_format", "dir"))
+
     def render_settings(self) -> dict:
         return dict(self.config["render"])
 

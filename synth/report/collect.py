@@ -143,7 +143,7 @@ def collect(root, *, max_shards: int | None = None, progress=None) -> Collected:
     ita = {}
     names: list[str] = list((ds.info.get("meta") or {}).get("model", {}).get("expression_names") or [])
     for n, ref in enumerate(refs):
-        fj = loads_json(ref.json_path.read_bytes())
+        fj = ref.meta()
         i, e, _ = parse_frame_key(ref.key)
         m, cam = fj["model"], fj["camera"]
         if i not in ident_seen:

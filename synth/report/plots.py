@@ -52,6 +52,19 @@ def _bins(n: int) -> int:
     return max(5, min(40, n // 3))
 
 
+def _hist(ax, values, xlabel: str, ylabel: str, colour: str, missing: str, bins=None) -> bool:
+    """A histogram of ``values`` with its axis labels, or a note that ``missing`` is not there yet;
+    True when there was something to plot."""
+    values = np.asarray(values)
+    if not values.size:
+        _empty(ax, missing)
+        return False
+    ax.hist(values, bins=_bins(values.size) if bins is None else bins, color=colour)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    return True
+
+
 def _bars(ax, labels, values, colour) -> None:
     """Vertical bars with the labels under them, turned."""
     x = np.arange(len(labels))
@@ -116,15 +129,10 @@ def cameras(c) -> bytes:
     else:
         _empty(a, "views")
     ang = c.smallest_angle_deg[np.isfinite(c.smallest_angle_deg)]
-    if ang.size:
-        b.hist(ang, bins=_bins(ang.size), color="#b05a3c")
-        if c.min_separation_deg is not None:
-            b.axvline(c.min_separation_deg, color="k", ls="--", lw=1, label=f"minimum {c.min_separation_deg:g} deg")
-            b.legend(fontsize=8)
-        b.set_xlabel("smallest angle between two views of an expression (deg)")
-        b.set_ylabel("expressions")
-    else:
-        _empty(b, "expressions with two views")
+    if _hist(b, ang, "smallest angle between two views of an expression (deg)", "expressions", "#b05a3c",
+             "expressions with two views") and c.min_separation_deg is not None:
+        b.axvline(c.min_separation_deg, color="k", ls="--", lw=1, label=f"minimum {c.min_separation_deg:g} deg")
+        b.legend(fontsize=8)
     return _done(fig, {a: "viewpoints (azimuth, elevation; 0 = frontal)", b: "view separation"})
 
 
@@ -158,15 +166,11 @@ def assets(c) -> bytes:
 def skin_ita(c) -> bytes:
     plt = _plt()
     fig, ax = plt.subplots(figsize=(7, 3.2))
-    if c.ita_deg.size:
-        ax.hist(c.ita_deg, bins=np.arange(-90, 91, 5), color="#c08a60")
+    if _hist(ax, c.ita_deg, "individual typology angle of the skin albedo (deg)", "identities", "#c08a60",
+             "identities", bins=np.arange(-90, 91, 5)):
         for lo, name in ITA_CATEGORIES[:-1]:
             ax.axvline(lo, color="0.5", lw=0.6, ls=":")
             ax.text(lo + 1, ax.get_ylim()[1] * 0.92, name, fontsize=6, rotation=90, va="top", color="0.35")
-        ax.set_xlabel("individual typology angle of the skin albedo (deg)")
-        ax.set_ylabel("identities")
-    else:
-        _empty(ax, "identities")
     ax.set_title("skin tone (ITA)")
     return _png(fig)
 
@@ -175,23 +179,12 @@ def render_times(c) -> bytes:
     fig, (a, b) = _plt().subplots(1, 2, figsize=(10, 3.2))
     fs = np.array(list(c.render.get("frame_seconds", {}).values()))
     ss = c.render.get("shard_seconds", {})
-    if fs.size:
-        a.hist(fs, bins=_bins(fs.size), color="#4a9a9a")
-        a.set_xlabel("seconds in Cycles")
-        a.set_ylabel("frames")
+    _hist(a, fs, "seconds in Cycles", "frames", "#4a9a9a", "render logs")
+    if 0 < len(ss) <= 30:
+        _bars(b, list(ss), np.array(list(ss.values())), "#4a9a9a")
+        b.set_ylabel("seconds")
     else:
-        _empty(a, "render logs")
-    if ss:
-        names, vals = list(ss), np.array(list(ss.values()))
-        if len(names) <= 30:
-            _bars(b, names, vals, "#4a9a9a")
-            b.set_ylabel("seconds")
-        else:
-            b.hist(vals, bins=30, color="#4a9a9a")
-            b.set_xlabel("seconds per shard")
-            b.set_ylabel("shards")
-    else:
-        _empty(b, "render logs")
+        _hist(b, list(ss.values()), "seconds per shard", "shards", "#4a9a9a", "render logs", bins=30)
     return _done(fig, {a: "render time per frame", b: "render time per shard"})
 
 

@@ -48,7 +48,7 @@ if die_at >= 0:
         return w
     for name in ("replace", "rename", "fsync"):
         setattr(os, name, wrap(name, getattr(os, name)))
-ds = open_dataset(root, os.environ["PLAN_HASH"], plan)
+ds = open_dataset(root, os.environ["PLAN_HASH"], plan, shard_format=os.environ.get("SHARD_FORMAT") or None)
 for sid in ds.pending_shards():
     st = ds.try_staging(sid)
     if st is None:  # another worker holds it, or committed it meanwhile
@@ -67,8 +67,9 @@ print(json.dumps(calls))
 """
 
 
-def run_child(root, plan, log, die_at=-1, sleep=0.0, wait=True):
-    env = dict(os.environ, REPO_DIR=str(REPO), PLAN=json.dumps(plan), PLAN_HASH=HASH, SIM_RENDER_S=str(sleep))
+def run_child(root, plan, log, die_at=-1, sleep=0.0, wait=True, fmt=None):
+    env = dict(os.environ, REPO_DIR=str(REPO), PLAN=json.dumps(plan), PLAN_HASH=HASH, SIM_RENDER_S=str(sleep),
+               SHARD_FORMAT=fmt or "")
     p = subprocess.Popen([sys.executable, "-c", CHILD, str(root), str(die_at), str(log)], env=env,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     if not wait:
@@ -77,9 +78,9 @@ def run_child(root, plan, log, die_at=-1, sleep=0.0, wait=True):
     return p.returncode, out, err
 
 
-def assert_consistent(root, plan):
+def assert_consistent(root, plan, fmt=None):
     """Every committed shard verifies completely; the index matches the files once reopened."""
-    ds = open_dataset(root, HASH, plan)  # reopening repairs a stale index
+    ds = open_dataset(root, HASH, plan, shard_format=fmt)  # reopening repairs a stale index
     rep = validate_dataset(root, partial=True)
     assert rep.defects == [], [d.line() for d in rep.defects]
     committed = ds.committed_shards()
@@ -258,24 +259,24 @@ def test_resume_reuses_finished_frames_and_cleans_leftovers(tmp_path):
 
 # -- kill -9 -----------------------------------------------------------------------------------
 
-def _kill_at(tmp_path, points, plan):
+def _kill_at(tmp_path, points, plan, fmt=None):
     """Kill a worker at each given sync point, check, resume; no frame is rendered twice."""
     for n in points:
         root, log = tmp_path / f"k{n}", tmp_path / f"k{n}.log"
-        rc, out, err = run_child(root, plan, log, die_at=n)
+        rc, out, err = run_child(root, plan, log, die_at=n, fmt=fmt)
         assert rc == -signal.SIGKILL, (n, rc, err)
-        assert_consistent(root, plan)
-        ds = assert_consistent(root, plan)
+        assert_consistent(root, plan, fmt)
+        ds = assert_consistent(root, plan, fmt)
         resume(ds, log)
-        ds = assert_consistent(root, plan)
+        ds = assert_consistent(root, plan, fmt)
         assert ds.pending_shards() == []
         assert validate_dataset(root).ok
         c = logged(log)
         assert max(c.values()) == 1, f"kill at point {n}: frames rendered twice: {[k for k, v in c.items() if v > 1]}"
 
 
-def _sync_points(tmp_path, plan) -> list[str]:
-    rc, out, err = run_child(tmp_path / "dry", plan, tmp_path / "dry.log", die_at=10**9)
+def _sync_points(tmp_path, plan, fmt=None) -> list[str]:
+    rc, out, err = run_child(tmp_path / "dry", plan, tmp_path / "dry.log", die_at=10**9, fmt=fmt)
     assert rc == 0, err
     return json.loads(out)
 

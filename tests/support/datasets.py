@@ -11,6 +11,8 @@
   :func:`model_dataset`, frames of the toy head model (tests/support/toy_model.py): codes,
   joint rotations, landmarks_3d and landmarks_2d as the worker computes them, cameras on an
   orbit around the head; pixels are fake_frames' sphere.
+
+Both take ``shard_format="tar"`` to commit tar shards instead of directories.
 """
 
 from __future__ import annotations
@@ -120,11 +122,11 @@ def _with_camera(fj: dict, cam: dict, lm3: np.ndarray) -> dict:
     return fj
 
 
-def _commit(root: Path, keys: list[str], make) -> Path:
+def _commit(root: Path, keys: list[str], make, shard_format: str | None = None) -> Path:
     exp = {}
     for k in keys:
         exp.setdefault(shard_name(parse_frame_key(k)[0]), []).append(k)
-    ds = open_dataset(root, "e" * 64, exp)
+    ds = open_dataset(root, "e" * 64, exp, shard_format=shard_format)
     for sid in ds.pending_shards():
         with ds.staging(sid) as st:
             for key in st.expected_keys:
@@ -154,7 +156,7 @@ def marked_pixels(fj: dict, n: int = 14) -> list[tuple[int, int, int]]:
     return out
 
 
-def marked_dataset(root: Path, W: int = 48, H: int = 36, views: int = 3) -> Path:
+def marked_dataset(root: Path, W: int = 48, H: int = 36, views: int = 3, shard_format: str | None = None) -> Path:
     keys = [frame_key(0, 0, v) for v in range(views)] + [frame_key(0, 1, 0), frame_key(1, 0, 0)]
 
     def make(key):
@@ -171,10 +173,11 @@ def marked_dataset(root: Path, W: int = 48, H: int = 36, views: int = 3) -> Path
             seg[r, c] = 1
         return (rgba, depth, np.zeros((H, W, 3), np.float32), seg), fj
 
-    return _commit(root, keys, make)
+    return _commit(root, keys, make, shard_format)
 
 
-def model_dataset(root: Path, identities: int = 1, expressions: int = 2, views: int = 3, size: int = 24):
+def model_dataset(root: Path, identities: int = 1, expressions: int = 2, views: int = 3, size: int = 24,
+                  shard_format: str | None = None):
     """(dataset dir, model file). The head model file is written to ``root.parent``."""
     from synth.model.head import HeadModel
 
@@ -208,4 +211,4 @@ def model_dataset(root: Path, identities: int = 1, expressions: int = 2, views: 
         fj = _with_camera(fj, _camera(key, size, size), ev.landmarks["ibug68"][0].astype(np.float64))
         return fake_frames.pixels(key, size), fj
 
-    return _commit(root, keys, make), model_path
+    return _commit(root, keys, make, shard_format), model_path

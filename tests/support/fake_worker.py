@@ -38,6 +38,14 @@ from renderer_jobs import guard  # noqa: E402
 from renderer_jobs.events import Commit, Error, Frame, Start, emit  # noqa: E402
 
 
+
+def _publish(path: Path, text: str) -> None:
+    """Write ``text`` under a temporary name and rename it into place, so a test that waits for the
+    file never reads it empty."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--dataset", required=True)
@@ -61,7 +69,7 @@ def main() -> int:
         if b == "env":
             (root / f"{shard}.env").write_text(os.environ.get("CUDA_VISIBLE_DEVICES", "(unset)"))
         if b in ("wait", "silent"):
-            (root / f"{shard}.pid").write_text(str(os.getpid()))
+            _publish(root / f"{shard}.pid", str(os.getpid()))
             while True:
                 time.sleep(1)
         if b == "crash":
@@ -73,7 +81,7 @@ def main() -> int:
             return 2
         if b in ("hang", "stubborn"):
             child = subprocess.Popen(["sleep", "600"], preexec_fn=guard.unblock_signals)
-            (root / f"{shard}.child").write_text(str(child.pid))
+            _publish(root / f"{shard}.child", str(child.pid))
             while True:
                 time.sleep(1)
         if b == "bad_event":
