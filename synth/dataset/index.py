@@ -2,12 +2,13 @@
 
 A commit signs its shard: before its commit point (the rename of the staging directory into
 ``shards/``, or for a tar shard the write of ``shards/<id>.tar.json``,
-:mod:`synth.dataset.tarshard`) it writes the **commit record** ``.commits/<shard>.json`` (the sha256 and size of the manifest, the frame
-and byte counts), then, after the commit point, adds the same entry to ``index.json`` (the records of
-every shard in one file, with ``digest``, a sha256 over every ``shard_id manifest_sha256``
-line: one number that changes when any committed shard does). Both writes are atomic; the
-record is one file per shard, so commits on several hosts never lose each other's signatures
-even where ``flock`` does not work (NFS, Lustre) and ``index.json``'s read-modify-write might.
+:mod:`synth.dataset.tarshard`) it writes the **commit record** ``.commits/<shard>.json`` (the
+sha256 and size of the manifest, the frame and byte counts), then, after the commit point,
+adds the same entry to ``index.json`` (the records of every shard in one file, with
+``digest``, a sha256 over every ``shard_id manifest_sha256`` line: one number that changes
+when any committed shard does). Both writes are atomic; the record is one file per shard, so
+commits on several hosts never lose each other's signatures even where ``flock`` does not work
+(NFS, Lustre) and ``index.json``'s read-modify-write might.
 
 A shard's **signature** is its commit record, else its ``index.json`` entry (datasets from
 before commit records). Signatures are written only by a commit, never from what happens to
@@ -19,8 +20,7 @@ be on disk:
   rerun of the render cannot launder it;
 - :func:`update_index` (every time a dataset is opened for writing) rebuilds ``index.json``
   from the signatures (never from the manifests), forgetting shards no longer on disk in
-  either form;
-  a damaged ``index.json`` is left for the explicit repair;
+  either form; a damaged ``index.json`` is left for the explicit repair;
 - :func:`repair_index` (``synth validate --repair-index``) is the one way to sign what the
   manifests now say; it reports every change, and ``synth validate`` logs it.
 """

@@ -98,8 +98,8 @@ class ShardEntries(NamedTuple):
       shard id: ``synth validate`` reports those);
     - ``tars``: shard ids whose manifest ``<id>.tar.json`` is a regular file (``<id>.tar``
       belongs to it, whatever it is: validate checks it);
-    - ``orphans``: shard ids with a regular file ``<id>.tar`` and no manifest (a commit killed
-      before its commit point, or a stray tar);
+    - ``orphans``: shard ids with a regular file ``<id>.tar`` and no ``<id>.tar.json`` at all
+      (a commit killed before its commit point, or a stray tar);
     - ``temps``: regular files with temporary names (leftovers of a killed commit);
     - ``others``: every other name -> its kind: links, devices, FIFOs, stray files (not opened);
     - ``kinds``: every name -> its kind.
@@ -131,8 +131,8 @@ def shard_entries(root: Path) -> ShardEntries:
             temps.append(n)
         elif k == "file" and SHARD_ID_RE.match(man_id):
             tars.append(man_id)
-        elif SHARD_ID_RE.match(tar_id) and kinds.get(n + ".json") == "file":
-            continue  # the tar of a tar shard (checked with it)
+        elif SHARD_ID_RE.match(tar_id) and n + ".json" in kinds:
+            continue  # the tar of a tar shard (checked with it; a manifest that is not a file is reported)
         elif k == "file" and SHARD_ID_RE.match(tar_id):
             orphans.append(tar_id)
         else:
@@ -220,6 +220,8 @@ def place_tar_shard(tmp: Path, root: Path, shard_id: str, data: bytes, *, durabl
     the commit point."""
     tp, mp = tar_path(root, shard_id), tar_manifest_path(root, shard_id)
     os.replace(tmp, tp)
+    if durable:  # the tar's rename is durable before the manifest can be
+        fsync_dir(tp.parent)
 
     def fill(t: Path) -> None:
         fd = os.open(t, os.O_WRONLY | os.O_CREAT | os.O_EXCL, MEMBER_MODE)

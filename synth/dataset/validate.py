@@ -213,7 +213,8 @@ def _shards_listing(root: Path, rep: Report, expected: dict) -> list[str]:
     for n, k in sorted(stray.items()):
         rep.defects.append(Defect(None, None, "unexpected-entry",
                                   f"{SHARDS_DIR}/{n[:120]!r} is a {KIND_TEXT[k]}: only shard directories and tar "
-                                  f"shards (<id>{TAR_SUFFIX} with <id>{TAR_MANIFEST_SUFFIX}) belong there (not opened)"))
+                                  f"shards (<id>{TAR_SUFFIX} with <id>{TAR_MANIFEST_SUFFIX}) belong there "
+                                  "(not opened)"))
     for s in ents.orphans:
         if s in expected:
             rep.warnings.append(Defect(s, None, "staging", f"{SHARDS_DIR}/{s}{TAR_SUFFIX} has no manifest: a commit "
