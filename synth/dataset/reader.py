@@ -182,6 +182,9 @@ class FrameRef(NamedTuple):
 
     def json_bytes(self) -> bytes:
         if self.tar is not None:
+            if self.tar.json[1] > MAX_FRAME_JSON_BYTES:  # the manifest's size, checked before reading
+                raise SynthError(f"frame JSON of {self.tar.json[1]} bytes (limit {MAX_FRAME_JSON_BYTES})",
+                                 str(self.json_path), "run `synth validate` on the dataset")
             return read_member(self.tar.tar, *self.tar.json, where=str(self.json_path))
         return _frame_file(self.json_path, MAX_FRAME_JSON_BYTES)
 
@@ -278,8 +281,9 @@ def _iter_tar(stream: IO[bytes], validate: bool, where: str, shard: str | None =
             stem, dot, ext = name.partition(".")
             if not m.isreg() or ext not in ("json", "exr") or name == MANIFEST_FILE:
                 continue
-            if m.size > MAX_MEMBER_BYTES:
-                raise SynthError(f"tar member {m.name} has {m.size} bytes (limit {MAX_MEMBER_BYTES})", where,
+            limit = MAX_FRAME_JSON_BYTES if ext == "json" else MAX_MEMBER_BYTES  # a frame JSON's bound, as on disk
+            if m.size > limit:
+                raise SynthError(f"tar member {m.name} has {m.size} bytes (limit {limit})", where,
                                  "this is not a synth frame; check the tar")
             data = tf.extractfile(m).read()  # type: ignore[union-attr]
             parts = pending.setdefault(stem, {})

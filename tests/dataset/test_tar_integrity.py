@@ -189,3 +189,17 @@ def test_cli_repair_index_on_a_tar_dataset(ds):
     logged = [json.loads(x) for x in (ds / "logs" / "index-repairs.jsonl").read_text().splitlines()]
     assert {c["shard"] for c in logged[0]["changes"]} == {None, S0, S1}
     assert validate_dataset(ds).ok and load_dataset(ds).committed_shards() == set(PLAN)
+
+
+def test_the_reader_bounds_frame_json_members(ds, monkeypatch):
+    """The reader refuses a frame JSON member over the frame-JSON bound before reading it, by
+    the manifest (random access) and by the header (a tar stream)."""
+    import synth.dataset.reader as reader
+
+    ref = reader.list_frames(ds)[0]
+    assert ref.tar is not None and reader.loads_json(ref.json_bytes())["frame_id"] == ref.key
+    monkeypatch.setattr(reader, "MAX_FRAME_JSON_BYTES", 100)
+    with pytest.raises(SynthError, match="limit 100"):
+        ref.json_bytes()
+    with pytest.raises(SynthError, match="limit 100"):
+        next(reader.iter_frames(tar_path(ds, S0)))
