@@ -32,6 +32,8 @@ import threading
 from dataclasses import asdict, dataclass, fields
 from typing import IO, ClassVar, Union
 
+from synth.io.jsonio import MAX_DEPTH, json_depth
+
 #: Bumped whenever an event's fields change meaning or a required field is added.
 PROTOCOL_VERSION = 2
 
@@ -202,9 +204,12 @@ def parse_line(line: str) -> Event | None:
     start = line.find("{")
     if start < 0:
         return None
+    text = line[start:]
+    if json_depth(text.encode("utf-8", "surrogatepass")) > MAX_DEPTH:  # deeper than any event: not one
+        return None
     try:
-        d = json.loads(line[start:])
-    except ValueError:
+        d = json.loads(text)  # NaN/Infinity parse here, so that from_dict refuses them as an EventError
+    except ValueError:  # not JSON
         return None
     if not isinstance(d, dict) or "event" not in d:
         return None

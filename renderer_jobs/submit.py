@@ -1,8 +1,10 @@
 """Plan or resume, then render what is missing with a backend, until the dataset is complete.
 
-``DIR/plan/`` holds the plan. :func:`prepare_plan` plans into it, or, when it exists,
-re-plans into a temporary directory and refuses arguments that give another plan hash.
-:func:`render_plan` opens (or resumes) the dataset and loops, reading from its files each
+``DIR/plan/`` holds the plan. :func:`prepare_plan` plans into it (atomically: several runs
+started at once adopt the first one's identical plan), or, when it exists, recomputes the plan
+hash in memory and refuses arguments that give another. :func:`render_plan` reports a
+finished dataset without writing anything; otherwise it checks the whole plan (shard spec
+hashes, model, HDR maps) before any worker starts, opens (or resumes) the dataset and loops, reading from its files each
 time: the shards not committed yet that no live process holds are grouped into batches of
 ``shards_per_worker`` (one fresh worker process each) and run on a backend while its events
 are tallied; shards that another live process holds (another ``synth render``, a worker of
@@ -14,7 +16,6 @@ error whose exit code says why (docs/farm.md, "Exit codes").
 from __future__ import annotations
 
 import os
-import shutil
 import time
 from collections import Counter
 from collections.abc import Iterable, Sequence
@@ -33,31 +34,34 @@ MAX_ROUNDS = 3
 
 def prepare_plan(out: Path, identities: int, config: Path | None, sets: list[str], seed: int | None,
                  model: Path | None, start: int = 0) -> Path:
-    """Plan into ``out/plan`` or verify that the plan there is the one these arguments give."""
+    """Plan into ``out/plan``, or verify that the plan there is the one these arguments give.
+
+    Everything is checked before anything is written (the configuration, the counts, the
+    referenced files, ``out`` itself), and a refused or failed plan leaves the file system as
+    it was. An existing plan is verified without writing (the plan hash is recomputed in
+    memory), so a finished dataset on read-only media still resumes to "complete". When
+    several ``synth render`` start at once on one ``out``, each plans into a temporary
+    directory and the first rename wins; the others adopt its plan when it is identical
+    (:func:`synth.plan.io.write_plan`)."""
     from synth.config import load_config
-    from synth.dataset.shards import PLAN_DIR
-    from synth.plan.io import load_plan
+    from synth.dataset.shards import PLAN_DIR, check_out_dir
+    from synth.plan.io import check_hdri_files, load_plan
     from synth.plan.planner import run_plan
 
     cfg = load_config(config, sets)
+    check_hdri_files({"environment": cfg.lighting.environment, "hdri_files": cfg.lighting.hdri_files})
+    info = check_out_dir(out)
     target = out / PLAN_DIR
-    if out.exists() and not out.is_dir():
-        raise SynthError("output path exists and is not a directory", str(out), "choose a directory for --out")
-    out.mkdir(parents=True, exist_ok=True)
-    if target.exists():
-        existing = load_plan(target)
-        tmp = out / f".plan-check-{os.getpid()}"
-        shutil.rmtree(tmp, ignore_errors=True)
-        try:
-            header, _ = run_plan(cfg, identities, tmp, seed=seed, first_identity=start, model_path=model)
-        finally:
-            shutil.rmtree(tmp, ignore_errors=True)
-        if header["plan_hash"] != existing.plan_hash:
-            raise SynthError(f"{out} already holds a render of a different plan (hash {existing.plan_hash[:16]}, "
+    if os.path.lexists(target) or info is not None:  # a plan or a dataset is there: the same one?
+        there = load_plan(target).plan_hash if os.path.lexists(target) else info["plan_hash"]
+        header, _ = run_plan(cfg, identities, None, seed=seed, first_identity=start, model_path=model)
+        if header["plan_hash"] != there:
+            raise SynthError(f"{out} already holds a render of a different plan (hash {there[:16]}, "
                              f"these arguments give {header['plan_hash'][:16]})", str(target),
                              "rerun with the original arguments to resume, or use a new --out")
-        return target
-    run_plan(cfg, identities, target, seed=seed, first_identity=start, model_path=model)
+        if os.path.lexists(target):
+            return target
+    run_plan(cfg, identities, target, seed=seed, first_identity=start, model_path=model)  # (re)write the plan
     return target
 
 
@@ -170,6 +174,21 @@ def _held_text(held: dict) -> str:
     return text + (f" and {len(items) - 3} more" if len(items) > 3 else "")
 
 
+def finished(out: Path, plan) -> dict | None:
+    """The dataset's summary when ``out`` holds this plan's dataset with every shard committed
+    (read without writing anything), else ``None``."""
+    from synth.dataset.layout import DATASET_FILE
+    from synth.dataset.shards import load_dataset
+
+    if not (Path(out) / DATASET_FILE).is_file():
+        return None
+    ds = load_dataset(out)
+    if ds.plan_hash != plan.plan_hash:
+        return None  # open_dataset refuses it with the full message
+    summary = ds.summary()
+    return summary if summary["shards_committed"] == summary["shards"] else None
+
+
 def render_plan(out: Path, plan_dir: Path, backend: Backend, shards_per_worker: int, quiet: bool = False,
                 retries: int = 0, log_dir: Path | None = None, wait: bool = True, progress: Progress | None = None,
                 poll_s: float = 2.0) -> dict:
@@ -180,6 +199,12 @@ def render_plan(out: Path, plan_dir: Path, backend: Backend, shards_per_worker: 
     from synth.plan.io import load_plan
 
     plan = load_plan(plan_dir)
+    done = finished(out, plan)
+    if done is not None:  # nothing to do: report it without writing (read-only media)
+        backend.close()
+        return {"wall_seconds": 0.0, "render_seconds": 0.0, "frames_rendered": 0, "frames_before": done["frames"],
+                "worker_starts": 0, "peak_worker_rss_mb": 0.0, **done}
+    plan.verify()  # the whole plan, before any worker starts (and before the dataset is created)
     ds = open_dataset(out, plan.plan_hash, plan.expected(), shard_format=plan.shard_format,
                       meta={"plan_dir": os.path.relpath(plan_dir, out), "run_seed": plan.seed,
                             "render": plan.render_settings(), "model": plan.header["model"]})

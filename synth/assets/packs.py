@@ -63,6 +63,8 @@ def pack_path_problem(rel: str, root: str | Path) -> tuple[Path | None, tuple[st
         return None, ("external pack names no .blend file", "write generator = \"blend:PATH.blend\"")
     if not str(rel).endswith(".blend"):
         return None, (f"external pack '{rel}' is not a .blend file", "point the generator at a .blend file")
+    if "\0" in str(rel):
+        return None, (f"external pack path {rel!r} contains a NUL byte", "remove the NUL (\\0) from the path")
     root_p = Path(root)
     if not root_p.is_dir():
         return None, (f"asset root '{root_p}' is not a folder", "fix asset_root (relative to the manifest folder)")

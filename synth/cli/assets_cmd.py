@@ -98,18 +98,22 @@ def validate_cmd(
     generators (rig modules present), external packs (file, sha256, confinement, licence).
     Exit 0 when clean, 1 with one line per defect (what, where, what to do)."""
     from synth.assets.validate import report_json, validate_manifest
+    from synth.errors import Incomplete, SynthError
 
+    if manifest_dir is not None and not manifest_dir.is_dir():
+        raise SynthError("asset manifest folder not found", str(manifest_dir), "pass an existing --manifest-dir")
     rep = validate_manifest(manifest_dir)
     if as_json:
         typer.echo(report_json(rep))
     else:
         for d in rep.defects:
             typer.echo(d.line())
-        summary = (f"{rep.manifest_dir}: {rep.files} files, {rep.assets} assets ({rep.packs} external packs): "
-                   + ("OK" if rep.ok else f"{len(rep.defects)} defect{'s' if len(rep.defects) != 1 else ''}"))
-        typer.echo(summary, err=not rep.ok)
+        typer.echo(f"{rep.manifest_dir}: {rep.files} files, {rep.assets} assets ({rep.packs} external packs): "
+                   + ("OK" if rep.ok else f"{len(rep.defects)} defect{'s' if len(rep.defects) != 1 else ''}"),
+                   err=not rep.ok)
     if not rep.ok:
-        raise typer.Exit(1)
+        raise Incomplete(f"{len(rep.defects)} defect(s) in the asset catalogue", str(rep.manifest_dir),
+                         "fix each defect listed above, then validate again")
 
 
 def register(app: typer.Typer) -> None:

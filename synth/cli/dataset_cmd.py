@@ -18,15 +18,25 @@ def validate_cmd(
                                                          "not defects (check a render in progress)."),
     jobs: int = typer.Option(1, "--jobs", "-j", min=1, max=256, help="Check shards in this many processes."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON report instead of lines."),
+    repair_index: bool = typer.Option(False, "--repair-index", help="First rebuild index.json from the shards' "
+                                      "manifests (signing what they now say), print and log every change "
+                                      "(DIR/logs/index-repairs.jsonl), then validate."),
 ) -> None:
-    """Check every committed shard: checksums, EXR layers/size/NaN, JSON schema, counts vs the plan.
+    """Check every committed shard: checksums, EXR layers/size/NaN, JSON schema, counts vs the plan,
+    and the index that signed each shard's manifest at commit.
 
     Exit code 0 when clean, 1 when defects were found, 2 for usage errors.
     """
+    from synth.dataset.shards import load_dataset
     from synth.dataset.validate import validate_dataset
+    from synth.dataset.validate_index import describe_change, repair
 
-    if not directory.exists():
-        raise SynthError("dataset directory not found", str(directory), "pass the --out directory of `synth render`")
+    load_dataset(directory)  # not a dataset: one line, exit 2
+    if repair_index:
+        changes = repair(directory)
+        for c in changes:
+            typer.echo(f"repaired {describe_change(c)}", err=as_json)
+        typer.echo(f"index.json rebuilt from the manifests: {len(changes)} change(s)", err=as_json)
     if as_json:
         rep = validate_dataset(directory, quick=quick, partial=partial, jobs=jobs)
         typer.echo(json.dumps(rep.to_json(), indent=1))
@@ -34,6 +44,7 @@ def validate_cmd(
         return
 
     from rich.console import Console
+    from rich.markup import escape
     from rich.progress import Progress
 
     err = Console(stderr=True)
@@ -43,28 +54,43 @@ def validate_cmd(
                                progress=lambda s: prog.advance(task))
     out = Console(highlight=False, soft_wrap=True)
     for d in rep.defects:
-        out.print(f"[red]DEFECT[/red]  {d.line()}", markup=True)
+        out.print(f"[red]DEFECT[/red]  {escape(d.line())}", markup=True)
     for w in rep.warnings:
-        out.print(f"[yellow]warning[/yellow] {w.line()}", markup=True)
+        out.print(f"[yellow]warning[/yellow] {escape(w.line())}", markup=True)
     kinds: dict[str, int] = {}
     for d in rep.defects:
         kinds[d.kind] = kinds.get(d.kind, 0) + 1
     by_kind = ", ".join(f"{k} {n}" for k, n in sorted(kinds.items()))
     status = "[green]OK[/green]" if rep.ok else f"[red]{len(rep.defects)} defect(s)[/red] ({by_kind})"
-    out.print(f"{rep.root}: {rep.shards_checked}/{rep.shards_expected} shards, "
+    out.print(f"{escape(rep.root)}: {rep.shards_checked}/{rep.shards_expected} shards, "
               f"{rep.frames_checked}/{rep.frames_expected} frames checked"
-              f"{'' if rep.hashed else ' (no hashing: --quick)'}; {status}; {len(rep.warnings)} warning(s)",
-              markup=True)
+              f"{'' if rep.hashed else ' (no hashing: --quick)'}; {status}; {len(rep.warnings)} warning(s)"
+              f"{f'; digest {rep.digest}' if rep.digest else ''}", markup=True)
     _finish(rep)
 
 
 def _finish(rep) -> None:
     """Exit code 1 when defects were found (raised as an error so every entry point sees it)."""
-    from synth.dataset.validate import DefectsFound
+    from synth.dataset.defects import DefectsFound
 
     if not rep.ok:
-        raise DefectsFound(f"{len(rep.defects)} defect(s) found", rep.root,
-                           "re-render the affected shards (delete them from shards/ and rerun the render)")
+        raise DefectsFound(f"{len(rep.defects)} defect(s) found", rep.root, _fix(rep))
+
+
+def _fix(rep) -> str:
+    """What to do about the kinds of defect found."""
+    kinds = {d.kind for d in rep.defects}
+    fixes = []
+    if kinds & {"unexpected-entry", "unexpected-shard"}:
+        fixes.append("move away what does not belong to the dataset (listed above)")
+    if "index" in kinds:
+        fixes.append("for the index lines, --repair-index signs the manifests as they are now (only if you trust "
+                     "them)")
+    if kinds == {"missing-shard"}:
+        fixes.append("rerun the render to commit the missing shards")
+    elif kinds - {"unexpected-entry", "unexpected-shard", "index"}:
+        fixes.append("re-render the affected shards (delete them from shards/ and rerun the render)")
+    return "; ".join(fixes)
 
 
 def preview_cmd(

@@ -90,11 +90,10 @@ def sample(n: int = typer.Option(4, "--n", min=1, max=100000, help="Number of me
     data, path = _load(model)
     hm = HeadModel(data)
     gmm = GaussianMixture.from_model(data)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    from synth.io import atomic_dir, dumps_json
+    from synth.io import atomic_dir, created_dirs, dumps_json
     from synth.model.export import write_mesh
 
-    with atomic_dir(out) as tmp:  # replaces an empty ``out`` (checked above)
+    with created_dirs(out.parent), atomic_dir(out) as tmp:  # replaces an empty ``out`` (checked above)
         records = []
         for i in range(n):
             # one generator per mesh index, so mesh i is the same whatever n is

@@ -8,12 +8,15 @@ from typing import Optional
 
 import typer
 
+from synth.seeds import MAX_SEED
+
 
 def plan_cmd(
     identities: int = typer.Option(..., "--identities", "-n", help="Number of identities to plan."),
     out: Path = typer.Option(..., "--out", "-o", help="Plan directory to create (must be new or empty)."),
     config: Optional[Path] = typer.Option(None, "--config", "-c", help="TOML configuration file."),
-    seed: Optional[int] = typer.Option(None, "--seed", "-s", help="Run seed (overrides dataset.seed)."),
+    seed: Optional[int] = typer.Option(None, "--seed", "-s", min=0, max=MAX_SEED,
+                                       help="Run seed (overrides dataset.seed)."),
     set_: list[str] = typer.Option([], "--set", help="Override one key: section.key=value (repeatable)."),
     model: Optional[Path] = typer.Option(None, "--model", "-m", help="Head model .npz (default: embedded)."),
     start: int = typer.Option(0, "--start", help="First identity index (a multiple of identities_per_shard)."),

@@ -23,6 +23,7 @@ from typing import Optional
 import typer
 
 from synth.errors import SynthError
+from synth.seeds import MAX_SEED
 
 
 def _overrides(expressions, views, preset, workers_device, set_):
@@ -57,7 +58,8 @@ def render_cmd(
                                                "--ray-address: CPUs of the local runtime, default all)."),
     shards_per_worker: int = typer.Option(2, "--shards-per-worker", min=1,
                                           help="Recycle a worker process after this many shards."),
-    seed: Optional[int] = typer.Option(None, "--seed", "-s", help="Run seed (overrides dataset.seed)."),
+    seed: Optional[int] = typer.Option(None, "--seed", "-s", min=0, max=MAX_SEED,
+                                       help="Run seed (overrides dataset.seed)."),
     device: Optional[str] = typer.Option(None, "--device", help="auto (OptiX, CUDA, else CPU), gpu or cpu."),
     set_: list[str] = typer.Option([], "--set", help="Override one config key: section.key=value (repeatable)."),
     model: Optional[Path] = typer.Option(None, "--model", "-m", help="Head model .npz (default: embedded)."),
@@ -90,7 +92,6 @@ def render_cmd(
     from renderer_jobs.backends import NAMES, make_backend
     from renderer_jobs.progress import Progress, auto_mode
     from renderer_jobs.submit import existing_plan, prepare_plan, render_plan, run_log_dir
-    from synth.errors import disk_full, is_disk_full
 
     if backend not in NAMES:
         raise SynthError(f"unknown backend {backend!r}", "--backend", f"use one of {', '.join(NAMES)}")
@@ -118,10 +119,6 @@ def render_cmd(
     except KeyboardInterrupt:
         typer.echo("interrupted: frames rendered so far are kept; rerun the same command to resume", err=True)
         raise typer.Exit(130) from None
-    except OSError as e:
-        if not is_disk_full(e):
-            raise
-        raise disk_full(e.filename or out, e) from None
     finally:
         signal.signal(signal.SIGTERM, previous)
     fps = res["frames_rendered"] / max(res["wall_seconds"], 1e-9)

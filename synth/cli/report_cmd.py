@@ -8,8 +8,6 @@ from typing import Optional
 
 import typer
 
-from synth.errors import SynthError
-
 
 def report_cmd(
     directory: Path = typer.Argument(..., help="Dataset directory (the --out of `synth render`), complete or not."),
@@ -24,8 +22,6 @@ def report_cmd(
     contact sheet, for the committed shards. One self-contained HTML file (plots embedded)."""
     from synth.report.html import write_report
 
-    if not directory.is_dir():
-        raise SynthError("dataset directory not found", str(directory), "pass the --out directory of `synth render`")
     out = output if output is not None or as_json else directory / "report.html"
     summary = write_report(directory, out, max_shards=max_shards)
     if as_json:

@@ -37,7 +37,8 @@ import numpy as np
 from synth.dataset.exr_check import check_exr_bytes
 from synth.dataset.segmentation import NAMES
 from synth.errors import SynthError
-from synth.io import atomic_write_bytes
+from synth.dataset.layout import MAX_EXR_BYTES
+from synth.io import FileRefused, atomic_write_bytes, read_bounded
 
 FORMAT = "synth-frame-exr/1"
 HALF_MAX = 65504.0
@@ -224,9 +225,11 @@ def _bytes(source, where: str | None) -> tuple[bytes, str]:
         return bytes(source), where or "<bytes>"
     path = Path(source)
     try:
-        return path.read_bytes(), where or str(path)
+        return read_bounded(path, MAX_EXR_BYTES), where or str(path)
     except FileNotFoundError:
         raise SynthError("EXR file not found", str(path), "check the path (or re-render the frame)") from None
+    except FileRefused as e:
+        raise SynthError(f"EXR file refused: it {e.what}", str(path), "re-render the frame") from None
     except OSError as e:
         raise SynthError(f"cannot read EXR ({e.strerror})", str(path), "check the file's permissions") from None
 

@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from synth.dataset.exr import CHANNELS
-from synth.dataset.layout import frame_files, parse_frame_key
+from synth.dataset.layout import MAX_FRAME_JSON_BYTES, frame_files, parse_frame_key
 from synth.errors import SynthError
-from synth.io import atomic_write_json, loads_json
+from synth.io import atomic_write_json, read_json
 
 SCHEMA_PATH = Path(__file__).parent.parent / "schemas" / "frame.schema.json"
 #: Largest allowed distance (pixels) between landmarks_2d and the projection of landmarks_3d.
@@ -180,10 +180,10 @@ def read_frame_json(path, *, validate: bool = True) -> dict:
     """Read a frame JSON (strict: NaN/Infinity refused) and, by default, validate it."""
     path = Path(path)
     try:
-        obj = loads_json(path.read_bytes())
+        obj = read_json(path, max_bytes=MAX_FRAME_JSON_BYTES)
     except FileNotFoundError:
         raise SynthError("frame JSON not found", str(path), "check the path") from None
-    except (ValueError, UnicodeDecodeError) as e:
+    except ValueError as e:
         raise SynthError(f"frame JSON does not parse: {e}", str(path), "the file is corrupt; re-render it") from None
     if validate:
         check_frame_json(obj, str(path))

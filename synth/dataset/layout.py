@@ -4,7 +4,8 @@
 
     DIR/
       dataset.json          plan hash, expected shards -> frame keys, meta, created, versions
-      index.json            committed shards (derived from the manifests; rebuildable)
+      index.json            committed shards and their manifests' sha256, with a digest over them
+      .commits/<shard>.json the commit record: the manifest's sha256, signed by the commit itself
       .lock                 flock for dataset-wide updates (dataset.json creation, index)
       logs/                 worker and task logs of `synth render` (one file per attempt)
       plan/                 the plan ``synth render`` made (docs/plan-format.md)
@@ -21,6 +22,7 @@ import datetime as _dt
 import fcntl
 import os
 import re
+import stat
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -36,10 +38,39 @@ LOCK_FILE = ".lock"
 LOGS_DIR = "logs"
 SHARDS_DIR = "shards"
 STAGING_DIR = ".staging"
+COMMITS_DIR = ".commits"
 MANIFEST_FILE = "manifest.json"
+
+#: Bounds on the files synth reads from a dataset: a larger one is refused, never read.
+MAX_DATASET_JSON_BYTES = 1 << 30  # dataset.json lists every frame key (~25 bytes each)
+MAX_INDEX_BYTES = 256 << 20
+MAX_MANIFEST_BYTES = 64 << 20
+MAX_FRAME_JSON_BYTES = 16 << 20
+MAX_EXR_BYTES = 2 << 30
+MAX_LEASE_BYTES = 64 << 10
+MAX_RECORD_BYTES = 64 << 10
 
 SHARD_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,127}$")
 FRAME_KEY_RE = re.compile(r"^id(\d{6})_ex(\d{2})_v(\d{2})$")
+
+
+def entry_kind(path: Path) -> str | None:
+    """What is at ``path`` without following a symbolic link: ``"dir"``, ``"file"`` (regular),
+    ``"symlink"``, ``"other"`` (device, FIFO, socket) or ``None`` (nothing)."""
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return None
+    if stat.S_ISDIR(mode):
+        return "dir"
+    if stat.S_ISREG(mode):
+        return "file"
+    return "symlink" if stat.S_ISLNK(mode) else "other"
+
+
+#: :func:`entry_kind` in words, for messages ("X is a symbolic link").
+KIND_TEXT = {"dir": "directory", "file": "regular file", "symlink": "symbolic link",
+             "other": "device, FIFO or socket"}
 
 
 def utc_now() -> str:

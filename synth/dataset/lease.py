@@ -35,6 +35,9 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from synth.dataset.layout import MAX_LEASE_BYTES
+from synth.io import FileRefused, loads_json, read_bounded
+
 #: Seconds without a heartbeat after which a lease held on another host may be broken
 #: (``SYNTH_LEASE_SECONDS`` overrides it; every host sharing a dataset should use the same).
 DEFAULT_TTL_S = float(os.environ.get("SYNTH_LEASE_SECONDS", "") or 120.0)
@@ -89,15 +92,17 @@ def read_holder(path: Path) -> Holder | None:
     A lease file that does not parse (written by something else) counts as held until its
     modification time is older than the default ttl."""
     try:
-        raw = path.read_bytes()
-        mtime = path.stat().st_mtime
+        mtime = path.lstat().st_mtime
+        raw = read_bounded(path, MAX_LEASE_BYTES, follow_symlinks=False)
     except FileNotFoundError:
         return None
+    except FileRefused:  # a symlink, a device, a huge file: not ours, treated like garbage
+        raw = b""
     try:
-        d = json.loads(raw)
+        d = loads_json(raw)
         return Holder(host=str(d["host"]), boot_id=str(d["boot_id"]), pid=int(d["pid"]), start=str(d["start"]),
                       token=str(d["token"]), heartbeat=float(d["heartbeat"]), ttl=float(d["ttl"]))
-    except (ValueError, KeyError, TypeError):
+    except (ValueError, KeyError, TypeError, AttributeError):
         return Holder(host="?", boot_id="?", pid=-1, start="", token="", heartbeat=mtime, ttl=DEFAULT_TTL_S)
 
 

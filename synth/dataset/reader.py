@@ -42,10 +42,11 @@ import numpy as np
 
 from synth.dataset.exr import decode_frame_exr
 from synth.dataset.frame_json import check_frame_json
-from synth.dataset.layout import MANIFEST_FILE, SHARD_ID_RE, SHARDS_DIR
+from synth.dataset.layout import (FRAME_KEY_RE, MANIFEST_FILE, MAX_EXR_BYTES, MAX_FRAME_JSON_BYTES, MAX_MANIFEST_BYTES,
+                                  SHARD_ID_RE, SHARDS_DIR)
 from synth.dataset.tarshard import MAX_MEMBER_BYTES, TAR_MANIFEST_SUFFIX, TAR_SUFFIX, manifest_paths, read_member
 from synth.errors import SynthError
-from synth.io import loads_json
+from synth.io import FileRefused, loads_json, read_bounded, read_json
 
 
 def _meta_field(section: str | None, key: str, kind, doc: str) -> cached_property:
@@ -141,11 +142,18 @@ def decode_frame(json_bytes: bytes, exr_bytes: bytes, *, key: str | None = None,
 def read_frame(json_path, *, shard: str | None = None, validate: bool = False) -> Frame:
     """Read ``KEY.json`` and the ``KEY.exr`` beside it."""
     p = Path(json_path)
+    jb, eb = _frame_file(p, MAX_FRAME_JSON_BYTES), _frame_file(p.with_suffix(".exr"), MAX_EXR_BYTES)
+    return decode_frame(jb, eb, key=p.stem, shard=shard or p.parent.name, validate=validate, where=str(p))
+
+
+def _frame_file(path: Path, max_bytes: int) -> bytes:
+    """A frame file's bytes (a regular file of at most ``max_bytes``), or a :class:`SynthError`."""
     try:
-        jb, eb = p.read_bytes(), p.with_suffix(".exr").read_bytes()
+        return read_bounded(path, max_bytes)
     except FileNotFoundError as e:
         raise SynthError("frame file not found", str(e.filename), "check the path (or re-render the frame)") from None
-    return decode_frame(jb, eb, key=p.stem, shard=shard or p.parent.name, validate=validate, where=str(p))
+    except FileRefused as e:
+        raise SynthError(f"frame file refused: it {e.what}", os.fsdecode(e.path), "re-render the frame") from None
 
 
 # --------------------------------------------------------------------------- listing
@@ -174,19 +182,22 @@ class FrameRef(NamedTuple):
 
     def json_bytes(self) -> bytes:
         if self.tar is not None:
+            if self.tar.json[1] > MAX_FRAME_JSON_BYTES:  # the manifest's size, checked before reading
+                raise SynthError(f"frame JSON of {self.tar.json[1]} bytes (limit {MAX_FRAME_JSON_BYTES})",
+                                 str(self.json_path), "run `synth validate` on the dataset")
             return read_member(self.tar.tar, *self.tar.json, where=str(self.json_path))
-        return self.json_path.read_bytes()
+        return _frame_file(self.json_path, MAX_FRAME_JSON_BYTES)
 
     def exr_bytes(self) -> bytes:
         if self.tar is not None:
             return read_member(self.tar.tar, *self.tar.exr, where=str(self.json_path.with_suffix(".exr")))
-        return self.json_path.with_suffix(".exr").read_bytes()
+        return _frame_file(self.json_path.with_suffix(".exr"), MAX_EXR_BYTES)
 
     def meta(self) -> dict:
         """The frame JSON alone (no pixels decoded)."""
         try:
             return loads_json(self.json_bytes())
-        except (ValueError, UnicodeDecodeError) as e:
+        except ValueError as e:
             raise SynthError(f"frame JSON does not parse: {str(e)[:120]}", str(self.json_path),
                              "run `synth validate` on the dataset") from None
 
@@ -201,9 +212,13 @@ def _shard_keys(shard_dir: Path) -> list[str]:
     """Frame keys of a shard: the manifest's list when committed, else the JSON files present."""
     man = shard_dir / MANIFEST_FILE
     if man.is_file():
-        m = loads_json(man.read_bytes())
+        try:
+            m = read_json(man, max_bytes=MAX_MANIFEST_BYTES, follow_symlinks=False)
+        except ValueError as e:
+            raise SynthError(f"manifest.json cannot be read ({e})", str(man), "run `synth validate` on the dataset") \
+                from None
         if isinstance(m, dict) and isinstance(m.get("frames"), list):
-            return sorted(str(k) for k in m["frames"])
+            return sorted(str(k) for k in m["frames"] if FRAME_KEY_RE.match(str(k)))
     return sorted(n[:-5] for n in os.listdir(shard_dir) if n.endswith(".json") and n != MANIFEST_FILE
                   and (shard_dir / (n[:-5] + ".exr")).is_file())
 
@@ -212,15 +227,15 @@ def _tar_refs(manifest_path: Path, shard: str) -> list[FrameRef]:
     """The frames of a committed tar shard, located by its manifest's member offsets."""
     tar = manifest_path.with_name(shard + TAR_SUFFIX)
     try:
-        m = loads_json(manifest_path.read_bytes())
+        m = read_json(manifest_path, max_bytes=MAX_MANIFEST_BYTES, follow_symlinks=False)
         files = m["files"]
         out = []
-        for k in sorted(str(k) for k in m["frames"]):
+        for k in sorted(str(k) for k in m["frames"] if FRAME_KEY_RE.match(str(k))):
             j, e = files[f"{k}.json"], files[f"{k}.exr"]
             out.append(FrameRef(shard, k, tar / f"{k}.json",
                                 TarMembers(tar, (j["offset"], j["bytes"]), (e["offset"], e["bytes"]))))
         return out
-    except (ValueError, UnicodeDecodeError, KeyError, TypeError) as e:
+    except (OSError, ValueError, KeyError, TypeError) as e:
         raise SynthError(f"tar shard manifest is unusable ({type(e).__name__}: {str(e)[:80]})", str(manifest_path),
                          "run `synth validate` on the dataset") from None
 
@@ -266,8 +281,9 @@ def _iter_tar(stream: IO[bytes], validate: bool, where: str, shard: str | None =
             stem, dot, ext = name.partition(".")
             if not m.isreg() or ext not in ("json", "exr") or name == MANIFEST_FILE:
                 continue
-            if m.size > MAX_MEMBER_BYTES:
-                raise SynthError(f"tar member {m.name} has {m.size} bytes (limit {MAX_MEMBER_BYTES})", where,
+            limit = MAX_FRAME_JSON_BYTES if ext == "json" else MAX_MEMBER_BYTES  # a frame JSON's bound, as on disk
+            if m.size > limit:
+                raise SynthError(f"tar member {m.name} has {m.size} bytes (limit {limit})", where,
                                  "this is not a synth frame; check the tar")
             data = tf.extractfile(m).read()  # type: ignore[union-attr]
             parts = pending.setdefault(stem, {})

@@ -18,8 +18,12 @@ Crash safety (kill -9 at any instant):
   size, so an interrupted frame is redone and a finished one never is;
 - a commit fsyncs every file, writes ``manifest.json`` (sha256 of every file) atomically,
   fsyncs, then renames the whole staging directory to ``shards/<id>`` in one ``rename(2)``:
-  a shard is either committed complete or not at all;
-- the index is updated last, under a lock, and is repaired from the files on the next open;
+  a shard is either committed complete or not at all (a tar shard, ``dataset.shard_format =
+  "tar"``: the tar is built and fsynced first, and the atomic write of its manifest
+  ``shards/<id>.tar.json`` is the commit point; :mod:`synth.dataset.tarshard`);
+- the commit signs the manifest's sha256 (its commit record, :mod:`synth.dataset.index`)
+  under the dataset lock just before that commit point, so the signatures are never behind
+  the files and a manifest that changed after its commit is never re-signed;
 - a shard is claimed with a lease file (:mod:`synth.dataset.lease`) that a process on another
   host can see and, once its holder is gone, break: flock is not reliable on NFS or Lustre.
 """
@@ -32,16 +36,18 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import synth
-from synth.dataset.index import ManifestError, parse_manifest, read_index, update_index
+from synth.dataset.index import (REPAIR_HINT, ManifestError, parse_manifest, read_manifest_bytes, signatures,
+                                 update_index)
 from synth.dataset.frame_json import jsonable
-from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, LOCK_FILE, LOGS_DIR,
-                                  SHARDS_DIR, STAGING_DIR, check_shard_id, flock, lease_path, shard_dir, staging_dir,
-                                  utc_now)
+from synth.dataset.layout import (DATASET_FILE, DATASET_FORMAT, FRAME_KEY_RE, KIND_TEXT, LOCK_FILE, LOGS_DIR,
+                                  MAX_DATASET_JSON_BYTES, SHARDS_DIR, STAGING_DIR, check_shard_id, flock, lease_path,
+                                  shard_dir, staging_dir, utc_now)
 from synth.dataset.lease import DEFAULT_TTL_S, Holder, read_holder
 from synth.dataset.staging import ShardBusy, ShardCommitted, StagingShard
-from synth.dataset.tarshard import check_shard_format, manifest_file, manifest_paths
+from synth.dataset.tarshard import (SHARD_FORMATS, TAR_MANIFEST_SUFFIX, check_shard_format, manifest_file,
+                                   shard_entries)
 from synth.errors import SynthError
-from synth.io import atomic_write_json, is_temp_name, loads_json
+from synth.io import atomic_write_json, is_temp_name, read_json
 
 
 #: ``synth render`` keeps the plan directory it renders next to the shards (DIR/plan/).
@@ -55,6 +61,8 @@ def _normalise_expected(expected: Mapping[str, Sequence[str]]) -> dict[str, list
         raise SynthError("the plan has no shards to render", None, "check the plan (expected shard -> frame keys)")
     for sid in sorted(expected):
         check_shard_id(sid)
+        if not isinstance(expected[sid], (list, tuple)):
+            raise SynthError(f"shard {sid}'s frames are not a list of frame keys", None, "check the plan")
         keys = list(expected[sid])
         if not keys:
             raise SynthError(f"shard {sid} has no frames in the plan", None, "drop empty shards from the plan")
@@ -70,16 +78,65 @@ def _normalise_expected(expected: Mapping[str, Sequence[str]]) -> dict[str, list
 
 def _read_dataset_json(root: Path) -> dict:
     p = root / DATASET_FILE
+    fix = "restore it or render into a new --out directory"
     try:
-        d = loads_json(p.read_bytes())
-    except (ValueError, UnicodeDecodeError) as e:
-        raise SynthError(f"dataset.json does not parse ({e})", str(p),
-                         "restore it or render into a new --out directory") from None
+        d = read_json(p, max_bytes=MAX_DATASET_JSON_BYTES, follow_symlinks=False)
+    except (ValueError, OSError) as e:
+        why = e.strerror if isinstance(e, OSError) else str(e)
+        raise SynthError(f"dataset.json cannot be read ({why})", str(p), fix) from None
     if not isinstance(d, dict) or d.get("format") != DATASET_FORMAT or not isinstance(d.get("plan_hash"), str) \
             or not isinstance(d.get("expected"), dict):
-        raise SynthError(f"dataset.json is not a {DATASET_FORMAT} file", str(p),
-                         "restore it or render into a new --out directory")
+        raise SynthError(f"dataset.json is not a {DATASET_FORMAT} file", str(p), fix)
+    try:
+        if _normalise_expected(d["expected"]) != d["expected"]:
+            raise SynthError("its expected shards are not sorted lists of frame keys")
+        if d.get("shard_format", "dir") not in SHARD_FORMATS:
+            raise SynthError(f"its shard_format is not one of {', '.join(SHARD_FORMATS)}")
+    except SynthError as e:
+        raise SynthError(f"dataset.json is damaged: {e.what}", str(p), fix) from None
     return d
+
+
+def check_out_dir(root: Path) -> dict | None:
+    """Refuse a directory that cannot hold a dataset, before anything is written: a path that
+    is not a directory, or a non-empty directory without ``dataset.json`` (only a plan, logs,
+    the lock and temporary names of other ``synth render`` runs may be there). Returns the
+    existing ``dataset.json`` (checked), or ``None``."""
+    root = Path(root)
+    if not os.path.lexists(root):
+        return None
+    if not root.is_dir():
+        raise SynthError("output path exists and is not a directory", str(root), "choose a directory for --out")
+    if os.path.lexists(root / DATASET_FILE):
+        return _read_dataset_json(root)
+    others = sorted(n for n in os.listdir(root) if n not in (LOCK_FILE, PLAN_DIR, LOGS_DIR) and not is_temp_name(n))
+    if others:
+        raise SynthError(f"directory is not empty and holds no dataset.json (found {others[0]!r})", str(root),
+                         "use an empty or new --out directory")
+    return None
+
+
+def _check_same_plan(root: Path, info: dict, plan_hash: str, exp: dict, shard_format: str | None) -> None:
+    if info["plan_hash"] != plan_hash:
+        raise SynthError(f"{root} holds a dataset from a different plan (hash {info['plan_hash'][:16]}, "
+                         f"this plan {plan_hash[:16]})", str(root / DATASET_FILE),
+                         "use a new --out or the original plan")
+    if info["expected"] != exp:
+        raise SynthError("dataset.json's expected shards differ from this plan's although the hashes match",
+                         str(root / DATASET_FILE), "the plan hash must cover the shard layout; use a new --out")
+    if shard_format is not None and info.get("shard_format", "dir") != shard_format:
+        raise SynthError(f"{root} stores shards as {info.get('shard_format', 'dir')!r}, not {shard_format!r}",
+                         str(root / DATASET_FILE), "use a new --out, or the dataset's shard format")
+
+
+def _shard_names(kinds: dict[str, str]) -> dict[str, tuple[str, str]]:
+    """The names under ``shards/`` that a committed shard would have -> (shard id, the kind it
+    must be): ``<id>`` a directory, ``<id>.tar.json`` a regular file."""
+    out = {}
+    for n in kinds:
+        sid = n[:-len(TAR_MANIFEST_SUFFIX)] if n.endswith(TAR_MANIFEST_SUFFIX) else n
+        out[n] = (sid, "dir" if sid == n else "file")
+    return out
 
 
 class Dataset:
@@ -103,30 +160,33 @@ class Dataset:
 
     # -- state (always read from the files) --------------------------------------------------
     def committed_shards(self) -> set[str]:
-        """Shards under ``shards/`` with a valid manifest. Reads the files, not the index.
+        """Planned shards that are committed: a directory under ``shards/``, or a tar shard's
+        manifest ``shards/<id>.tar.json``, that a commit signed (its commit record, or its
+        ``index.json`` entry; :mod:`synth.dataset.index`).
 
-        A manifest whose size matches the index entry is trusted (it was parsed when indexed;
-        committed shards never change); any other is parsed. Directories without a valid
-        manifest are not committed (``synth validate`` reports them). Tar shards
-        (``shards/<id>.tar.json``) count as well as directories.
+        Read from the files each time; ``shards/`` is listed before the signatures are read
+        and a commit signs before its commit point, so a commit in progress in another process
+        is seen whole or not at all. Raises a :class:`SynthError` (run ``synth validate
+        --repair-index``) when ``index.json`` is damaged or of another plan, and when a planned
+        shard's entry is unsigned or not a real directory (a regular file for a tar manifest):
+        synth did not commit it, and nothing will silently adopt it. Unplanned entries are left
+        to ``synth validate``.
         """
-        idx = read_index(self.root)
-        known = idx["shards"] if idx and idx.get("plan_hash") == self.plan_hash else {}
+        kinds = shard_entries(self.root).kinds
+        sigs = signatures(self.root, self.plan_hash)
         out = set()
-        for name, mp in manifest_paths(self.root):
-            try:
-                size = mp.stat().st_size
-            except OSError:
+        for name, (sid, want) in _shard_names(kinds).items():
+            kind = kinds[name]
+            if sid not in self.expected:
                 continue
-            ent = known.get(name)
-            if ent is not None and ent.get("manifest_bytes") == size:
-                out.add(name)
-                continue
-            try:
-                parse_manifest(mp.read_bytes(), name)
-            except (OSError, ManifestError):
-                continue
-            out.add(name)
+            where = str(self.root / SHARDS_DIR / name)
+            if sid not in sigs:
+                raise SynthError(f"shards/{name} has no commit record (synth did not commit it, or its index was "
+                                 "lost)", where, REPAIR_HINT)
+            if kind != want:
+                raise SynthError(f"shards/{name} is a {KIND_TEXT[kind]}, not a {KIND_TEXT[want]}", where,
+                                 "restore the shard, or delete it and rerun the render")
+            out.add(sid)
         return out
 
     def pending_shards(self) -> list[str]:
@@ -137,7 +197,7 @@ class Dataset:
     def read_manifest(self, shard_id: str) -> dict:
         p = manifest_file(self.root, check_shard_id(shard_id))
         try:
-            return parse_manifest(p.read_bytes(), shard_id)
+            return parse_manifest(read_manifest_bytes(p), shard_id, p.name)
         except FileNotFoundError:
             raise SynthError(f"shard {shard_id} is not committed", str(self.shard_dir(shard_id)), "render it first") \
                 from None
@@ -214,34 +274,19 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
     exp = _normalise_expected(expected)
     if shard_format is not None:
         check_shard_format(shard_format, str(root))
-    if root.exists() and not root.is_dir():
-        raise SynthError("output path exists and is not a directory", str(root), "choose a directory for --out")
+    found = check_out_dir(root)  # refuse before anything is created
+    if found is not None:
+        _check_same_plan(root, found, plan_hash, exp, shard_format)
     try:
         root.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise SynthError(f"cannot create the dataset directory ({e.strerror})", str(root),
                          "choose a writable --out") from None
     with flock(root / LOCK_FILE):
-        if (root / DATASET_FILE).exists():
-            info = _read_dataset_json(root)
-            if info["plan_hash"] != plan_hash:
-                raise SynthError(f"{root} holds a dataset from a different plan (hash {info['plan_hash'][:16]}, "
-                                 f"this plan {plan_hash[:16]})", str(root / DATASET_FILE),
-                                 "use a new --out or the original plan")
-            if info["expected"] != exp:
-                raise SynthError("dataset.json's expected shards differ from this plan's although the hashes match",
-                                 str(root / DATASET_FILE), "the plan hash must cover the shard layout; use a new --out")
-            if shard_format is not None and info.get("shard_format", "dir") != shard_format:
-                raise SynthError(f"{root} stores shards as {info.get('shard_format', 'dir')!r}, not {shard_format!r}",
-                                 str(root / DATASET_FILE), "use a new --out, or the dataset's shard format")
+        info = check_out_dir(root)  # again, under the lock: another process may have created it
+        if info is not None:
+            _check_same_plan(root, info, plan_hash, exp, shard_format)
         else:
-            leftovers = [n for n in os.listdir(root) if is_temp_name(n)]  # a creation killed half-way
-            others = sorted(n for n in os.listdir(root)
-                            if n not in (LOCK_FILE, PLAN_DIR, LOGS_DIR) and n not in leftovers
-                            and not n.startswith(".plan-"))
-            if others:
-                raise SynthError(f"directory is not empty and holds no dataset.json (found {others[0]!r})",
-                                 str(root), "use an empty or new --out directory")
             info = {
                 "format": DATASET_FORMAT,
                 "plan_hash": plan_hash,
@@ -254,8 +299,6 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
                 "meta": jsonable(meta or {}),
                 "expected": exp,
             }
-            for n in leftovers:
-                os.unlink(root / n)
             try:
                 atomic_write_json(root / DATASET_FILE, info)
             except (TypeError, ValueError) as e:
@@ -270,8 +313,11 @@ def open_dataset(root, plan_hash: str, expected: Mapping[str, Sequence[str]], me
 def load_dataset(root) -> Dataset:
     """Open an existing dataset read-only (validate, preview, training readers)."""
     root = Path(root)
-    if not root.is_dir():
+    if not os.path.lexists(root):
         raise SynthError("dataset directory not found", str(root), "pass the --out directory of `synth render`")
+    if not root.is_dir():
+        raise SynthError("not a directory", str(root), "pass the dataset directory (the --out of `synth render`)")
     if not (root / DATASET_FILE).is_file():
-        raise SynthError("not a synth dataset (no dataset.json)", str(root), "pass the --out directory of `synth render`")
+        raise SynthError("not a synth dataset (no dataset.json)", str(root),
+                         "pass the --out directory of `synth render`")
     return Dataset(root, _read_dataset_json(root), writable=False)

@@ -17,13 +17,15 @@ import numpy as np
 import synth
 from synth.dataset.exr import encode_frame_exr, read_frame_exr_header
 from synth.dataset.frame_json import check_frame_json, jsonable
-from synth.dataset.index import update_index
-from synth.dataset.layout import MANIFEST_FILE, SHARD_FORMAT, frame_files, lease_path, shard_dir, staging_dir, utc_now
+from synth.dataset.index import commit_shard, manifest_entry
+from synth.dataset.layout import (MANIFEST_FILE, MAX_FRAME_JSON_BYTES, SHARD_FORMAT, frame_files, lease_path, shard_dir,
+                                  staging_dir, utc_now)
 from synth.dataset.lease import DEFAULT_TTL_S, Lease, LeaseBusy
-from synth.dataset.tarshard import check_shard_format, committed_forms, place_tar_shard
+from synth.dataset.tarshard import (build_tar_shard, check_shard_format, committed_forms, place_tar_shard,
+                                   tar_manifest_path)
 from synth.errors import SynthError
 from synth.io import (atomic_write_bytes, atomic_write_json, dumps_json, file_digest, fsync_dir, is_temp_name,
-                      loads_json, sha256_bytes)
+                      read_json, sha256_bytes)
 
 
 class ShardBusy(SynthError):
@@ -153,7 +155,7 @@ class StagingShard:
             ok = exr in names
             if ok:
                 try:
-                    fj = loads_json((self.dir / js).read_bytes())
+                    fj = read_json(self.dir / js, max_bytes=MAX_FRAME_JSON_BYTES, follow_symlinks=False)
                     hdr = read_frame_exr_header(self.dir / exr)
                     ok = (fj.get("frame_id") == stem and (hdr["width"], hdr["height"])
                           == (fj["image"]["width"], fj["image"]["height"]))
@@ -213,10 +215,12 @@ class StagingShard:
 
         Checks that exactly the planned frames are present (``expected_keys``, when given, must
         equal the plan's), fsyncs every file, writes ``manifest.json`` (frames, sha256 and size of
-        every file, plan hash, versions, plus ``manifest_extra`` such as seeds), renames the
-        staging directory to ``shards/<id>`` and updates the index. A tar shard is written as
-        ``shards/<id>.tar`` and ``shards/<id>.tar.json`` instead (:meth:`_commit_tar`).
-        Nothing is committed when anything is missing.
+        every file, plan hash, versions, plus ``manifest_extra`` such as seeds), then, under the
+        dataset lock, signs the manifest (its commit record), renames the staging directory to
+        ``shards/<id>`` and adds the shard to ``index.json``
+        (:func:`synth.dataset.index.commit_shard`). A tar shard is written as ``shards/<id>.tar``
+        and ``shards/<id>.tar.json`` instead (:meth:`_commit_tar`). Nothing is committed when
+        anything is missing.
         """
         self._need_lock()
         where = str(self.dir)
@@ -239,7 +243,8 @@ class StagingShard:
                              "remove them (only KEY.exr and KEY.json belong to a shard)")
         files = {}
         for name in sorted(wanted):
-            digest, size = file_digest(self.dir / name, sync=durable and self.shard_format == "dir")
+            digest, size = file_digest(self.dir / name, sync=durable and self.shard_format == "dir",
+                                       follow_symlinks=False)  # a tar shard: the tar is fsynced instead
             files[name] = {"sha256": digest, "bytes": size}
         manifest = {
             "format": SHARD_FORMAT,
@@ -265,40 +270,56 @@ class StagingShard:
             fsync_dir(self.dir)
         target = self.target
         target.parent.mkdir(exist_ok=True)
-        if target.exists():
-            raise ShardCommitted(f"shard {self.shard_id} is already committed", str(target),
-                                 "committed shards are never modified")
-        if not self._lease.held():  # broken by another host after a missed heartbeat: let it commit
-            raise ShardBusy(f"shard {self.shard_id}: this process's claim was broken by another process; "
-                            "not committed", str(self.dir), "the other process finishes the shard")
-        os.rename(self.dir, target)  # the commit point
-        self._committed = True
-        if durable:
-            fsync_dir(target.parent)
-            fsync_dir(self.dir.parent)
-        update_index(self.root, self.plan_hash, durable=durable)
+
+        def rename() -> None:  # under the dataset lock, after the commit record signed the manifest
+            self._check_commit(target)
+            os.rename(self.dir, target)  # the commit point
+            self._committed = True
+            if durable:
+                fsync_dir(target.parent)
+                fsync_dir(self.dir.parent)
+
+        commit_shard(self.root, self.plan_hash, self.shard_id, manifest_entry(data, manifest), rename,
+                     durable=durable)
         self.close()  # anyone who takes the lease now sees the committed shard
         manifest["manifest_sha256"] = sha256_bytes(data)
         return manifest
 
-    def _commit_tar(self, manifest: dict, durable: bool) -> dict:
-        """The tar form of the commit (:func:`synth.dataset.tarshard.place_tar_shard`); the
-        staging directory is removed after the commit point."""
+    def _check_commit(self, where: Path) -> None:
+        """The last checks before the commit point (under the dataset lock): the shard is not
+        committed in either form, and this process still holds its lease."""
         if committed_forms(self.root, self.shard_id):
-            raise ShardCommitted(f"shard {self.shard_id} is already committed", str(self.target),
+            raise ShardCommitted(f"shard {self.shard_id} is already committed", str(where),
                                  "committed shards are never modified")
+        if not self._lease.held():  # broken by another host after a missed heartbeat: let it commit
+            raise ShardBusy(f"shard {self.shard_id}: this process's claim was broken by another process; "
+                            "not committed", str(self.dir), "the other process finishes the shard")
 
-        def lease_check() -> None:  # broken by another host after a missed heartbeat: let it commit
-            if not self._lease.held():
-                raise ShardBusy(f"shard {self.shard_id}: this process's claim was broken by another process; "
-                                "not committed", str(self.dir), "the other process finishes the shard")
+    def _commit_tar(self, manifest: dict, durable: bool) -> dict:
+        """The tar form of the commit: build the tar under a temporary name (which completes the
+        manifest: member offsets, ``container``), sign the manifest, then, under the dataset
+        lock, rename the tar into place and write its manifest (the commit point;
+        :mod:`synth.dataset.tarshard`); the staging directory is removed after it."""
+        mp = tar_manifest_path(self.root, self.shard_id)
+        if committed_forms(self.root, self.shard_id):  # before the work of building the tar
+            raise ShardCommitted(f"shard {self.shard_id} is already committed", str(mp),
+                                 "committed shards are never modified")
+        tmp = build_tar_shard(self.dir, self.root, self.shard_id, manifest, durable=durable)
+        try:
+            data = dumps_json(manifest)
 
-        data = place_tar_shard(self.dir, self.root, self.shard_id, manifest, check=lease_check, durable=durable)
-        self._committed = True
+            def place() -> None:  # under the dataset lock, after the commit record signed the manifest
+                self._check_commit(mp)
+                place_tar_shard(tmp, self.root, self.shard_id, data, durable=durable)
+                self._committed = True
+
+            commit_shard(self.root, self.plan_hash, self.shard_id, manifest_entry(data, manifest), place,
+                         durable=durable)
+        finally:
+            tmp.unlink(missing_ok=True)  # renamed away when committed
         shutil.rmtree(self.dir, ignore_errors=True)
         if durable:
             fsync_dir(self.dir.parent)
-        update_index(self.root, self.plan_hash, durable=durable)
         self.close()
         manifest["manifest_sha256"] = sha256_bytes(data)
         return manifest

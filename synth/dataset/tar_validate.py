@@ -5,13 +5,14 @@ Checks, in order, reading each byte at most once and never more than the manifes
 - the manifest ``<id>.tar.json``: as for a directory shard (``synth.dataset.validate``: parses,
   names the shard, agrees with the index and the plan, lists both files of every frame), plus a
   ``container`` entry naming ``<id>.tar`` with its size and sha256;
-- the tar: a regular file (not a link), of the manifest's size and sha256 (the hash not with
-  ``--quick``);
+- the tar: a regular file (``lstat``: never a link, a FIFO or a device), of the manifest's
+  size and sha256 (the hash not with ``--quick``; never reading more than that size);
 - its members, walked header by header (:func:`synth.dataset.tarshard.iter_members`): regular
   files only, flat ``KEY.exr`` / ``KEY.json`` names (no ``..``, no absolute paths, no
   directories), sizes within bounds; each listed in the manifest, once, at the manifest's
   offset, with its size and sha256, in name order (so WebDataset sees a frame's two files
-  together); a member's data is read only when the manifest lists it with that size;
+  together); a member's data is read only when the manifest lists it with that size, and a
+  frame JSON only up to the bound a directory shard's has (``MAX_FRAME_JSON_BYTES``);
 - each frame's JSON and EXR, from the member bytes, exactly as for a directory shard (the
   caller's ``check_frame``).
 """
@@ -19,12 +20,12 @@ Checks, in order, reading each byte at most once and never more than the manifes
 from __future__ import annotations
 
 import os
-import stat
 from collections.abc import Callable
 from pathlib import Path
 
+from synth.dataset.layout import KIND_TEXT, MAX_FRAME_JSON_BYTES, entry_kind
 from synth.dataset.tarshard import CONTAINER_FORMAT, TarRefused, iter_members, tar_path
-from synth.io import sha256_bytes, sha256_file
+from synth.io import file_digest, open_regular, sha256_bytes
 
 #: A finding: (frame key or None, defect kind, message); ``synth.dataset.validate`` makes
 #: them its ``Defect``s (this module does not import it: validate calls into here).
@@ -42,17 +43,22 @@ def check_tar_shard(root, shard: str, manifest: dict, quick: bool,
             and isinstance(c.get("sha256"), str) and isinstance(c.get("bytes"), int) and c["bytes"] >= 0):
         return [(None, "manifest", f"{tp.name}.json lacks a valid 'container' entry (format tar, file {tp.name}, "
                                    "sha256, bytes)")], 0
-    try:
-        st = os.lstat(tp)
-    except FileNotFoundError:
+    kind = entry_kind(tp)
+    if kind is None:
         return [(None, "missing-file", f"{tp.name} is missing")], 0
-    if not stat.S_ISREG(st.st_mode):
-        return [(None, "tar", f"{tp.name} is not a regular file (a link or a device?)")], 0
+    if kind != "file":
+        return [(None, "tar", f"{tp.name} is a {KIND_TEXT[kind]}, not a regular file (not read)")], 0
     found: list[Finding] = []
-    if st.st_size != c["bytes"]:
-        found.append((None, "checksum", f"{tp.name} is {st.st_size} bytes, manifest says {c['bytes']}"))
-    elif not quick and sha256_file(tp) != c["sha256"]:
-        found.append((None, "checksum", f"{tp.name} sha256 differs from the manifest"))
+    size = os.lstat(tp).st_size
+    if size != c["bytes"]:
+        found.append((None, "checksum", f"{tp.name} is {size} bytes, manifest says {c['bytes']}"))
+    elif not quick:
+        try:
+            digest, _ = file_digest(tp, max_bytes=c["bytes"], follow_symlinks=False)
+        except (OSError, ValueError) as e:
+            return found + [(None, "io", f"{tp.name} cannot be read: {e}")], 0
+        if digest != c["sha256"]:
+            found.append((None, "checksum", f"{tp.name} sha256 differs from the manifest"))
     more, checked = _check_members(Path(tp), shard, manifest["files"], quick, check_frame)
     return found + more, checked
 
@@ -65,11 +71,12 @@ def _check_members(tp: Path, shard: str, listed: dict, quick: bool,
     pending: dict[str, dict[str, bytes]] = {}
     checked = 0
 
-    def wanted(name: str, size: int) -> bool:  # read only what the manifest lists, with its size
-        return name in listed and name not in seen_set and listed[name]["bytes"] == size
+    def wanted(name: str, size: int) -> bool:  # read only what the manifest lists, with its size (bounded)
+        return name in listed and name not in seen_set and listed[name]["bytes"] == size \
+            and not (name.endswith(".json") and size > MAX_FRAME_JSON_BYTES)
 
     try:
-        fd = os.open(tp, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+        fd, _ = open_regular(tp, follow_symlinks=False)
         with os.fdopen(fd, "rb") as f:
             for mem in iter_members(f, f"{shard}/{tp.name}", select=wanted):
                 n, key = mem.name, mem.key
@@ -82,8 +89,12 @@ def _check_members(tp: Path, shard: str, listed: dict, quick: bool,
                 if ent is None:
                     found.append((key, "extra-file", f"{n} is in the tar but not in the manifest"))
                     continue
-                if mem.data is None:
+                if mem.data is None and mem.size != ent["bytes"]:
                     found.append((key, "checksum", f"{n} is {mem.size} bytes, manifest says {ent['bytes']}"))
+                    continue
+                if mem.data is None:
+                    found.append((key, "json", f"{n} is {mem.size} bytes, more than the {MAX_FRAME_JSON_BYTES} "
+                                               "allowed for a frame JSON (not read)"))
                     continue
                 if not quick and sha256_bytes(mem.data) != ent["sha256"]:
                     found.append((key, "checksum", f"{n} sha256 differs from the manifest"))
@@ -98,8 +109,8 @@ def _check_members(tp: Path, shard: str, listed: dict, quick: bool,
                     checked += 1
     except TarRefused as e:
         found.append((None, "tar", e.what))
-    except OSError as e:
-        found.append((None, "io", f"cannot read {tp.name}: {e.strerror or e}"))
+    except (OSError, ValueError) as e:  # ValueError: FileRefused (replaced since the lstat)
+        found.append((None, "io", f"cannot read {tp.name}: {getattr(e, 'strerror', None) or e}"))
     for n in sorted(set(listed) - seen_set):
         found.append((n.rsplit(".", 1)[0], "missing-file", f"{n} is listed but not in {tp.name}"))
     if seen != sorted(seen):

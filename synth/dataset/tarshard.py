@@ -17,10 +17,13 @@ POSIX ustar, regular files only, mode 0444, mtime 0, uid/gid 0, no user or group
 members in name order. The same frames therefore give the same tar, byte for byte.
 
 Frames are staged as files exactly as for directory shards (so resume after a kill works the
-same); the tar is made at commit: written to a temporary name in ``shards/``, fsynced and
-renamed to ``<id>.tar``; then the manifest ``<id>.tar.json`` is written atomically, which is
-the commit point (a tar without its manifest is the leftover of a killed commit: not
-committed, replaced by the next commit); then the staging directory is removed.
+same); the tar is made at commit in two steps. :func:`build_tar_shard` writes it to a
+temporary name in ``shards/`` and fsyncs it, which gives the manifest's bytes; the commit
+signs them (:func:`synth.dataset.index.commit_shard`: the commit record), then, under the
+dataset lock, :func:`place_tar_shard` renames the tar to ``<id>.tar`` and writes the manifest
+``<id>.tar.json`` atomically, which is the commit point (a tar without its manifest is the
+leftover of a killed commit: not committed, replaced by the next commit); then the staging
+directory is removed.
 
 Reading back, :func:`iter_members` walks a tar's 512-byte headers one at a time with
 ``tarfile.TarInfo.frombuf`` (which checks each header's checksum) and accepts only what this
@@ -32,15 +35,14 @@ headers, ``..`` or absolute names) is refused before its data is read.
 from __future__ import annotations
 
 import os
-import stat
 import tarfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, NamedTuple
 
-from synth.dataset.layout import FRAME_KEY_RE, MANIFEST_FILE, SHARD_ID_RE, SHARDS_DIR, check_shard_id
+from synth.dataset.layout import FRAME_KEY_RE, MANIFEST_FILE, SHARD_ID_RE, SHARDS_DIR, check_shard_id, entry_kind
 from synth.errors import SynthError
-from synth.io import atomic_place, atomic_write_bytes, dumps_json, file_digest, is_temp_name
+from synth.io import FileRefused, atomic_place, file_digest, fsync_dir, is_temp_name, open_regular, temp_name
 
 SHARD_FORMATS = ("dir", "tar")
 TAR_SUFFIX = ".tar"
@@ -68,18 +70,10 @@ def tar_manifest_path(root: Path, shard_id: str) -> Path:
     return Path(root) / SHARDS_DIR / f"{check_shard_id(shard_id)}{TAR_MANIFEST_SUFFIX}"
 
 
-def _kind(path: Path) -> str | None:
-    try:
-        mode = os.lstat(path).st_mode
-    except FileNotFoundError:
-        return None
-    return "dir" if stat.S_ISDIR(mode) else "file" if stat.S_ISREG(mode) else "other"
-
-
 def committed_forms(root: Path, shard_id: str) -> list[str]:
-    """The forms in which ``shard_id`` is present under ``shards/``: ``"dir"`` (a directory
-    ``shards/<id>``) and/or ``"tar"`` (a manifest ``shards/<id>.tar.json``). Whether the
-    manifest is valid is not checked here."""
+    """The forms in which ``shard_id`` is present under ``shards/``: ``"dir"`` (an entry
+    ``shards/<id>``) and/or ``"tar"`` (an entry ``shards/<id>.tar.json``), of whatever kind
+    (not following links). Whether they are valid (and signed) is not checked here."""
     out = []
     if os.path.lexists(Path(root) / SHARDS_DIR / check_shard_id(shard_id)):
         out.append("dir")
@@ -89,55 +83,81 @@ def committed_forms(root: Path, shard_id: str) -> list[str]:
 
 
 def manifest_file(root: Path, shard_id: str) -> Path:
-    """Where the manifest of ``shard_id`` is: ``shards/<id>.tar.json`` for a tar shard, else
-    ``shards/<id>/manifest.json`` (which may not exist)."""
+    """Where the manifest of ``shard_id`` is: ``shards/<id>/manifest.json`` when there is a
+    directory ``shards/<id>`` (a shard in both forms is read as its directory), else
+    ``shards/<id>.tar.json`` when that is there, else the directory's (which does not exist)."""
+    d = Path(root) / SHARDS_DIR / check_shard_id(shard_id)
     tp = tar_manifest_path(root, shard_id)
-    return tp if os.path.lexists(tp) else Path(root) / SHARDS_DIR / shard_id / MANIFEST_FILE
+    return tp if not os.path.lexists(d) and os.path.lexists(tp) else d / MANIFEST_FILE
 
 
 class ShardEntries(NamedTuple):
-    """What ``shards/`` holds, by name: ``dirs`` and ``tars`` (shard ids with a directory, or a
-    ``.tar.json`` manifest), ``orphans`` (``<id>.tar`` without its manifest: a commit killed
-    before its commit point), ``temps`` (leftover temporary files) and ``others``."""
+    """What ``shards/`` holds, by name, never following a link (:func:`entry_kind`):
+
+    - ``dirs``: names of real directories (shard directories, or strays whose name is not a
+      shard id: ``synth validate`` reports those);
+    - ``tars``: shard ids whose manifest ``<id>.tar.json`` is a regular file (``<id>.tar``
+      belongs to it, whatever it is: validate checks it);
+    - ``orphans``: shard ids with a regular file ``<id>.tar`` and no ``<id>.tar.json`` at all
+      (a commit killed before its commit point, or a stray tar);
+    - ``temps``: regular files with temporary names (leftovers of a killed commit);
+    - ``others``: every other name -> its kind: links, devices, FIFOs, stray files (not opened);
+    - ``kinds``: every name -> its kind.
+    """
 
     dirs: list[str]
     tars: list[str]
     orphans: list[str]
     temps: list[str]
-    others: list[str]
+    others: dict[str, str]
+    kinds: dict[str, str]
 
 
 def shard_entries(root: Path) -> ShardEntries:
     base = Path(root) / SHARDS_DIR
     try:
         names = sorted(os.listdir(base))
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):
         names = []
-    dirs, tars, orphans, temps, others = [], [], [], [], []
-    present = set(names)
-    for n in names:
-        if is_temp_name(n):
-            temps.append(n)
-        elif n.endswith(TAR_MANIFEST_SUFFIX) and SHARD_ID_RE.match(n[:-len(TAR_MANIFEST_SUFFIX)]):
-            tars.append(n[:-len(TAR_MANIFEST_SUFFIX)])
-        elif n.endswith(TAR_SUFFIX) and SHARD_ID_RE.match(n[:-len(TAR_SUFFIX)]):
-            if n + ".json" not in present:
-                orphans.append(n[:-len(TAR_SUFFIX)])
-        elif _kind(base / n) == "dir":
+    kinds = {n: entry_kind(base / n) for n in names}
+    kinds = {n: k for n, k in kinds.items() if k is not None}  # gone since the listing
+    dirs, tars, orphans, temps, others = [], [], [], [], {}
+    for n, k in kinds.items():
+        tar_id = n[:-len(TAR_SUFFIX)] if n.endswith(TAR_SUFFIX) else ""
+        man_id = n[:-len(TAR_MANIFEST_SUFFIX)] if n.endswith(TAR_MANIFEST_SUFFIX) else ""
+        if k == "dir" and not is_temp_name(n):
             dirs.append(n)
+        elif k == "file" and is_temp_name(n):
+            temps.append(n)
+        elif k == "file" and SHARD_ID_RE.match(man_id):
+            tars.append(man_id)
+        elif SHARD_ID_RE.match(tar_id) and n + ".json" in kinds:
+            continue  # the tar of a tar shard (checked with it; a manifest that is not a file is reported)
+        elif k == "file" and SHARD_ID_RE.match(tar_id):
+            orphans.append(tar_id)
         else:
-            others.append(n)
-    return ShardEntries(dirs, tars, orphans, temps, others)
+            others[n] = k
+    return ShardEntries(dirs, tars, orphans, temps, others, kinds)
 
 
-def manifest_paths(root: Path) -> list[tuple[str, Path]]:
-    """(shard id, manifest path) of every shard present under ``shards/`` in either form,
-    sorted; a shard present in both forms is listed twice (``synth validate`` reports it)."""
+def manifest_paths(root: Path, entries: ShardEntries | None = None) -> list[tuple[str, Path]]:
+    """(shard id, manifest path) of every shard present under ``shards/`` as a real directory
+    or a regular ``.tar.json`` manifest, sorted; a shard present in both forms is listed twice,
+    its directory first (``synth validate`` reports it)."""
     root = Path(root)
-    e = shard_entries(root)
+    e = entries or shard_entries(root)
     out = [(s, root / SHARDS_DIR / s / MANIFEST_FILE) for s in e.dirs if SHARD_ID_RE.match(s)]
     out += [(s, tar_manifest_path(root, s)) for s in e.tars]
     return sorted(out)
+
+
+def present_shards(root: Path, entries: ShardEntries | None = None) -> dict[str, Path]:
+    """Shard id -> its manifest path, for every shard present in a real form (a shard in both
+    forms: its directory's)."""
+    out: dict[str, Path] = {}
+    for s, mp in manifest_paths(root, entries):
+        out.setdefault(s, mp)
+    return out
 
 
 # --------------------------------------------------------------------------- writing
@@ -165,39 +185,58 @@ def write_tar(fileobj: IO[bytes], members: list[tuple[str, Path]]) -> dict[str, 
     return offsets
 
 
-def place_tar_shard(src_dir: Path, root: Path, shard_id: str, manifest: dict, *, check: Callable[[], None],
-                    durable: bool = True) -> bytes:
-    """Commit the staged files listed in ``manifest["files"]`` (in ``src_dir``) as a tar shard:
-    write ``shards/<id>.tar`` under a temporary name, fsync it, call ``check()`` (the caller's
-    last check, e.g. that it still holds the shard's lease; an exception aborts and leaves
-    nothing), rename it into place, then write ``shards/<id>.tar.json`` atomically: the commit
-    point. Fills in the manifest's member offsets and ``container``; returns the manifest's
-    bytes. The caller refuses an already committed shard first and removes its staging after."""
-    tp, mp = tar_path(root, shard_id), tar_manifest_path(root, shard_id)
+def build_tar_shard(src_dir: Path, root: Path, shard_id: str, manifest: dict, *, durable: bool = True) -> Path:
+    """The first step of a tar commit: write the staged files listed in ``manifest["files"]``
+    (in ``src_dir``) as a tar under a temporary name in ``shards/`` and fsync it; fill in the
+    manifest's member offsets and ``container``. Returns the temporary path (the caller removes
+    it if it does not get to :func:`place_tar_shard`). Temporary tars of this shard left by a
+    killed commit are removed first (the caller holds the shard's lease)."""
+    tp = tar_path(root, shard_id)
     tp.parent.mkdir(exist_ok=True)
-    for n in os.listdir(tp.parent):  # temp tars of this shard left by a killed commit (we hold the lease)
+    for n in os.listdir(tp.parent):
         if is_temp_name(n) and n.startswith(f".{tp.name}."):
             os.unlink(tp.parent / n)
     names = sorted(manifest["files"])
-    container: dict = {}
-
-    def fill(tmp: Path) -> None:
+    tmp = temp_name(tp)
+    try:
         with open(tmp, "xb") as f:
             offsets = write_tar(f, [(n, Path(src_dir) / n) for n in names])
         os.chmod(tmp, MEMBER_MODE)
         digest, size = file_digest(tmp, sync=durable)
-        container.update(format=CONTAINER_FORMAT, file=tp.name, sha256=digest, bytes=size)
-        for n in names:
-            manifest["files"][n]["offset"] = offsets[n]
-        check()
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    for n in names:
+        manifest["files"][n]["offset"] = offsets[n]
+    manifest["container"] = {"format": CONTAINER_FORMAT, "file": tp.name, "sha256": digest, "bytes": size}
+    return tmp
 
-    # replaces the orphan tar of a killed commit, never a committed one (that has a manifest)
-    atomic_place(tp, fill, durable=durable, sync_file=False)
-    manifest["container"] = container
-    data = dumps_json(manifest)
-    atomic_write_bytes(mp, data, durable=durable)  # the commit point
-    os.chmod(mp, MEMBER_MODE)
-    return data
+
+def place_tar_shard(tmp: Path, root: Path, shard_id: str, data: bytes, *, durable: bool = True) -> None:
+    """The second step, the commit itself (under the dataset lock, after the commit record
+    signed ``data``): rename the tar built by :func:`build_tar_shard` to ``shards/<id>.tar``
+    (replacing the orphan tar of a killed commit; the caller refused an already committed
+    shard), then write the manifest ``data`` as ``shards/<id>.tar.json``, read-only, atomically:
+    the commit point."""
+    tp, mp = tar_path(root, shard_id), tar_manifest_path(root, shard_id)
+    os.replace(tmp, tp)
+    if durable:  # the tar's rename is durable before the manifest can be
+        fsync_dir(tp.parent)
+
+    def fill(t: Path) -> None:
+        fd = os.open(t, os.O_WRONLY | os.O_CREAT | os.O_EXCL, MEMBER_MODE)
+        try:
+            view = memoryview(data)
+            while view:
+                view = view[os.write(fd, view):]
+            if durable:
+                os.fsync(fd)
+        finally:
+            os.close(fd)
+
+    atomic_place(mp, fill, durable=False, sync_file=False)  # the commit point
+    if durable:
+        fsync_dir(mp.parent)
 
 
 # --------------------------------------------------------------------------- reading
@@ -292,7 +331,12 @@ def read_member(path: Path, offset: int, size: int, where: str | None = None) ->
             and offset % BLOCK == 0):
         raise SynthError(f"bad member offset/size in the manifest ({offset!r}, {size!r})", where or str(path),
                          "run `synth validate` on the dataset")
-    with open(path, "rb") as f:
+    try:
+        fd, _ = open_regular(path)  # never a FIFO or a device
+    except FileRefused as e:
+        raise SynthError(f"tar shard refused: it {e.what}", where or str(path), "run `synth validate` on the dataset") \
+            from None
+    with os.fdopen(fd, "rb") as f:
         f.seek(offset)
         data = f.read(size)
     if len(data) != size:

@@ -7,14 +7,70 @@ state or the new one. Temporary names start with ``.`` and end with ``.tmp`` (se
 
 from __future__ import annotations
 
+import errno
 import os
 import secrets
 import shutil
+import stat
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 TMP_SUFFIX = ".tmp"
+
+
+class FileRefused(ValueError):
+    """A file that may not be read as asked: not a regular file (a symlink when links are not
+    followed, a device, a FIFO, a directory) or larger than the bound. ``path`` names it."""
+
+    def __init__(self, path, what: str):
+        super().__init__(f"{os.fsdecode(path)} {what}")
+        self.path, self.what = path, what
+
+
+def open_regular(path, *, follow_symlinks: bool = True) -> tuple[int, os.stat_result]:
+    """Open a regular file for reading: (descriptor, its fstat). Never blocks on a FIFO and,
+    with ``follow_symlinks=False``, never follows a symbolic link at the last component; any
+    other kind of file raises :class:`FileRefused`. The caller closes the descriptor."""
+    flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
+    if not follow_symlinks:
+        flags |= os.O_NOFOLLOW
+    try:
+        fd = os.open(path, flags)
+    except OSError as e:
+        if e.errno == errno.ELOOP and not follow_symlinks:
+            raise FileRefused(path, "is a symbolic link") from None
+        raise
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+            raise FileRefused(path, f"is {kind}")
+    except BaseException:
+        os.close(fd)
+        raise
+    return fd, st
+
+
+def read_bounded(path, max_bytes: int, *, follow_symlinks: bool = True) -> bytes:
+    """The bytes of a regular file of at most ``max_bytes`` (:func:`open_regular`); a larger
+    one (also one that grows while being read) raises :class:`FileRefused` before it is read."""
+    fd, st = open_regular(path, follow_symlinks=follow_symlinks)
+    try:
+        if st.st_size > max_bytes:
+            raise FileRefused(path, f"is {st.st_size} bytes, more than the {max_bytes} allowed")
+        chunks, n = [], 0
+        while True:
+            b = os.read(fd, min(1 << 20, max_bytes + 1 - n))
+            if not b:
+                break
+            chunks.append(b)
+            n += len(b)
+            if n > max_bytes:
+                raise FileRefused(path, f"grew past the {max_bytes} bytes allowed while being read")
+        return b"".join(chunks)
+    finally:
+        os.close(fd)
 
 
 def temp_name(final: Path) -> Path:
@@ -25,6 +81,29 @@ def temp_name(final: Path) -> Path:
 
 def is_temp_name(name: str) -> bool:
     return name.startswith(".") and name.endswith(TMP_SUFFIX)
+
+
+@contextmanager
+def created_dirs(path: Path) -> Iterator[Path]:
+    """Create directory ``path`` and any missing parents; if the body raises, remove again
+    those of them that are still empty (deepest first), so a refused command leaves the file
+    system as it found it."""
+    path = Path(path)
+    missing = []
+    p = path
+    while not os.path.lexists(p) and p != p.parent:
+        missing.append(p)
+        p = p.parent
+    path.mkdir(parents=True, exist_ok=True)
+    try:
+        yield path
+    except BaseException:
+        for d in missing:  # deepest first
+            try:
+                os.rmdir(d)
+            except OSError:
+                break
+        raise
 
 
 def fsync_dir(path: Path) -> None:
@@ -92,6 +171,14 @@ def atomic_write_bytes(path: Path, data: bytes, *, durable: bool = True) -> None
     atomic_place(path, fill, durable=durable, sync_file=False)
 
 
+class DirectoryTaken(FileExistsError):
+    """:func:`atomic_dir` found ``final`` filled by someone else when it came to rename."""
+
+    def __init__(self, final: Path):
+        super().__init__(errno.ENOTEMPTY, "directory is not empty", str(final))
+        self.final = Path(final)
+
+
 @contextmanager
 def atomic_dir(final: Path, *, durable: bool = True) -> Iterator[Path]:
     """A directory that appears at ``final`` complete or not at all.
@@ -101,18 +188,30 @@ def atomic_dir(final: Path, *, durable: bool = True) -> Iterator[Path]:
     replaced), and the parent is fsynced (``durable``; the body fsyncs the files it needs
     durable). On an exception it is removed and ``final`` is left as it was. A body that
     decides to keep ``final`` as it is removes the temporary directory itself; nothing is
-    renamed then."""
+    renamed then. The rename is one ``rename(2)``, which replaces only an empty directory:
+    when another process put content at ``final`` first, :class:`DirectoryTaken` is raised
+    (the temporary directory removed), so the caller can compare and adopt what is there."""
     final = Path(final)
     tmp = temp_name(final)
-    tmp.mkdir()
+    try:
+        tmp.mkdir()
+    except OSError as e:  # name the directory asked for, not the temporary name
+        raise OSError(e.errno, e.strerror, str(final)) from None
     try:
         yield tmp
         if tmp.exists():
-            if final.exists():
-                final.rmdir()  # empty, or this raises: never replace a directory with content
-            os.replace(tmp, final)
-    except BaseException:
+            try:
+                os.rename(tmp, final)  # never replaces a directory with content
+            except OSError as e:
+                if e.errno not in (errno.ENOTEMPTY, errno.EEXIST):
+                    raise
+                raise DirectoryTaken(final) from None
+    except BaseException as e:
         shutil.rmtree(tmp, ignore_errors=True)
+        if isinstance(e, OSError) and not isinstance(e, DirectoryTaken):  # name the file as it would have been
+            name = os.fsdecode(e.filename) if e.filename is not None else str(tmp)
+            if name == str(tmp) or name.startswith(str(tmp) + os.sep):
+                raise OSError(e.errno, e.strerror, str(final) + name[len(str(tmp)):]) from e
         raise
     if durable:
         fsync_dir(final.parent)

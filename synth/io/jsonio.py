@@ -1,12 +1,34 @@
-"""Strict JSON: ``NaN`` and ``Infinity`` are not JSON, so they are refused both ways (Python's
-``json`` writes and reads them by default). UTF-8 bytes with a trailing newline."""
+"""Strict, bounded JSON: the one way synth reads and writes JSON.
+
+- ``NaN`` and ``Infinity`` are not JSON, so they are refused both ways (Python's ``json``
+  writes and reads them by default). Text is UTF-8 with a trailing newline.
+- Reading is bounded: nesting deeper than ``max_depth`` (default :data:`MAX_DEPTH`) is refused
+  before the parser sees it, so no input can exhaust the interpreter's recursion (a
+  ``RecursionError`` deep inside the parser, or in code walking the result); files are read
+  through :func:`synth.io.files.read_bounded` (a size bound, regular files only, optionally no
+  symbolic links), so ``/dev/zero`` or a 50 GB file is refused, not read.
+
+Every problem with the input raises :class:`JSONError` (a ``ValueError``) with a short reason;
+callers turn it into a one-line user error naming the file.
+"""
 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
-from synth.io.files import atomic_write_bytes
+from synth.io.files import atomic_write_bytes, read_bounded
+
+#: Deepest nesting of arrays and objects accepted (synth's own files nest at most ~8 deep).
+MAX_DEPTH = 64
+
+_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.S)
+_NOT_BRACKETS = bytes(b for b in range(256) if b not in b"[]{}")
+
+
+class JSONError(ValueError):
+    """Input that is not strict, bounded JSON (syntax, encoding, NaN, nesting, size)."""
 
 
 def dumps_json(obj, *, indent: int | None = 1) -> bytes:
@@ -15,12 +37,47 @@ def dumps_json(obj, *, indent: int | None = 1) -> bytes:
 
 
 def _refuse_constant(name: str):
-    raise ValueError(f"non-standard JSON constant {name}")
+    raise JSONError(f"non-standard JSON constant {name}")
 
 
-def loads_json(data: bytes | str):
-    """Strict JSON parsing: ``NaN``/``Infinity`` are rejected (Python's json accepts them)."""
-    return json.loads(data, parse_constant=_refuse_constant)
+def json_depth(data: bytes) -> int:
+    """The deepest nesting of ``[``/``{`` in JSON bytes, strings skipped (linear time, no
+    recursion). Meaningful for well-formed JSON; for other bytes it is an upper bound."""
+    brackets = _STRING.sub(b"", data).translate(None, _NOT_BRACKETS)
+    if brackets.count(b"[") + brackets.count(b"{") <= 1:
+        return 1 if brackets else 0
+    import numpy as np
+
+    a = np.frombuffer(brackets, np.uint8)
+    steps = np.where((a == ord("[")) | (a == ord("{")), 1, -1).astype(np.int64)
+    return int(np.cumsum(steps).max())
+
+
+def loads_json(data: bytes | str, *, max_depth: int = MAX_DEPTH):
+    """Parse strict JSON: UTF-8, no ``NaN``/``Infinity``, nesting at most ``max_depth``.
+    Raises :class:`JSONError`."""
+    raw = data.encode("utf-8", "surrogatepass") if isinstance(data, str) else bytes(data)
+    depth = json_depth(raw)
+    if depth > max_depth:
+        raise JSONError(f"nested {depth} levels deep (at most {max_depth} allowed)")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise JSONError(f"not UTF-8 text (byte {raw[e.start]:#04x} at offset {e.start})") from None
+    try:
+        return json.loads(text, parse_constant=_refuse_constant)
+    except JSONError:
+        raise
+    except (ValueError, RecursionError) as e:  # JSONDecodeError; integer too long; depth (unreachable)
+        raise JSONError(str(e)[:200]) from None
+
+
+def read_json(path: str | Path, *, max_bytes: int, max_depth: int = MAX_DEPTH, follow_symlinks: bool = True):
+    """Read and parse a JSON file of at most ``max_bytes`` (a regular file; with
+    ``follow_symlinks=False`` not a symbolic link). Raises OSError when it cannot be opened,
+    :class:`synth.io.files.FileRefused` (a ValueError) for the wrong kind or size of file,
+    :class:`JSONError` for its content."""
+    return loads_json(read_bounded(path, max_bytes, follow_symlinks=follow_symlinks), max_depth=max_depth)
 
 
 def atomic_write_json(path: Path, obj, *, durable: bool = True, indent: int | None = 1) -> bytes:

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from synth.errors import ModelFormatError
-from synth.io import atomic_place
+from synth.io import atomic_place, loads_json
 
 FORMAT_NAME = "synth-head-model"
 FORMAT_VERSION = 1
@@ -298,11 +298,11 @@ def read_model(path: str | os.PathLike) -> HeadModelData:
     if "meta" not in members:
         _fail("no 'meta' member", where)
     try:
-        meta = json.loads(members.pop("meta").tobytes().decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        meta = loads_json(members.pop("meta").tobytes())
+    except ValueError as e:
         _fail(f"'meta' is not UTF-8 JSON: {e}", where)
-    if meta.get("format") != FORMAT_NAME:
-        _fail(f"not a {FORMAT_NAME} file (format={meta.get('format')!r})", where)
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME:
+        _fail(f"not a {FORMAT_NAME} file (format={meta.get('format') if isinstance(meta, dict) else None!r})", where)
     kw: dict[str, Any] = {}
     for k in list(_ARRAY_SCHEMA) + list(_OPTIONAL_ARRAYS):
         kw[k] = members.pop(k, None)

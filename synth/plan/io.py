@@ -27,7 +27,8 @@ import orjson
 
 from synth.dataset.layout import frame_key
 from synth.errors import SynthError
-from synth.io import atomic_dir, fsync_file, sha256_bytes, sha256_file
+from synth.io import (DirectoryTaken, FileRefused, atomic_dir, created_dirs, file_digest, fsync_file, read_bounded,
+                      loads_json, read_json, sha256_bytes, sha256_file)
 
 PLAN_FORMAT = "synth-plan"
 PLAN_FORMAT_VERSION = 1
@@ -35,6 +36,8 @@ HEADER_FILE = "plan.json"
 SUMMARY_FILE = "summary.json"
 SHARDS_DIR = "shards"
 SCHEMA_PATH = Path(__file__).resolve().parents[1] / "schemas" / "plan.schema.json"
+#: plan.json lists every shard (~300 bytes each): a larger file is refused, never read.
+MAX_HEADER_BYTES = 256 << 20
 
 
 @lru_cache(maxsize=1)
@@ -84,18 +87,20 @@ def check_out_dir(out: Path) -> str | None:
     if not hp.is_file():
         raise SynthError("output directory is not empty and holds no plan", str(out), "use an empty or new --out")
     try:
-        return str(json.loads(hp.read_text(encoding="utf-8"))["plan_hash"])
-    except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError):
+        return str(read_json(hp, max_bytes=MAX_HEADER_BYTES)["plan_hash"])
+    except (ValueError, KeyError, TypeError):
         raise SynthError("output directory holds an unreadable plan.json", str(out), "use a new --out") from None
 
 
-def write_shards(tmp: Path, shards: Iterable[tuple[str, dict]]) -> list[dict]:
-    """Write shard specs into ``tmp/shards/``; returns their header listing entries."""
+def write_shards(tmp: Path | None, shards: Iterable[tuple[str, dict]]) -> list[dict]:
+    """Write shard specs into ``tmp/shards/`` (``tmp=None``: only hash them); returns their
+    header listing entries."""
     listing = []
     for shard_id, spec in shards:
         data = dumps_compact(spec)
         name = f"{SHARDS_DIR}/{shard_id}.json"
-        (tmp / name).write_bytes(data)
+        if tmp is not None:
+            (tmp / name).write_bytes(data)
         idents = spec["identities"]
         n_frames = sum(len(e["frames"]) for i in idents for e in i["expressions"])
         listing.append({"shard_id": shard_id, "file": name,
@@ -104,35 +109,59 @@ def write_shards(tmp: Path, shards: Iterable[tuple[str, dict]]) -> list[dict]:
     return listing
 
 
-def write_plan(out: str | os.PathLike, header: dict,
-               produce: Callable[[Path], tuple[list[dict], dict]]) -> tuple[dict, dict]:
+def finish_header(header: dict, listing: list[dict], summary: dict) -> tuple[dict, dict]:
+    """The header with its shard listing and ``plan_hash``, and the summary with the hash."""
+    header = {**header, "shards": listing}
+    header["plan_hash"] = header_hash(header)
+    return header, {**summary, "plan_hash": header["plan_hash"]}
+
+
+def write_plan(out: str | os.PathLike | None, header: dict,
+               produce: Callable[[Path | None], tuple[list[dict], dict]]) -> tuple[dict, dict]:
     """Write a plan directory atomically. ``produce(tmp)`` writes the shard files into
     ``tmp/shards/`` (see :func:`write_shards`) and returns (listing, summary); ``header``
     lacks ``shards`` and ``plan_hash``, which are filled in here. Returns (header, summary).
-    If ``out`` already holds the identical plan nothing is written; a different plan there
-    is refused (SynthError)."""
+
+    ``out=None`` writes nothing: ``produce(None)`` only hashes, and the header tells the plan
+    hash these inputs give (to compare with an existing plan on read-only media, say). If
+    ``out`` already holds the identical plan, or another process puts it there while this one
+    plans (two ``synth render`` started at once), that plan is kept and this one discarded; a
+    different plan there is refused (SynthError). A refused or failed plan leaves nothing,
+    not even the parent directories it created."""
+    if out is None:
+        return finish_header(header, *produce(None))
     out = Path(out)
     existing = check_out_dir(out)
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise SynthError(f"cannot create the output's parent directory ({e.strerror})", str(out.parent),
-                         "choose a writable --out") from None
-    with atomic_dir(out) as tmp:  # replaces an empty ``out`` (checked above)
-        (tmp / SHARDS_DIR).mkdir()
-        listing, summary = produce(tmp)
-        header = {**header, "shards": listing}
-        header["plan_hash"] = header_hash(header)
-        summary = {**summary, "plan_hash": header["plan_hash"]}
-        (tmp / SUMMARY_FILE).write_bytes(dumps_pretty(summary))
-        (tmp / HEADER_FILE).write_bytes(dumps_pretty(header))
-        fsync_file(tmp / HEADER_FILE)
-        if existing is not None:
-            if existing != header["plan_hash"]:
-                raise SynthError(f"output directory holds a different plan (hash {existing[:16]}, this plan "
-                                 f"{header['plan_hash'][:16]})", str(out), "use a new --out or delete the old plan")
-            shutil.rmtree(tmp)  # the identical plan is already there: keep it
+    with created_dirs(out.parent):
+        try:
+            with atomic_dir(out) as tmp:  # replaces an empty ``out`` (checked above)
+                (tmp / SHARDS_DIR).mkdir()
+                header, summary = finish_header(header, *produce(tmp))
+                (tmp / SUMMARY_FILE).write_bytes(dumps_pretty(summary))
+                (tmp / HEADER_FILE).write_bytes(dumps_pretty(header))
+                fsync_file(tmp / HEADER_FILE)
+                if existing is not None:
+                    _same_plan(out, existing, header["plan_hash"])
+                    shutil.rmtree(tmp)  # the identical plan is already there: keep it
+        except DirectoryTaken:  # another process placed its plan first: adopt it if identical
+            _same_plan(out, check_out_dir(out), header["plan_hash"])
     return header, summary
+
+
+def _same_plan(out: Path, existing: str | None, plan_hash: str) -> None:
+    if existing != plan_hash:
+        raise SynthError(f"output directory holds a different plan (hash {str(existing)[:16]}, this plan "
+                         f"{plan_hash[:16]})", str(out), "use a new --out or delete the old plan")
+
+
+def check_hdri_files(lighting: dict) -> None:
+    """Refuse a lighting config whose environment maps are missing (before any worker starts)."""
+    if lighting.get("environment") != "hdri":
+        return
+    for f in lighting.get("hdri_files") or ():
+        if not Path(f).is_file():
+            raise SynthError("HDR environment file not found", str(f),
+                             "restore the file or remove it from lighting.hdri_files")
 
 
 # --------------------------------------------------------------------------- reader
@@ -147,9 +176,9 @@ class Plan:
         if not hp.is_file():
             raise SynthError("no plan.json in the plan directory", str(self.root), "run 'synth plan --out DIR' first")
         try:
-            self.header: dict = orjson.loads(hp.read_bytes())
-        except orjson.JSONDecodeError as e:
-            raise SynthError(f"plan.json is not valid JSON ({e})", str(hp), "re-run 'synth plan'") from None
+            self.header: dict = read_json(hp, max_bytes=MAX_HEADER_BYTES)
+        except ValueError as e:
+            raise SynthError(f"plan.json cannot be read ({e})", str(hp), "re-run 'synth plan'") from None
         if not isinstance(self.header, dict) or self.header.get("format") != PLAN_FORMAT:
             raise SynthError("not a synth plan (format field)", str(hp), "point at a directory written by 'synth plan'")
         if self.header.get("format_version") != PLAN_FORMAT_VERSION:
@@ -184,15 +213,38 @@ class Plan:
         entry = self._shards[shard_id]
         p = self.root / entry["file"]
         try:
-            data = p.read_bytes()
+            data = read_bounded(p, entry["bytes"])
         except OSError as e:
             raise SynthError(f"cannot read shard spec ({e.strerror})", str(p), "re-run 'synth plan'") from None
+        except FileRefused:
+            data = b""  # larger than planned: the sha256 below cannot match
         if sha256_bytes(data) != entry["sha256"]:
             raise SynthError("shard spec does not match its sha256 in plan.json", str(p), "re-run 'synth plan'")
-        spec = orjson.loads(data)
+        try:
+            spec = loads_json(data)
+        except ValueError as e:
+            raise SynthError(f"shard spec cannot be read ({e})", str(p), "re-run 'synth plan'") from None
         if validate_spec:
             validate(spec, "shard", str(p))
         return spec
+
+    def verify(self) -> None:
+        """Check the whole plan before any worker starts: every shard spec has the sha256
+        plan.json lists, the model file is the one planned with, the HDR maps exist."""
+        for sid, entry in self._shards.items():
+            p = self.root / entry["file"]
+            try:
+                digest, _ = file_digest(p, max_bytes=entry["bytes"])
+            except FileNotFoundError:
+                raise SynthError(f"shard spec of {sid} is missing", str(p), "restore the plan or re-run 'synth plan'") \
+                    from None
+            except (OSError, FileRefused):
+                digest = None
+            if digest != entry["sha256"]:
+                raise SynthError(f"shard spec of {sid} was changed after planning (its sha256 differs from plan.json)",
+                                 str(p), "restore the plan or re-run 'synth plan'")
+        self.checked_model_path()
+        check_hdri_files(self.lighting())
 
     def frame_keys(self, shard_id: str) -> list[str]:
         """Frame keys of a shard, from the header alone (no shard file read)."""
@@ -227,17 +279,21 @@ class Plan:
             return default_model_path()
         return Path(p)
 
-    def model_data(self):
-        """The head model the plan was made with (refused if the file changed since)."""
-        from synth.model.format import read_model
-
+    def checked_model_path(self) -> Path:
+        """The model file the plan was made with, refused if it is missing or changed since."""
         path = self.model_path()
         if not path.is_file():
             raise SynthError("the plan's model file is missing", str(path), "restore it or re-run 'synth plan'")
         if sha256_file(path) != self.model_sha256():
             raise SynthError("the model file changed since planning (sha256 mismatch)", str(path),
                              "re-run 'synth plan' with this model")
-        return read_model(path)
+        return path
+
+    def model_data(self):
+        """The head model the plan was made with (refused if the file changed since)."""
+        from synth.model.format import read_model
+
+        return read_model(self.checked_model_path())
 
 
 def load_plan(root: str | os.PathLike) -> Plan:

@@ -30,8 +30,8 @@ def check_counts(cfg: Config, first_identity: int, n_identities: int) -> None:
     if n_identities < 1:
         raise SynthError(f"--identities must be at least 1, got {n_identities}", "--identities", "plan one or more")
     if first_identity < 0 or first_identity + n_identities > 1_000_000:
-        raise SynthError("identity indices must lie in [0, 1000000) (frame keys have 6 digits)", "--start",
-                         "plan fewer identities")
+        raise SynthError("identity indices must lie in [0, 1000000) (frame keys have 6 digits)",
+                         "--identities, --start", "plan fewer identities")
     if d.expressions_per_identity > 100 or d.views_per_expression > 100:
         raise SynthError("expressions_per_identity and views_per_expression must be at most 100 (frame keys have "
                          "2 digits)", "dataset", "lower them")
@@ -212,7 +212,8 @@ def model_record(model_path) -> tuple[HeadModelData, dict[str, Any]]:
 
 def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first_identity: int = 0,
              model_path=None, jobs: int | None = None) -> tuple[dict, dict]:
-    """Sample and write a plan directory; returns (header, summary).
+    """Sample and write a plan directory; returns (header, summary). With ``out=None`` nothing
+    is written: the header says which plan (``plan_hash``) these inputs give.
 
     Identities are planned in chunks of whole shards, in up to ``jobs`` forked processes
     (default: up to 4 cores); each chunk samples and writes its own shards. Every number
@@ -224,12 +225,17 @@ def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first
     from synth.plan import io, stats
 
     if seed is not None:
-        cfg = dataclasses.replace(cfg, dataset=dataclasses.replace(cfg.dataset, seed=seeds.check_seed(seed)))
+        try:
+            seed = seeds.check_seed(seed)
+        except ValueError as e:
+            raise SynthError(str(e), "--seed", "use a seed from 0 to 18446744073709551615") from None
+        cfg = dataclasses.replace(cfg, dataset=dataclasses.replace(cfg.dataset, seed=seed))
     cfg = cfg.resolved()
     seed = cfg.dataset.seed
     check_counts(cfg, first_identity, n_identities)
     cameras.check_feasible(cfg.camera, cfg.dataset.views_per_expression)
-    io.check_out_dir(Path(out))  # fail fast, before the sampling
+    if out is not None:
+        io.check_out_dir(Path(out))  # fail fast, before the sampling
     model, model_rec = model_record(model_path)
     cat = load_catalogue(cfg.assets.manifest_dir or None)
     d = cfg.dataset
@@ -237,7 +243,7 @@ def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first
     n_shards = -(-n_identities // S)
     jobs = parallel.default_jobs() if jobs is None else max(1, int(jobs))
 
-    def produce(tmp: Path) -> tuple[list[dict], dict]:
+    def produce(tmp: Path | None) -> tuple[list[dict], dict]:
         def chunk(r: tuple[int, int]):
             lo, hi = first_identity + r[0] * S, min(first_identity + r[1] * S, first_identity + n_identities)
             arr = sample_plan(cfg, model, cat, seed, lo, hi - lo)

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from tests.support import fake_frames as ff
-from synth.dataset.index import read_index, rebuild_index
+from synth.dataset.index import read_index, repair_index
 from synth.dataset.layout import frame_key, shard_name
 from synth.dataset.shards import load_dataset, open_dataset
 from synth.dataset.validate import validate_dataset
@@ -113,7 +113,8 @@ def test_commit_layout_manifest_and_index(tmp_path):
     assert ds.pending_shards() == ["shard_000000", "shard_000001"]
     ff.render_dataset(ds)
     root = tmp_path / "ds"
-    assert sorted(os.listdir(root)) == [".lock", ".staging", "dataset.json", "index.json", "shards"]
+    assert sorted(os.listdir(root)) == [".commits", ".lock", ".staging", "dataset.json", "index.json", "shards"]
+    assert sorted(os.listdir(root / ".commits")) == ["shard_000000.json", "shard_000001.json"]  # the signatures
     assert os.listdir(root / ".staging") == []  # nothing left behind (no locks either)
     info = json.loads((root / "dataset.json").read_text())
     assert info["plan_hash"] == HASH and info["expected"] == plan and info["meta"]["config"]["views"] == 3
@@ -132,7 +133,7 @@ def test_commit_layout_manifest_and_index(tmp_path):
     assert idx["num_shards"] == 2 and idx["num_frames"] == 12
     assert idx["shards"]["shard_000001"]["manifest_sha256"] == hashlib.sha256((sd / "manifest.json").read_bytes()
                                                                                ).hexdigest()
-    assert rebuild_index(root, HASH) == idx
+    assert repair_index(root, HASH)[0] == idx
     assert ds.committed_shards() == {"shard_000000", "shard_000001"} and ds.pending_shards() == []
     assert load_dataset(root).committed_shards() == ds.committed_shards()
 
@@ -335,7 +336,7 @@ def test_concurrent_workers_keep_the_index_consistent(tmp_path):
         assert p.returncode == 0, err
     idx = read_index(root)
     assert sorted(idx["shards"]) == sorted(plan) and idx["num_frames"] == 10
-    assert rebuild_index(root, HASH) == idx
+    assert repair_index(root, HASH)[0] == idx
     total = sum((logged(tmp_path / f"log{j}") for j in range(3)), Counter())
     assert total == Counter(k for ks in plan.values() for k in ks)  # each frame rendered once, by one worker
     assert validate_dataset(root).ok

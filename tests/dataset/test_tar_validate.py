@@ -1,7 +1,7 @@
 """`synth validate` on hostile tar shards: every case is reported as a defect (never an
 exception, never a read past what the manifest allows), and the tar-level checks are passed
-on purpose (the manifest is rewritten to match the hostile tar, the index rebuilt) so that
-the member checks themselves are exercised."""
+on purpose (the manifest is rewritten to match the hostile tar and re-signed, as
+--repair-index does) so that the member checks themselves are exercised."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from synth.dataset.index import rebuild_index
+from synth.dataset.index import repair_index
 from synth.dataset.layout import frame_key
 from synth.dataset.shards import open_dataset
 from synth.dataset.tarshard import BLOCK, MAX_MEMBER_BYTES, TarRefused, iter_members, tar_manifest_path, tar_path
@@ -74,7 +74,7 @@ def install(root: Path, data: bytes, edit=None) -> list[str]:
     if edit:
         edit(m)
     mp.write_bytes(json.dumps(m).encode())
-    rebuild_index(root, HASH)
+    repair_index(root, HASH)
     rep = validate_dataset(root)
     return [d.line() for d in rep.defects]
 

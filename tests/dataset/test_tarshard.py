@@ -238,12 +238,14 @@ def test_preview_of_an_unreadable_tar_member_is_a_red_tile(tmp_path):
 def test_kill9_at_the_tar_commit_steps(tmp_path):
     plan = ff.plan(1, 1, 2)
     points = _sync_points(tmp_path, plan, "tar")
-    first = next(i for i, c in enumerate(points, 1) if c.startswith("replace .shard_000000.tar."))
+    first = next(i for i, c in enumerate(points, 1) if c.startswith("replace .shard_000000.json."))
     # the dataset's creation, the first frame, then every sync point of the commit: before and
-    # after placing the tar (an orphan tar), before and after its manifest (the commit point;
-    # after it the staging directory is still there), the index update
+    # after its commit record (signed, not committed), before and after placing the tar (an
+    # orphan tar), before and after its manifest (the commit point; after it the staging
+    # directory is still there), the index update
     want = [i for i, c in enumerate(points, 1) if c.startswith(("replace .dataset.json", "replace .id000000_ex00_v00."))]
-    want += list(range(first - 1, len(points) + 1))
+    want += list(range(first, len(points) + 1))
+    assert any(points[i - 1].startswith("replace .shard_000000.tar.") for i in want), points
     assert any(points[i - 1].startswith("replace .shard_000000.tar.json.") for i in want), points
     _kill_at(tmp_path, want, plan, "tar")
 

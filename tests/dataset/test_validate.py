@@ -13,7 +13,7 @@ import pytest
 
 from tests.support import fake_frames as ff
 from synth.cli.main import main
-from synth.dataset.index import rebuild_index
+from synth.dataset.index import repair_index
 from synth.dataset.exr import read_frame_exr
 from synth.dataset.shards import open_dataset
 from synth.dataset.validate import validate_dataset
@@ -51,7 +51,7 @@ def reseal(root: Path, shard: str = S0) -> None:
             data = (sd / name).read_bytes()
             m["files"][name] = {"sha256": hashlib.sha256(data).hexdigest(), "bytes": len(data)}
     (sd / "manifest.json").write_text(json.dumps(m))
-    rebuild_index(root, HASH)
+    repair_index(root, HASH)
 
 
 def write_raw_exr(path: Path, rgba, depth, normals, seg) -> None:
@@ -111,7 +111,7 @@ def test_frame_missing_from_manifest_is_reported(ds):
         del m["files"][f"{KEY}.{ext}"]
         (sd / f"{KEY}.{ext}").unlink()
     (sd / "manifest.json").write_text(json.dumps(m))
-    rebuild_index(ds, HASH)
+    repair_index(ds, HASH)
     assert kinds(ds) == {(S0, KEY, "missing-frame")}
 
 
@@ -202,7 +202,7 @@ def test_modified_manifest_is_caught_by_the_index(ds):
 
 def test_missing_shard_partial_and_staging_warnings(ds, capsys):
     shutil.rmtree(ds / "shards" / "shard_000001")
-    rebuild_index(ds, HASH)
+    repair_index(ds, HASH)
     (ds / ".staging" / "shard_000001").mkdir()
     (ds / ".staging" / "shard_000001" / "id000001_ex00_v00.json").write_text("{}")
     assert kinds(ds) == {("shard_000001", None, "missing-shard")}

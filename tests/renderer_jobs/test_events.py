@@ -93,6 +93,12 @@ def test_non_finite_numbers_are_refused_both_ways():
         parse_line('{"v": 2, "event": "rss", "rss_mb": Infinity}')
 
 
+def test_a_deeply_nested_line_is_not_an_event():
+    """A worker line nested deeper than any event is plain output, never a RecursionError."""
+    assert parse_line("x " + "[" * 200_000 + "]" * 200_000) is None
+    assert parse_line('{"event": ' + "[" * 200_000 + "]" * 200_000 + "}") is None
+
+
 @pytest.mark.parametrize("rc, reported, stopped, retry", [
     (0, False, False, False),
     (1, False, False, True),  # a crash (traceback)

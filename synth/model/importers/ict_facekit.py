@@ -20,7 +20,6 @@ every rule.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 from concurrent.futures import ThreadPoolExecutor
@@ -29,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from synth.errors import ModelFormatError
+from synth.io import read_json
 from synth.model import meshutil as mu
 from synth.model.format import HeadModelData
 from synth.model.importers import ict_rig as ir
@@ -130,12 +130,12 @@ def import_ict_facekit(directory: str | Path) -> HeadModelData:
 
     idx_path = model_dir / "vertex_indices.json"
     try:
-        indices = json.loads(idx_path.read_text(encoding="utf-8"))
+        indices = read_json(idx_path, max_bytes=64 << 20)
         lm_ids = np.asarray(indices["idx_to_landmark_verts"], np.int64)
         order = [str(s) for s in indices.get("expressions", [])]
     except FileNotFoundError:
         raise ModelFormatError("missing vertex_indices.json (landmarks)", str(idx_path), _FIX) from None
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as e:
+    except (KeyError, TypeError, ValueError) as e:
         raise ModelFormatError(f"unreadable vertex_indices.json ({type(e).__name__}: {e})", str(idx_path),
                                "restore the original file") from None
     if lm_ids.shape != (68,) or lm_ids.min() < 0 or lm_ids.max() >= n:
