@@ -34,8 +34,7 @@ def ds(clean, tmp_path) -> Path:
     return datasets.writable_copy(clean, tmp_path / "ds")
 
 
-def found(root: Path, **kw) -> set[tuple]:
-    return {(d.shard, d.key, d.kind) for d in validate_dataset(root, **kw).defects}
+found = datasets.defects_found
 
 
 def frame(root: Path, ext: str, shard: str = S0) -> Path:

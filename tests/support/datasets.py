@@ -69,6 +69,14 @@ def writable_copy(src: Path, dst: Path) -> Path:
     return dst
 
 
+def defects_found(root: Path, **kw) -> set[tuple]:
+    """(shard, key, kind) of every defect ``synth validate`` finds in ``root`` (keyword arguments go to
+    :func:`synth.dataset.validate.validate_dataset`)."""
+    from synth.dataset.validate import validate_dataset
+
+    return {(d.shard, d.key, d.kind) for d in validate_dataset(root, **kw).defects}
+
+
 def first_frame(root: Path, shard: str = "shard_000000") -> tuple[Path, Path]:
     """(the shard directory, the first frame JSON in it)."""
     sd = root / "shards" / shard
