@@ -29,7 +29,7 @@ HASH = "f" * 64
 # A worker that renders fake frames into a dataset; it can SIGKILL itself at the N-th file-system
 # sync point (os.replace / os.rename / os.fsync), or be killed from outside at a random moment.
 CHILD = r"""
-import os, signal, sys, time, json
+import os, signal, sys, json
 sys.path.insert(0, os.environ["REPO_DIR"])
 from tests.support import fake_frames as ff
 from synth.dataset.shards import open_dataset
@@ -48,20 +48,16 @@ if die_at >= 0:
         return w
     for name in ("replace", "rename", "fsync"):
         setattr(os, name, wrap(name, getattr(os, name)))
+def logged(key):
+    with open(log, "a") as f:
+        f.write(key + "\n")
 ds = open_dataset(root, os.environ["PLAN_HASH"], plan, shard_format=os.environ.get("SHARD_FORMAT") or None)
 for sid in ds.pending_shards():
     st = ds.try_staging(sid)
     if st is None:  # another worker holds it, or committed it meanwhile
         continue
     with st:
-        done = st.frames_done()
-        for key in st.expected_keys:
-            if key in done:
-                continue
-            time.sleep(sleep)
-            st.write_frame(key, *ff.pixels(key), ff.frame_json(key))
-            with open(log, "a") as f:
-                f.write(key + "\n")
+        ff.stage_missing(st, sleep, logged)
         st.commit(manifest_extra={"seeds": {"run": 1}})
 print(json.dumps(calls))
 """

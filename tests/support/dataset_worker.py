@@ -14,7 +14,6 @@ import argparse
 import os
 import platform
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
@@ -56,16 +55,13 @@ def main() -> int:
                 emit(Skip(shard=sid))
                 continue
             with st:
-                done = st.frames_done()
-                for key in st.expected_keys:
-                    if key in done:
-                        continue
-                    time.sleep(sleep)
-                    st.write_frame(key, *ff.pixels(key), ff.frame_json(key))
+                def staged(key: str, sid: str = sid) -> None:
                     if log:
                         with open(log, "a") as f:
                             f.write(key + "\n")
                     emit(Frame(shard=sid, key=key, render_seconds=sleep))
+
+                ff.stage_missing(st, sleep, staged)
                 st.commit()
             emit(Commit(shard=sid))
     except SynthError as e:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from synth.assets.classes import RECORD_ORDER
@@ -68,6 +70,19 @@ def plan(n_shards: int = 2, n_expr: int = 2, n_views: int = 3, first_identity: i
     """shard_{i:06d} -> the keys of identity i (all expressions and views)."""
     return {shard_name(i): [frame_key(i, e, v) for e in range(n_expr) for v in range(n_views)]
             for i in range(first_identity, first_identity + n_shards)}
+
+
+def stage_missing(st, sleep: float = 0.0, on_frame=None) -> None:
+    """Write the fake frames the staging shard ``st`` still lacks, sleeping ``sleep`` seconds before
+    each (as a render would) and calling ``on_frame(key)`` after each one is staged."""
+    done = st.frames_done()
+    for key in st.expected_keys:
+        if key in done:
+            continue
+        time.sleep(sleep)
+        st.write_frame(key, *pixels(key), frame_json(key))
+        if on_frame is not None:
+            on_frame(key)
 
 
 def render_dataset(ds, size: int = 16, shards=None) -> None:

@@ -46,6 +46,7 @@ def _publish(path: Path, text: str) -> None:
     tmp.write_text(text)
     os.replace(tmp, path)
 
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--dataset", required=True)
