@@ -30,17 +30,21 @@ def command(dataset: Path, plan_dir: Path, shards) -> list[str]:
             ",".join(shards)]
 
 
+def parse_args(argv=None) -> argparse.Namespace:
+    """The render worker's arguments that the fake workers take: --dataset, --plan, --shards."""
+    ap = argparse.ArgumentParser()
+    for name in ("--dataset", "--plan", "--shards"):
+        ap.add_argument(name, required=True)
+    return ap.parse_args(argv)
+
+
 def main() -> int:
     from synth.dataset.shards import open_dataset
     from synth.errors import SynthError
     from synth.plan.io import load_plan
     from tests.support import fake_frames as ff
 
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--dataset", required=True)
-    ap.add_argument("--plan", required=True)
-    ap.add_argument("--shards", required=True)
-    args = ap.parse_args()
+    args = parse_args()
     guard.install()
     shards = args.shards.split(",")
     emit(Start(shards=tuple(shards), pid=os.getpid(), host=platform.node()))

@@ -22,7 +22,6 @@ its parent), except for ``stubborn``, which ignores SIGTERM.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -36,6 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from renderer_jobs import guard  # noqa: E402
 from renderer_jobs.events import Commit, Error, Frame, Start, emit  # noqa: E402
+from tests.support.dataset_worker import parse_args  # noqa: E402
 
 
 
@@ -48,11 +48,7 @@ def _publish(path: Path, text: str) -> None:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--dataset", required=True)
-    ap.add_argument("--plan", required=True)
-    ap.add_argument("--shards", required=True)
-    args = ap.parse_args()
+    args = parse_args()
     root = Path(args.dataset)
     shards = args.shards.split(",")
     what = json.loads((root / "behaviour.json").read_text())
