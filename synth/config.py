@@ -1,8 +1,9 @@
 """The typed dataset configuration: dataclasses with documented defaults that mirror the
 Cafca paper, read from TOML and overridable with dotted ``--set section.key=value``.
 
-Every field is a :func:`synth.configkit.setting`: a one-line doc, optional inclusive
-``range`` (applied to every number of a tuple) and ``choices``. The machinery (types,
+Every section is a :func:`synth.configkit.section`: per field a default, its one-line doc
+right under it and, on its type, optional inclusive ``Bounds`` (applied to every number of a
+tuple) and ``Choices``. The machinery (types,
 TOML, overrides, did-you-mean, the reference table) is :mod:`synth.configkit`; this module
 holds the sections, the render presets and the cross-field rules (:func:`check_cross`),
 which run once after every override is applied. ``synth config show --explain`` prints the
@@ -14,12 +15,11 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 from synth import configkit
 from synth.assets import classes as asset_classes
-from synth.configkit import ConfigError
-from synth.configkit import setting as _f  # a documented field: default, doc, range, choices
+from synth.configkit import Bounds, Choices, ConfigError, Unordered, section
 from synth.seeds import MAX_SEED
 
 # The render presets live here and nowhere else (the plan records the resolved settings).
@@ -33,142 +33,168 @@ RENDER_PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-U64 = (0, MAX_SEED)
+Seed = Annotated[int, Bounds(0, MAX_SEED)]  #: a seed of the project's seed scheme (synth.seeds)
+Interval = tuple[float, float]  #: [low, high], low <= high (checked)
 
 
-@dataclass(frozen=True)
+@section
 class DatasetConfig:
-    seed: int = _f(0, "run seed (0 .. 2**64-1); `synth plan --seed` overrides it", U64)
-    identities_per_shard: int = _f(1, "identities in one shard (one worker job)", (1, 100000))
-    expressions_per_identity: int = _f(13, "expressions sampled per identity (paper: 13)", (1, 1000))
-    views_per_expression: int = _f(30, "viewpoints rendered per expression (paper: 30)", (1, 100000))
-    shard_format: str = _f("dir", "how a committed shard is stored: 'dir' = a directory of KEY.exr/KEY.json; "
-                           "'tar' = one tar of them, for WebDataset-style streaming (docs/shard-format.md)",
-                           choices=("dir", "tar"))
+    seed: Seed = 0
+    """run seed (0 .. 2**64-1); `synth plan --seed` overrides it"""
+    identities_per_shard: Annotated[int, Bounds(1, 100000)] = 1
+    """identities in one shard (one worker job)"""
+    expressions_per_identity: Annotated[int, Bounds(1, 1000)] = 13
+    """expressions sampled per identity (paper: 13)"""
+    views_per_expression: Annotated[int, Bounds(1, 100000)] = 30
+    """viewpoints rendered per expression (paper: 30)"""
+    shard_format: Annotated[str, Choices("dir", "tar")] = "dir"
+    """how a committed shard is stored: 'dir' = a directory of KEY.exr/KEY.json; 'tar' = one tar of them, for
+    WebDataset-style streaming (docs/shard-format.md)"""
 
 
-@dataclass(frozen=True)
+@section
 class CameraConfig:
-    azimuth_deg: tuple[float, float] = _f((-180.0, 180.0), "azimuth range; 0 = in front of the face, "
-                                          "+ toward the subject's left", (-360.0, 360.0))
-    elevation_deg: tuple[float, float] = _f((-45.0, 70.0), "elevation range; +90 = above the head",
-                                            (-90.0, 90.0))
-    radius_m: tuple[float, float] = _f((0.9, 1.3), "distance from the look-at target (metres) when "
-                                       "camera.distance = 'range'", (1e-3, 1e3))
-    distance: str = _f("fit", "'fit': per view, the distance at which the head's bounding sphere fills "
-                       "camera.head_fill of the half field of view (shorter image side); 'range': drawn "
-                       "from camera.radius_m", choices=("fit", "range"))
-    head_fill: tuple[float, float] = _f((0.75, 0.95), "with distance = 'fit': the head sphere's angular "
-                                        "radius over the half field of view, drawn uniformly", (0.05, 1.0))
-    head_margin_m: float = _f(0.03, "added to the radius of each head's bounding sphere (expressions, "
-                              "the jaw), besides the reach of its planned hair and headwear", (0.0, 1.0))
-    elevation_sampling: str = _f("area", "'area': uniform over the sphere patch; 'angle': uniform in "
-                                 "elevation degrees", choices=("area", "angle"))
-    min_separation_deg: float = _f(25.0, "minimum angle between the viewing directions of two views of "
-                                   "one expression (paper: 25)", (0.0, 180.0))
-    focal_length_mm: float = _f(85.0, "lens focal length (with sensor_width_mm; ignored if fov_deg is set)",
-                                (0.1, 10000.0))
-    sensor_width_mm: float = _f(36.0, "sensor width; the sensor spans the image width", (0.1, 1000.0))
-    fov_deg: float | None = _f(None, "horizontal field of view; overrides the focal length if set",
-                               (0.01, 179.0))
-    near_m: float = _f(0.05, "near clipping distance (metres)", (1e-6, 1e6))
-    far_m: float = _f(10.0, "far clipping distance (metres)", (1e-6, 1e6))
-    target: str = _f("head", "look-at point: 'head' = centre of the identity's head bounding box (neck "
-                     "and shoulders excluded), 'eyes' = midpoint of the four eye corners (ibug68), "
-                     "'landmarks' = centroid of all ibug68 landmarks, 'origin' = world origin",
-                     choices=("head", "eyes", "landmarks", "origin"))
-    target_offset_m: tuple[float, float, float] = _f((0.0, 0.0, 0.0), "added to the look-at point (world)",
-                                                     (-10.0, 10.0))
-    roll_deg: tuple[float, float] = _f((0.0, 0.0), "camera roll about the optical axis", (-180.0, 180.0))
-    principal_point_jitter_px: float = _f(0.0, "principal point offset drawn uniformly in +-this (pixels)",
-                                          (0.0, 1e4))
-    max_candidates: int = _f(20000, "viewpoint candidates tried per expression before giving up",
-                             (1, 10**8))
-    restarts: int = _f(8, "fresh restarts when the greedy sampler jams (within max_candidates)", (0, 10**4))
+    azimuth_deg: Annotated[Interval, Bounds(-360.0, 360.0)] = (-180.0, 180.0)
+    """azimuth range; 0 = in front of the face, + toward the subject's left"""
+    elevation_deg: Annotated[Interval, Bounds(-90.0, 90.0)] = (-45.0, 70.0)
+    """elevation range; +90 = above the head"""
+    radius_m: Annotated[Interval, Bounds(1e-3, 1e3)] = (0.9, 1.3)
+    """distance from the look-at target (metres) when camera.distance = 'range'"""
+    distance: Annotated[str, Choices("fit", "range")] = "fit"
+    """'fit': per view, the distance at which the head's bounding sphere fills camera.head_fill of the half field
+    of view (shorter image side); 'range': drawn from camera.radius_m"""
+    head_fill: Annotated[Interval, Bounds(0.05, 1.0)] = (0.75, 0.95)
+    """with distance = 'fit': the head sphere's angular radius over the half field of view, drawn uniformly"""
+    head_margin_m: Annotated[float, Bounds(0.0, 1.0)] = 0.03
+    """added to the radius of each head's bounding sphere (expressions, the jaw), besides the reach of its
+    planned hair and headwear"""
+    elevation_sampling: Annotated[str, Choices("area", "angle")] = "area"
+    """'area': uniform over the sphere patch; 'angle': uniform in elevation degrees"""
+    min_separation_deg: Annotated[float, Bounds(0.0, 180.0)] = 25.0
+    """minimum angle between the viewing directions of two views of one expression (paper: 25)"""
+    focal_length_mm: Annotated[float, Bounds(0.1, 10000.0)] = 85.0
+    """lens focal length (with sensor_width_mm; ignored if fov_deg is set)"""
+    sensor_width_mm: Annotated[float, Bounds(0.1, 1000.0)] = 36.0
+    """sensor width; the sensor spans the image width"""
+    fov_deg: Annotated[float | None, Bounds(0.01, 179.0)] = None
+    """horizontal field of view; overrides the focal length if set"""
+    near_m: Annotated[float, Bounds(1e-6, 1e6)] = 0.05
+    """near clipping distance (metres)"""
+    far_m: Annotated[float, Bounds(1e-6, 1e6)] = 10.0
+    """far clipping distance (metres)"""
+    target: Annotated[str, Choices("head", "eyes", "landmarks", "origin")] = "head"
+    """look-at point: 'head' = centre of the identity's head bounding box (neck and shoulders excluded), 'eyes' =
+    midpoint of the four eye corners (ibug68), 'landmarks' = centroid of all ibug68 landmarks, 'origin' =
+    world origin"""
+    target_offset_m: Annotated[tuple[float, float, float], Bounds(-10.0, 10.0)] = (0.0, 0.0, 0.0)
+    """added to the look-at point (world)"""
+    roll_deg: Annotated[Interval, Bounds(-180.0, 180.0)] = (0.0, 0.0)
+    """camera roll about the optical axis"""
+    principal_point_jitter_px: Annotated[float, Bounds(0.0, 1e4)] = 0.0
+    """principal point offset drawn uniformly in +-this (pixels)"""
+    max_candidates: Annotated[int, Bounds(1, 10**8)] = 20000
+    """viewpoint candidates tried per expression before giving up"""
+    restarts: Annotated[int, Bounds(0, 10**4)] = 8
+    """fresh restarts when the greedy sampler jams (within max_candidates)"""
 
 
-@dataclass(frozen=True)
+@section
 class IdentityConfig:
-    truncation_quantile: float = _f(0.995, "truncate identity codes at the Mahalanobis radius (to their "
-                                    "prior component) that holds this fraction of the untruncated "
-                                    "prior: sqrt(chi2.ppf(q, dims)); 1 = no truncation", (0.01, 1.0))
-    max_mahalanobis: float | None = _f(None, "truncation radius in absolute terms (overrides the quantile)",
-                                       (0.01, 1000.0))
+    truncation_quantile: Annotated[float, Bounds(0.01, 1.0)] = 0.995
+    """truncate identity codes at the Mahalanobis radius (to their prior component) that holds this fraction of
+    the untruncated prior: sqrt(chi2.ppf(q, dims)); 1 = no truncation"""
+    max_mahalanobis: Annotated[float | None, Bounds(0.01, 1000.0)] = None
+    """truncation radius in absolute terms (overrides the quantile)"""
 
 
-@dataclass(frozen=True)
+@section
 class ExpressionConfig:
-    neutral_weight: float = _f(0.08, "relative probability of the neutral expression", (0.0, 1e6))
-    preset_weight: float = _f(0.46, "relative probability of a named preset", (0.0, 1e6))
-    random_weight: float = _f(0.46, "relative probability of a random sparse combination", (0.0, 1e6))
-    presets: tuple[str, ...] = _f((), "preset names to draw from (empty = all built-in presets)")
-    preset_intensity: tuple[float, float] = _f((0.6, 1.0), "scale applied to a preset", (0.0, 2.0))
-    random_active: tuple[int, int] = _f((2, 6), "number of active components in a random combination",
-                                        (1, 10000))
-    random_amplitude: tuple[float, float] = _f((0.2, 1.0), "amplitude of each active component",
-                                               (0.0, 100.0))
-    random_symmetry: float = _f(0.6, "chance that a random combination mirrors its left/right components",
-                                (0.0, 1.0))
-    max_total_activation: float = _f(3.0, "random combinations are scaled down to this summed activation",
-                                     (0.0, 1e6))
-    code_range: tuple[float, float] = _f((0.0, 1.0), "every expression coefficient is clipped to this",
-                                         (-100.0, 100.0))
-    exclude: tuple[str, ...] = _f(("tongueOut", "eyeLook*"), "expression names (glob) never activated by "
-                                  "random combinations (gaze is a joint rotation)")
-    jaw_via: str = _f("auto", "how a preset's jaw opening is realised: 'blendshape' (jawOpen), 'joint' "
-                      "(jaw rotation), 'auto' = blendshape if the model has jawOpen",
-                      choices=("auto", "blendshape", "joint"))
-    jaw_open_deg: tuple[float, float] = _f((0.0, 25.0), "anatomical limits of the jaw opening (joint)",
-                                           (-10.0, 45.0))
-    jaw_lateral_deg: tuple[float, float] = _f((-4.0, 4.0), "anatomical limits of the sideways jaw swing",
-                                              (-15.0, 15.0))
-    random_jaw_probability: float = _f(0.3, "chance that a random combination opens the jaw", (0.0, 1.0))
-    gaze_yaw_deg: tuple[float, float] = _f((-25.0, 25.0), "eye gaze yaw limits (+ = subject's left)",
-                                           (-50.0, 50.0))
-    gaze_pitch_deg: tuple[float, float] = _f((-15.0, 15.0), "eye gaze pitch limits (+ = up)", (-45.0, 45.0))
-    vergence_deg: tuple[float, float] = _f((0.0, 2.0), "each eye turns inward by this much", (0.0, 10.0))
+    neutral_weight: Annotated[float, Bounds(0.0, 1e6)] = 0.08
+    """relative probability of the neutral expression"""
+    preset_weight: Annotated[float, Bounds(0.0, 1e6)] = 0.46
+    """relative probability of a named preset"""
+    random_weight: Annotated[float, Bounds(0.0, 1e6)] = 0.46
+    """relative probability of a random sparse combination"""
+    presets: tuple[str, ...] = ()
+    """preset names to draw from (empty = all built-in presets)"""
+    preset_intensity: Annotated[Interval, Bounds(0.0, 2.0)] = (0.6, 1.0)
+    """scale applied to a preset"""
+    random_active: Annotated[tuple[int, int], Bounds(1, 10000)] = (2, 6)
+    """number of active components in a random combination"""
+    random_amplitude: Annotated[Interval, Bounds(0.0, 100.0)] = (0.2, 1.0)
+    """amplitude of each active component"""
+    random_symmetry: Annotated[float, Bounds(0.0, 1.0)] = 0.6
+    """chance that a random combination mirrors its left/right components"""
+    max_total_activation: Annotated[float, Bounds(0.0, 1e6)] = 3.0
+    """random combinations are scaled down to this summed activation"""
+    code_range: Annotated[Interval, Bounds(-100.0, 100.0)] = (0.0, 1.0)
+    """every expression coefficient is clipped to this"""
+    exclude: tuple[str, ...] = ("tongueOut", "eyeLook*")
+    """expression names (glob) never activated by random combinations (gaze is a joint rotation)"""
+    jaw_via: Annotated[str, Choices("auto", "blendshape", "joint")] = "auto"
+    """how a preset's jaw opening is realised: 'blendshape' (jawOpen), 'joint' (jaw rotation), 'auto' =
+    blendshape if the model has jawOpen"""
+    jaw_open_deg: Annotated[Interval, Bounds(-10.0, 45.0)] = (0.0, 25.0)
+    """anatomical limits of the jaw opening (joint)"""
+    jaw_lateral_deg: Annotated[Interval, Bounds(-15.0, 15.0)] = (-4.0, 4.0)
+    """anatomical limits of the sideways jaw swing"""
+    random_jaw_probability: Annotated[float, Bounds(0.0, 1.0)] = 0.3
+    """chance that a random combination opens the jaw"""
+    gaze_yaw_deg: Annotated[Interval, Bounds(-50.0, 50.0)] = (-25.0, 25.0)
+    """eye gaze yaw limits (+ = subject's left)"""
+    gaze_pitch_deg: Annotated[Interval, Bounds(-45.0, 45.0)] = (-15.0, 15.0)
+    """eye gaze pitch limits (+ = up)"""
+    vergence_deg: Annotated[Interval, Bounds(0.0, 10.0)] = (0.0, 2.0)
+    """each eye turns inward by this much"""
 
 
-@dataclass(frozen=True)
+@section
 class AssetsConfig:
-    manifest_dir: str = _f("", "asset catalogue folder (empty = the repository's assets_manifest/)")
-    disabled_classes: tuple[str, ...] = _f((), "asset classes never used (ablations: e.g. hair, glasses)",
-                                           choices=asset_classes.NAMES)
+    manifest_dir: str = ""
+    """asset catalogue folder (empty = the repository's assets_manifest/)"""
+    disabled_classes: Annotated[tuple[str, ...], Choices(*asset_classes.NAMES)] = ()
+    """asset classes never used (ablations: e.g. hair, glasses)"""
 
 
-@dataclass(frozen=True)
+@section
 class SkinConfig:
-    ita_weights: tuple[float, ...] = _f((1.0, 1.0, 1.0, 1.0, 1.0, 1.0), "relative probability of the six ITA "
-                                        "skin-tone categories, lightest first: very light (> 55 deg), light "
-                                        "(41-55), intermediate (28-41), tan (10-28), brown (-30-10), dark "
-                                        "(< -30); uniform in ITA within a category", (0.0, 1e6))
-    ita_limits_deg: tuple[float, float] = _f((-55.0, 62.0), "ITA range of all skin tones: the low end of "
-                                             "'dark', the high end of 'very light'", (-80.0, 80.0))
+    ita_weights: Annotated[tuple[float, ...], Bounds(0.0, 1e6)] = (1.0, 1.0, 1.0, 1.0, 1.0, 1.0)
+    """relative probability of the six ITA skin-tone categories, lightest first: very light (> 55 deg), light
+    (41-55), intermediate (28-41), tan (10-28), brown (-30-10), dark (< -30); uniform in ITA within a category"""
+    ita_limits_deg: Annotated[Interval, Bounds(-80.0, 80.0)] = (-55.0, 62.0)
+    """ITA range of all skin tones: the low end of 'dark', the high end of 'very light'"""
 
 
-@dataclass(frozen=True)
+@section
 class LightingConfig:
-    environment: str = _f("uniform", "'uniform' (paper: one uniform well-lit environment) or 'hdri'",
-                          choices=("uniform", "hdri"))
-    strength: float = _f(1.0, "environment strength", (0.0, 1e4))
-    color: tuple[float, float, float] = _f((1.0, 1.0, 1.0), "uniform environment colour (linear RGB)",
-                                           (0.0, 1e4))
-    hdri_files: tuple[str, ...] = _f((), "environment maps drawn per identity when environment = 'hdri'")
-    hdri_rotation_deg: tuple[float, float] = _f((-180.0, 180.0), "rotation of the map about Z", (-360.0, 360.0))
+    environment: Annotated[str, Choices("uniform", "hdri")] = "uniform"
+    """'uniform' (paper: one uniform well-lit environment) or 'hdri'"""
+    strength: Annotated[float, Bounds(0.0, 1e4)] = 1.0
+    """environment strength"""
+    color: Annotated[tuple[float, float, float], Bounds(0.0, 1e4)] = (1.0, 1.0, 1.0)
+    """uniform environment colour (linear RGB)"""
+    hdri_files: tuple[str, ...] = ()
+    """environment maps drawn per identity when environment = 'hdri'"""
+    hdri_rotation_deg: Annotated[Interval, Bounds(-360.0, 360.0)] = (-180.0, 180.0)
+    """rotation of the map about Z"""
 
 
-@dataclass(frozen=True)
+@section
 class RenderConfig:
-    preset: str = _f("preview", "ci = 64x64, 4 spp; preview = 256x256, 16 spp, denoised; "
-                     "production = 512x512, adaptive sampling, denoised", choices=tuple(RENDER_PRESETS))
-    resolution: tuple[int, int] | None = _f(None, "width, height in pixels (unset = preset)", (1, 65536),
-                                                ordered=False)
-    samples: int | None = _f(None, "samples per pixel (unset = preset)", (1, 1 << 20))
-    denoise: bool | None = _f(None, "denoise (unset = preset)")
-    adaptive_sampling: bool | None = _f(None, "adaptive sampling (unset = preset)")
-    adaptive_threshold: float | None = _f(None, "adaptive sampling noise threshold (unset = preset)",
-                                          (0.0, 1.0))
-    device: str = _f("auto", "render device", choices=("auto", "cpu", "gpu"))
+    preset: Annotated[str, Choices(*RENDER_PRESETS)] = "preview"
+    """ci = 64x64, 4 spp; preview = 256x256, 16 spp, denoised; production = 512x512, adaptive sampling, denoised"""
+    resolution: Annotated[tuple[int, int] | None, Bounds(1, 65536), Unordered()] = None
+    """width, height in pixels (unset = preset)"""
+    samples: Annotated[int | None, Bounds(1, 1 << 20)] = None
+    """samples per pixel (unset = preset)"""
+    denoise: bool | None = None
+    """denoise (unset = preset)"""
+    adaptive_sampling: bool | None = None
+    """adaptive sampling (unset = preset)"""
+    adaptive_threshold: Annotated[float | None, Bounds(0.0, 1.0)] = None
+    """adaptive sampling noise threshold (unset = preset)"""
+    device: Annotated[str, Choices("auto", "cpu", "gpu")] = "auto"
+    """render device"""
 
 
 @dataclass(frozen=True)

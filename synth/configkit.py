@@ -1,31 +1,42 @@
-"""Typed dataclass configs with documented fields, presets, TOML files and ``--set`` overrides.
+'''Typed dataclass configs with documented fields, presets, TOML files and ``--set`` overrides.
 
-A *config* is a frozen dataclass whose fields are *sections*; a section is a frozen dataclass
-whose fields are declared with :func:`setting` (default, one-line doc, optional bounds and
-choices). This module is the one home of the machinery both the renderer's config
-(:mod:`synth.config`) and the prior's (:mod:`prior.config`, :mod:`prior.train.config`) use:
+A *config* is a frozen dataclass whose fields are *sections*. A section is a class decorated
+with :func:`section`; a field is a plain annotated default, its one-line doc an attribute
+docstring right under it, its bounds and choices ``Annotated`` metadata (:class:`Bounds`,
+:class:`Choices`, :class:`Unordered`), often through an alias::
+
+    Size = Annotated[int, Bounds(1)]
+
+    @section
+    class TrainConfig:
+        steps: Size = 1_000_000
+        """total optimisation steps (the learning-rate schedule spans them)"""
+
+This module is the one home of the machinery of the renderer's config (:mod:`synth.config`)
+and the prior's (:mod:`prior.config`, :mod:`prior.train.config`, :mod:`prior.fit.config`):
 
 - :func:`coerce`: a value checked against a type hint (``int``, ``float``, ``bool``, ``str``,
   ``X | None``, fixed tuples and ``tuple[X, ...]``) and the field's bounds and choices;
-- :func:`read_toml` and :func:`parse_override` (``section.key=value``, the value read as TOML,
-  else as a bare string), each failure one line;
-- :func:`apply`: ``{section: {key: value}}`` onto a config (unknown names refused with a
-  did-you-mean);
-- :func:`load`: base <- TOML file <- every ``--set`` in order, *then* the field checks and the
-  config's own cross-field rules, once; so the order of ``--set`` flags never matters;
-- :func:`to_dict`, :func:`to_toml`, :func:`reference` and :func:`markdown` for the saved form,
+- :func:`read_toml`, :func:`parse_override` (``section.key=value``, the value read as TOML, else
+  as a bare string) and :func:`apply` (unknown names refused with a did-you-mean), each failure
+  one line; :func:`load`: base <- TOML file <- every ``--set`` in order, *then* the field checks
+  and the config's own cross-field rules, once, so the order of ``--set`` flags never matters;
+- :func:`to_dict`, :func:`to_toml`, :func:`reference`, :func:`markdown`: the saved form,
   ``synth config show`` and the docs tables.
 
-Bounds are inclusive (``range=(low, high)``, ``None`` = unbounded) unless given as ``gt`` /
+Bounds are inclusive (``Bounds(low, high)``, ``None`` = unbounded) unless given as ``gt`` /
 ``lt`` (exclusive); on a tuple they apply to every number. A numeric pair is a ``[low, high]``
-interval (low <= high) unless declared ``ordered=False``.
-"""
+interval (low <= high) unless marked ``Unordered()``.
+'''
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import difflib
+import inspect
 import math
+import textwrap
 import tomllib
 import types
 import typing
@@ -42,25 +53,74 @@ class ConfigError(SynthError, ValueError):
     """A refused config value: one line for the CLI (exit 2), a ValueError for library callers."""
 
 
-def setting(default, doc: str, range=None, *, gt=None, lt=None, choices=None,  # noqa: A002 - metadata key
-            ordered: bool = True) -> Any:
-    """A documented dataclass field.
+@dataclasses.dataclass(frozen=True, eq=False)  # typing caches Annotated[] by equal args: 0 == 0.0
+class Bounds:
+    """Bounds of a number (of each number of a tuple): inclusive low / high, or exclusive gt / lt."""
 
-    ``range=(low, high)``: inclusive bounds (either may be None); ``gt`` / ``lt``: exclusive
-    bounds instead. ``choices``: the allowed values (of every element, for a tuple).
-    ``ordered=False``: a numeric pair is not an interval (e.g. a resolution)."""
-    lo, hi = range if range is not None else (None, None)
-    if (gt is not None and lo is not None) or (lt is not None and hi is not None):
-        raise TypeError("give each bound once: range=(low, high) or gt=/lt=")
-    md: dict[str, Any] = {"doc": doc, "ordered": ordered}
-    if any(b is not None for b in (lo, hi, gt, lt)):
-        md["range"] = (gt if gt is not None else lo, lt if lt is not None else hi)
-        md["open"] = (gt is not None, lt is not None)
-    if choices is not None:
-        md["choices"] = tuple(choices)
-    if isinstance(default, (list, tuple)):
-        return dataclasses.field(default_factory=lambda d=tuple(default): d, metadata=md)
-    return dataclasses.field(default=default, metadata=md)
+    low: float | None = None
+    high: float | None = None
+    gt: float | None = dataclasses.field(default=None, kw_only=True)
+    lt: float | None = dataclasses.field(default=None, kw_only=True)
+
+    def __post_init__(self) -> None:
+        if (self.gt is not None and self.low is not None) or (self.lt is not None and self.high is not None):
+            raise TypeError("give each bound once: low/high or gt=/lt=")
+
+
+class Choices:
+    """The allowed values of a field (of every element, for a tuple): ``Choices("vgg", "alex")``."""
+
+    def __init__(self, *values: Any) -> None:
+        self.values = values
+
+
+class Unordered:
+    """A numeric pair that is not a ``[low, high]`` interval (e.g. a resolution)."""
+
+
+def _metadata(doc: str, extras: tuple, where: str) -> dict[str, Any]:
+    """The field metadata the checks and tables read: doc, ordered, range/open, choices."""
+    md: dict[str, Any] = {"doc": doc, "ordered": not any(isinstance(x, Unordered) for x in extras)}
+    for x in extras:
+        if isinstance(x, Bounds) and (x.low, x.high, x.gt, x.lt) != (None,) * 4:
+            md["range"] = (x.gt if x.gt is not None else x.low, x.lt if x.lt is not None else x.high)
+            md["open"] = (x.gt is not None, x.lt is not None)
+        elif isinstance(x, Choices):
+            md["choices"] = x.values
+        elif not isinstance(x, (Bounds, Unordered)):
+            raise TypeError(f"{where}: unknown field metadata {x!r} (use Bounds, Choices or Unordered)")
+    return md
+
+
+def _attribute_docs(cls: type) -> dict[str, str]:
+    """Field name -> the string right under its declaration in the class source, white space folded."""
+    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
+    body = next(n for n in ast.walk(tree) if isinstance(n, ast.ClassDef)).body
+    return {a.target.id: " ".join(b.value.value.split()) for a, b in zip(body, body[1:])
+            if isinstance(a, ast.AnnAssign) and isinstance(a.target, ast.Name)
+            and isinstance(b, ast.Expr) and isinstance(b.value, ast.Constant) and isinstance(b.value.value, str)}
+
+
+def section(cls: type) -> type:
+    """``cls`` as a frozen dataclass, each field's doc (read from the class source), bounds and choices
+    (``Annotated`` metadata, outermost in the hint, so the plain hint is the field's type) in its
+    metadata. A field without a doc, a nested ``Annotated`` or a default out of bounds fails here."""
+    docs, hints = _attribute_docs(cls), typing.get_type_hints(cls, include_extras=True)
+    for name in cls.__dict__.get("__annotations__", {}):
+        where, hint = f"{cls.__qualname__}.{name}", hints[name]
+        if name not in docs:
+            raise TypeError(f"{where} has no doc: write a one-line docstring right under it")
+        annotated = typing.get_origin(hint) is typing.Annotated
+        if "Annotated[" in repr(typing.get_args(hint)[0] if annotated else hint):
+            raise TypeError(f"{where}: put Annotated[...] outermost in the type")
+        md = _metadata(docs[name], hint.__metadata__ if annotated else (), where)
+        setattr(cls, name, dataclasses.field(default=cls.__dict__.get(name, dataclasses.MISSING), metadata=md))
+    cls = dataclasses.dataclass(frozen=True)(cls)
+    plain = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        if f.default is not dataclasses.MISSING:
+            coerce(f.default, plain[f.name], f"{cls.__qualname__}.{f.name}", dict(f.metadata), "its default")
+    return cls
 
 
 def sections(config_cls: type) -> dict[str, type]:
@@ -271,9 +331,7 @@ def load(base: Any, path: str | Path | None = None, overrides=(),
 
 
 def _plain(v):
-    if isinstance(v, (list, tuple)):
-        return [_plain(x) for x in v]
-    return v
+    return [_plain(x) for x in v] if isinstance(v, (list, tuple)) else v
 
 
 def to_dict(cfg: Any, drop_none: bool = True) -> dict[str, dict[str, Any]]:
@@ -297,10 +355,8 @@ def _scalar_toml(v: Any) -> str:
 def to_toml(cfg: Any) -> str:
     """TOML text of a config, one line per key (unset values omitted); :func:`read_toml` and
     :func:`apply` read it back to the same config."""
-    blocks = []
-    for sec, values in to_dict(cfg).items():
-        blocks.append(f"[{sec}]\n" + "".join(f"{k} = {_scalar_toml(v)}\n" for k, v in values.items()))
-    return "\n".join(blocks)
+    return "\n".join(f"[{sec}]\n" + "".join(f"{k} = {_scalar_toml(v)}\n" for k, v in values.items())
+                     for sec, values in to_dict(cfg).items())
 
 
 def meaning(md) -> str:

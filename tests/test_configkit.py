@@ -8,30 +8,42 @@ import math
 import tomllib
 import typing
 from dataclasses import dataclass, field
+from typing import Annotated
 
 import pytest
 
 from synth import configkit as ck
-from synth.configkit import ConfigError, setting
+from synth.configkit import Bounds, Choices, ConfigError, Unordered, section
 from synth.errors import SynthError
 
 
-@dataclass(frozen=True)
+@section
 class Shape:
-    count: int = setting(3, "a count", (1, None))
-    scale: float = setting(0.5, "a scale", gt=0.0, lt=1.0)
-    low_high: tuple[float, float] = setting((0.0, 1.0), "an interval", (-10.0, 10.0))
-    size: tuple[int, int] = setting((4, 2), "a size, not an interval", (1, 64), ordered=False)
-    names: tuple[str, ...] = setting(("a",), "names from a list", choices=("a", "b", "c"))
-    mode: str = setting("fast", "a mode", choices=("fast", "slow"))
-    flag: bool = setting(False, "a flag")
-    limit: float | None = setting(None, "unset or a number", (0.0, 100.0))
+    count: Annotated[int, Bounds(1)] = 3
+    """a count"""
+    scale: Annotated[float, Bounds(gt=0.0, lt=1.0)] = 0.5
+    """a scale"""
+    low_high: Annotated[tuple[float, float], Bounds(-10.0, 10.0)] = (0.0, 1.0)
+    """an interval"""
+    size: Annotated[tuple[int, int], Bounds(1, 64), Unordered()] = (4, 2)
+    """a size, not an interval"""
+    names: Annotated[tuple[str, ...], Choices("a", "b", "c")] = ("a",)
+    """names from a list"""
+    mode: Annotated[str, Choices("fast", "slow")] = "fast"
+    """a mode"""
+    flag: bool = False
+    """a flag"""
+    limit: Annotated[float | None, Bounds(0.0, 100.0)] = None
+    """unset or a number"""
 
 
-@dataclass(frozen=True)
+@section
 class Limits:
-    low: float = setting(1.0, "lower limit", (0.0, None))
-    high: float = setting(2.0, "upper limit, above low", (0.0, None))
+    low: Annotated[float, Bounds(0.0)] = 1.0
+    """lower limit"""
+    high: Annotated[float, Bounds(0.0)] = 2.0
+    """upper limit,
+    above low"""  # a doc may wrap: white space is folded
 
 
 @dataclass(frozen=True)
@@ -107,9 +119,70 @@ def test_coercion_refuses_with_one_line(key, value, message):
     assert isinstance(e.value, SynthError) and isinstance(e.value, ValueError)
 
 
-def test_setting_refuses_a_bound_given_twice():
-    with pytest.raises(TypeError):
-        setting(1.0, "doc", (0.0, 1.0), gt=0.0)
+def test_bounds_refuse_a_bound_given_twice():
+    with pytest.raises(TypeError, match="give each bound once"):
+        Bounds(0.0, 1.0, gt=0.0)
+    with pytest.raises(TypeError, match="give each bound once"):
+        Bounds(None, 1.0, lt=0.5)
+
+
+def test_section_fields_carry_doc_bounds_and_choices():
+    fields = {f.name: f for f in dataclasses.fields(Shape)}
+    assert dict(fields["count"].metadata) == {"doc": "a count", "ordered": True, "range": (1, None),
+                                              "open": (False, False)}
+    assert fields["scale"].metadata["range"] == (0.0, 1.0) and fields["scale"].metadata["open"] == (True, True)
+    assert fields["size"].metadata["ordered"] is False and fields["names"].metadata["choices"] == ("a", "b", "c")
+    assert "range" not in fields["flag"].metadata and "choices" not in fields["flag"].metadata
+    assert Limits.__dataclass_fields__["high"].metadata["doc"] == "upper limit, above low"
+    assert HINTS["limit"] == float | None and HINTS["size"] == tuple[int, int]  # Annotated stripped
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        Shape().count = 4  # type: ignore[misc]
+
+
+def test_bounds_keep_the_numbers_as_written():
+    # Limits above wrote Bounds(0.0) in Annotated[float, ...]; Bounds(0) is a different bound in
+    # the tables ("range >= 0"), even though typing caches Annotated[...] by equal arguments
+    @section
+    class Written:
+        x: Annotated[float, Bounds(0)] = 1.0
+        """at least 0"""
+
+    assert Limits.__dataclass_fields__["low"].metadata["range"] == (0.0, None)
+    (low, _), = [Written.__dataclass_fields__["x"].metadata["range"]]
+    assert type(low) is int and ck.meaning(Written.__dataclass_fields__["x"].metadata) == "at least 0 [range >= 0]"
+
+
+def test_section_refuses_a_field_without_doc():
+    with pytest.raises(TypeError, match=r"Undocumented.second has no doc"):
+        @section
+        class Undocumented:
+            first: int = 1
+            """documented"""
+            second: int = 2
+
+            def method(self):
+                """not a field's doc"""
+
+
+def test_section_refuses_misplaced_annotated_and_unknown_metadata():
+    with pytest.raises(TypeError, match="outermost"):
+        @section
+        class Nested:
+            x: Annotated[float, Bounds(0.0)] | None = None
+            """bounds inside a union"""
+    with pytest.raises(TypeError, match="unknown field metadata"):
+        @section
+        class Odd:
+            x: Annotated[int, "positive"] = 1
+            """a string is not metadata"""
+
+
+def test_section_refuses_a_default_outside_its_bounds():
+    with pytest.raises(ConfigError, match=r"Bad.x = 0 must be >= 1 \(its default\)"):
+        @section
+        class Bad:
+            x: Annotated[int, Bounds(1)] = 0
+            """at least one"""
 
 
 @pytest.mark.parametrize("data, message", [

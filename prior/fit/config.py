@@ -16,82 +16,101 @@ Presets: ``paper`` (Cafca's supplementary "Inference Details": 1,500 inversion s
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
 
-from prior.config import NONNEG, SEED, SIZE
+from prior.config import Count, Decay, NonNegative, Positive, Seed, Size
+from prior.train.config import TrainConfig
 from synth import configkit
-from synth.configkit import ConfigError, setting
+from synth.configkit import Bounds, Choices, ConfigError, section
 from synth.errors import SynthError
 
-POSITIVE = dict(gt=0.0)
-DECAY = dict(range=(0.0, None), lt=1.0)
 
-
-@dataclass(frozen=True)
+@section
 class LandmarkConfig:
     """Head-model and camera fitting to 2D landmarks (``prior/fit/landmarks_fit.py``)."""
 
-    per_image_expression: bool = setting(True, "one expression code (and jaw/eye pose) per image, held near "
-                                         "their mean (paper: in the wild); false = one shared code")
-    sigma_px: float = setting(1.0, "sigma (pixels) of landmarks read from a synth frame's JSON (--landmarks json)",
-                              **POSITIVE)
-    noise_px: float = setting(0.0, "Gaussian noise (pixels per axis) added to JSON landmarks, seeded by the "
-                              "frame's indices (experiments)", NONNEG)
-    fov_init_deg: float = setting(50.0, "initial horizontal field of view (degrees) of the shared focal length, "
-                                  "which is fitted", gt=0.0, lt=180.0)
-    focal_px: float = setting(0.0, "known focal length in pixels (e.g. from EXIF) instead of fitting one; "
-                              "0 = fit it", NONNEG)
+    per_image_expression: bool = True
+    """one expression code (and jaw/eye pose) per image, held near their mean (paper: in the wild); false = one
+    shared code"""
+    sigma_px: Positive = 1.0
+    """sigma (pixels) of landmarks read from a synth frame's JSON (--landmarks json)"""
+    noise_px: NonNegative = 0.0
+    """Gaussian noise (pixels per axis) added to JSON landmarks, seeded by the frame's indices (experiments)"""
+    fov_init_deg: Annotated[float, Bounds(gt=0.0, lt=180.0)] = 50.0
+    """initial horizontal field of view (degrees) of the shared focal length, which is fitted"""
+    focal_px: NonNegative = 0.0
+    """known focal length in pixels (e.g. from EXIF) instead of fitting one; 0 = fit it"""
 
 
-@dataclass(frozen=True)
+@section
 class InversionConfig:
     """Warm-up: only the latent ``w`` moves (codes, cameras, network frozen), on the inputs downscaled
     to the prior's resolution, L1 + lpips_weight * LPIPS on random square patches (paper Eq. 6)."""
 
-    steps: int = setting(1500, "optimisation steps of w", NONNEG)
-    patch_size: int = setting(32, "side of the random square patches (pixels of the downscaled images)", (8, None))
-    patches: int = setting(4, "patches per step (paper: 4 x 32 x 32 = 4,096 rays)", SIZE)
-    lpips_weight: float = setting(0.1, "weight of the LPIPS term; 0 = L1 only", NONNEG)
-    lpips_net: str = setting("vgg", "LPIPS backbone", choices=("vgg", "alex"))
-    lr_init: float = setting(1e-2, "learning rate of w, log-linear from lr_init to lr_final over the steps",
-                             **POSITIVE)
-    lr_final: float = setting(1e-3, "learning rate of w at the last step (at most lr_init)", **POSITIVE)
-    resolution_factor: float = setting(1.0, "downscale the inputs so that their longer side is this many times "
-                                       "the prior's (1 = the prior's resolution)", **POSITIVE)
+    steps: Count = 1500
+    """optimisation steps of w"""
+    patch_size: Annotated[int, Bounds(8)] = 32
+    """side of the random square patches (pixels of the downscaled images)"""
+    patches: Size = 4
+    """patches per step (paper: 4 x 32 x 32 = 4,096 rays)"""
+    lpips_weight: NonNegative = 0.1
+    """weight of the LPIPS term; 0 = L1 only"""
+    lpips_net: Annotated[str, Choices("vgg", "alex")] = "vgg"
+    """LPIPS backbone"""
+    lr_init: Positive = 1e-2
+    """learning rate of w, log-linear from lr_init to lr_final over the steps"""
+    lr_final: Positive = 1e-3
+    """learning rate of w at the last step (at most lr_init)"""
+    resolution_factor: Positive = 1.0
+    """downscale the inputs so that their longer side is this many times the prior's (1 = the prior's resolution)"""
 
 
-@dataclass(frozen=True)
+@section
 class FinetuneConfig:
     """Model fitting: every network parameter and w (paper Eq. 7), random rays of all input views at
-    their own resolution, targets multiplied by the foreground masks."""
+    their own resolution, targets multiplied by the foreground masks. The optimiser's defaults are
+    the prior training's (supplementary: "employs the Adam optimizer with the same parameters")."""
 
-    steps: int = setting(50_000, "optimisation steps of the network and w", NONNEG)
-    rays_per_step: int = setting(4096, "random rays per step, drawn uniformly over the pixels of all input views",
-                                 SIZE)
-    lr_init: float = setting(2e-3, "learning rate after the warm-up; log-linear decay to lr_final", **POSITIVE)
-    lr_final: float = setting(2e-5, "learning rate at the last step (at most lr_init)", **POSITIVE)
-    warmup_steps: int = setting(100, "steps of linear warm-up from lr_init * warmup_start", NONNEG)
-    warmup_start: float = setting(0.01, "learning-rate factor at step 0 of the warm-up", (None, 1.0), gt=0.0)
-    adam_beta1: float = setting(0.9, "Adam's first moment decay (the prior's)", **DECAY)
-    adam_beta2: float = setting(0.999, "Adam's second moment decay (the prior's)", **DECAY)
-    adam_eps: float = setting(1e-8, "Adam's epsilon", **POSITIVE)
-    grad_clip: float = setting(1e-3, "gradient-norm clipping per group (proposal MLP, NeRF MLP, w); 0 = off "
-                               "(paper 1e-3)", NONNEG)
-    proposal_weight: float = setting(1.0, "weight of the proposal loss (the paper gives no fitting weights)",
-                                     NONNEG)
-    normal_weight: float = setting(3e-4, "weight of the normal-consistency loss", NONNEG)
-    view_weight: float = setting(1e-4, "weight of the L2 penalty on the view-dependent colour branch", NONNEG)
-    distortion_weight: float = setting(1e-2, "weight of the distortion loss", NONNEG)
-    bf16: bool = setting(False, "bf16 autocast for the MLPs (compositing and losses stay float32)")
+    steps: Count = 50_000
+    """optimisation steps of the network and w"""
+    rays_per_step: Size = 4096
+    """random rays per step, drawn uniformly over the pixels of all input views"""
+    lr_init: Positive = TrainConfig.lr_init
+    """learning rate after the warm-up; log-linear decay to lr_final"""
+    lr_final: Positive = TrainConfig.lr_final
+    """learning rate at the last step (at most lr_init)"""
+    warmup_steps: Count = 100
+    """steps of linear warm-up from lr_init * warmup_start"""
+    warmup_start: Annotated[float, Bounds(None, 1.0, gt=0.0)] = TrainConfig.warmup_start
+    """learning-rate factor at step 0 of the warm-up"""
+    adam_beta1: Decay = TrainConfig.adam_beta1
+    """Adam's first moment decay (the prior's)"""
+    adam_beta2: Decay = TrainConfig.adam_beta2
+    """Adam's second moment decay (the prior's)"""
+    adam_eps: Positive = TrainConfig.adam_eps
+    """Adam's epsilon"""
+    grad_clip: NonNegative = TrainConfig.grad_clip
+    """gradient-norm clipping per group (proposal MLP, NeRF MLP, w); 0 = off (paper 1e-3)"""
+    proposal_weight: NonNegative = 1.0
+    """weight of the proposal loss (the paper gives no fitting weights)"""
+    normal_weight: NonNegative = 3e-4
+    """weight of the normal-consistency loss"""
+    view_weight: NonNegative = 1e-4
+    """weight of the L2 penalty on the view-dependent colour branch"""
+    distortion_weight: NonNegative = 1e-2
+    """weight of the distortion loss"""
+    bf16: bool = False
+    """bf16 autocast for the MLPs (compositing and losses stay float32)"""
 
 
-@dataclass(frozen=True)
+@section
 class GeneralConfig:
     """What every stage shares."""
 
-    seed: int = setting(0, "seed of every random draw of the fit (patches, rays, stratified jitter, landmark "
-                        "noise)", SEED)
-    render_chunk: int = setting(4096, "rays per chunk when rendering whole images", SIZE)
+    seed: Seed = 0
+    """seed of every random draw of the fit (patches, rays, stratified jitter, landmark noise)"""
+    render_chunk: Size = 4096
+    """rays per chunk when rendering whole images"""
 
 
 @dataclass(frozen=True)

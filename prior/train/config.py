@@ -9,82 +9,96 @@ validated, and saved with the run (``RUN/config.toml``) and in every checkpoint.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Annotated, Any
 
-from prior.config import NONNEG, SEED, SIZE, ModelConfig, SamplingConfig
+from prior.config import Count, Decay, ModelConfig, NonNegative, Positive, SamplingConfig, Seed, Size
 from prior.config import preset as model_preset
 from synth import configkit
-from synth.configkit import ConfigError, setting
+from synth.configkit import Bounds, Choices, ConfigError, section
 from synth.errors import SynthError
 
 
-@dataclass(frozen=True)
+@section
 class DataConfig:
     """Frames -> rays, codes and bounds (``prior/data``)."""
 
-    holdout_views: int = setting(0, "views per (identity, expression) never trained on (the highest view "
-                                 "indices), kept for evaluation", NONNEG)
-    joints: tuple[str, ...] = setting(("jaw", "eye_l", "eye_r"), "joints whose rotations (axis-angle, 3 values "
-                                      "each) join the expression code psi, in this order, each once")
-    bounds_margin: float = setting(0.05, "each identity's bounding sphere is the tight sphere of its "
-                                   "foreground points, its radius scaled by 1 + bounds_margin", NONNEG)
-    pixel_dtype: str = setting("float16", "dtype of the decoded pixels kept in memory (float16 is the EXR's "
-                               "own precision)", choices=("float16", "float32"))
-    fit_scene: bool = setting(True, "set model.scene_center and model.scene_radius to a sphere holding every "
-                              "identity's bounding sphere")
+    holdout_views: Count = 0
+    """views per (identity, expression) never trained on (the highest view indices), kept for evaluation"""
+    joints: tuple[str, ...] = ("jaw", "eye_l", "eye_r")
+    """joints whose rotations (axis-angle, 3 values each) join the expression code psi, in this order, each once"""
+    bounds_margin: NonNegative = 0.05
+    """each identity's bounding sphere is the tight sphere of its foreground points, its radius scaled by 1 +
+    bounds_margin"""
+    pixel_dtype: Annotated[str, Choices("float16", "float32")] = "float16"
+    """dtype of the decoded pixels kept in memory (float16 is the EXR's own precision)"""
+    fit_scene: bool = True
+    """set model.scene_center and model.scene_radius to a sphere holding every identity's bounding sphere"""
 
 
-@dataclass(frozen=True)
+@section
 class TrainConfig:
     """The optimisation (``prior/train``)."""
 
-    steps: int = setting(1_000_000, "total optimisation steps (the learning-rate schedule spans them)", SIZE)
-    seed: int = setting(0, "run seed: every random draw (batches, stratified jitter) derives from "
-                        "(seed, step, rank)", SEED)
-    identities_per_batch: int = setting(256, "identities per step (summed over ranks and micro-batches); a "
-                                        "batch has identities x views x pixels rays", SIZE)
-    views_per_identity: int = setting(8, "frames drawn per identity and step (any expression)", SIZE)
-    pixels_per_view: int = setting(64, "pixels (rays) drawn per frame", SIZE)
-    foreground_fraction: float = setting(0.0, "share of each view's pixels drawn from its foreground "
-                                         "(alpha > 0); 0 = uniform over the image", (0.0, 1.0))
-    grad_accum: int = setting(1, "micro-batches per step, gradients summed before the update; it must divide "
-                              "identities_per_batch", SIZE)
-    lr_init: float = setting(2e-3, "learning rate after the warm-up; it decays log-linearly to lr_final at "
-                             "the last step", gt=0.0)
-    lr_final: float = setting(2e-5, "learning rate at the last step (at most lr_init)", gt=0.0)
-    warmup_steps: int = setting(2500, "steps of linear warm-up from lr_init * warmup_start to lr_init",
-                                NONNEG)
-    warmup_start: float = setting(0.01, "learning-rate factor at step 0 of the warm-up", (None, 1.0), gt=0.0)
-    adam_beta1: float = setting(0.9, "Adam's first moment decay", (0.0, None), lt=1.0)
-    adam_beta2: float = setting(0.999, "Adam's second moment decay", (0.0, None), lt=1.0)
-    adam_eps: float = setting(1e-8, "Adam's epsilon", gt=0.0)
-    grad_clip: float = setting(1e-3, "gradient-norm clipping, separately per parameter group (proposal MLP, "
-                               "NeRF MLP, codebook); 0 = off", NONNEG)
-    proposal_weight: float = setting(1.0, "weight of the proposal loss (Cafca: L1 + lambda_prop * L_prop)",
-                                     NONNEG)
-    background: tuple[float, float, float] = setting(
-        (0.5, 0.5, 0.5), "stage 1 (\"with background\"): targets are composited over this constant colour "
-        "(linear RGB) and the model renders without a background term, so empty space inside the bounds must "
-        "get density")
-    background_steps: int = setting(50_000, "steps of stage 1; afterwards stage 2 (\"without background\"): "
-                                    "targets over black. 0 = stage 2 only", NONNEG)
-    collapse_acc: float = setting(1e-3, "stage 2 stops as collapsed when the mean opacity over foreground "
-                                  "pixels stays below this for collapse_patience logged steps", NONNEG)
-    collapse_patience: int = setting(5, "consecutive logged steps below collapse_acc that count as a "
-                                     "collapse", SIZE)
-    log_every: int = setting(100, "steps between log lines and metrics.jsonl entries", SIZE)
-    checkpoint_every: int = setting(5000, "steps between checkpoints", SIZE)
-    preview_every: int = setting(10_000, "steps between TensorBoard preview images (one training view per "
-                                 "identity shown); 0 = off", NONNEG)
-    preview_size: int = setting(64, "side of the preview images in pixels", SIZE)
-    keep_checkpoints: int = setting(3, "checkpoints kept in RUN/checkpoints (the newest ones)", SIZE)
-    bf16: bool = setting(False, "bf16 autocast for the MLPs (CUDA, or a CPU with native bf16: 1.7x here); "
-                         "compositing and losses stay float32")
-    compile: bool = setting(False, "torch.compile the model (first steps are slow while it compiles)")
-    render_chunk: int = setting(4096, "rays per chunk when rendering whole images (previews, "
-                                "`synth prior render`)", SIZE)
+    steps: Size = 1_000_000
+    """total optimisation steps (the learning-rate schedule spans them)"""
+    seed: Seed = 0
+    """run seed: every random draw (batches, stratified jitter) derives from (seed, step, rank)"""
+    identities_per_batch: Size = 256
+    """identities per step (summed over ranks and micro-batches); a batch has identities x views x pixels rays"""
+    views_per_identity: Size = 8
+    """frames drawn per identity and step (any expression)"""
+    pixels_per_view: Size = 64
+    """pixels (rays) drawn per frame"""
+    foreground_fraction: Annotated[float, Bounds(0.0, 1.0)] = 0.0
+    """share of each view's pixels drawn from its foreground (alpha > 0); 0 = uniform over the image"""
+    grad_accum: Size = 1
+    """micro-batches per step, gradients summed before the update; it must divide identities_per_batch"""
+    lr_init: Positive = 2e-3
+    """learning rate after the warm-up; it decays log-linearly to lr_final at the last step"""
+    lr_final: Positive = 2e-5
+    """learning rate at the last step (at most lr_init)"""
+    warmup_steps: Count = 2500
+    """steps of linear warm-up from lr_init * warmup_start to lr_init"""
+    warmup_start: Annotated[float, Bounds(None, 1.0, gt=0.0)] = 0.01
+    """learning-rate factor at step 0 of the warm-up"""
+    adam_beta1: Decay = 0.9
+    """Adam's first moment decay"""
+    adam_beta2: Decay = 0.999
+    """Adam's second moment decay"""
+    adam_eps: Positive = 1e-8
+    """Adam's epsilon"""
+    grad_clip: NonNegative = 1e-3
+    """gradient-norm clipping, separately per parameter group (proposal MLP, NeRF MLP, codebook); 0 = off"""
+    proposal_weight: NonNegative = 1.0
+    """weight of the proposal loss (Cafca: L1 + lambda_prop * L_prop)"""
+    background: tuple[float, float, float] = (0.5, 0.5, 0.5)
+    """stage 1 ("with background"): targets are composited over this constant colour (linear RGB) and the model
+    renders without a background term, so empty space inside the bounds must get density"""
+    background_steps: Count = 50_000
+    """steps of stage 1; afterwards stage 2 ("without background"): targets over black. 0 = stage 2 only"""
+    collapse_acc: NonNegative = 1e-3
+    """stage 2 stops as collapsed when the mean opacity over foreground pixels stays below this for
+    collapse_patience logged steps"""
+    collapse_patience: Size = 5
+    """consecutive logged steps below collapse_acc that count as a collapse"""
+    log_every: Size = 100
+    """steps between log lines and metrics.jsonl entries"""
+    checkpoint_every: Size = 5000
+    """steps between checkpoints"""
+    preview_every: Count = 10_000
+    """steps between TensorBoard preview images (one training view per identity shown); 0 = off"""
+    preview_size: Size = 64
+    """side of the preview images in pixels"""
+    keep_checkpoints: Size = 3
+    """checkpoints kept in RUN/checkpoints (the newest ones)"""
+    bf16: bool = False
+    """bf16 autocast for the MLPs (CUDA, or a CPU with native bf16: 1.7x here); compositing and losses stay
+    float32"""
+    compile: bool = False
+    """torch.compile the model (first steps are slow while it compiles)"""
+    render_chunk: Size = 4096
+    """rays per chunk when rendering whole images (previews, `synth prior render`)"""
 
 
 @dataclass(frozen=True)
