@@ -1,8 +1,8 @@
 '''Typed dataclass configs with documented fields, presets, TOML files and ``--set`` overrides.
 
-A *config* is a frozen dataclass whose fields are *sections*. A section is a class decorated
-with :func:`section`; a field is a plain annotated default, its one-line doc an attribute
-docstring right under it, its bounds and choices ``Annotated`` metadata (:class:`Bounds`,
+A *config* is a frozen dataclass whose fields are *sections*; a section is a class decorated
+with :func:`section`, each field a plain annotated default with its one-line doc right under it
+(an attribute docstring) and its bounds and choices as ``Annotated`` metadata (:class:`Bounds`,
 :class:`Choices`, :class:`Unordered`), often through an alias::
 
     Size = Annotated[int, Bounds(1)]
@@ -12,21 +12,13 @@ docstring right under it, its bounds and choices ``Annotated`` metadata (:class:
         steps: Size = 1_000_000
         """total optimisation steps (the learning-rate schedule spans them)"""
 
-This module is the one home of the machinery of the renderer's config (:mod:`synth.config`)
-and the prior's (:mod:`prior.config`, :mod:`prior.train.config`, :mod:`prior.fit.config`):
-
-- :func:`coerce`: a value checked against a type hint (``int``, ``float``, ``bool``, ``str``,
-  ``X | None``, fixed tuples and ``tuple[X, ...]``) and the field's bounds and choices;
-- :func:`read_toml`, :func:`parse_override` (``section.key=value``, the value read as TOML, else
-  as a bare string) and :func:`apply` (unknown names refused with a did-you-mean), each failure
-  one line; :func:`load`: base <- TOML file <- every ``--set`` in order, *then* the field checks
-  and the config's own cross-field rules, once, so the order of ``--set`` flags never matters;
-- :func:`to_dict`, :func:`to_toml`, :func:`reference`, :func:`markdown`: the saved form,
-  ``synth config show`` and the docs tables.
-
-Bounds are inclusive (``Bounds(low, high)``, ``None`` = unbounded) unless given as ``gt`` /
-``lt`` (exclusive); on a tuple they apply to every number. A numeric pair is a ``[low, high]``
-interval (low <= high) unless marked ``Unordered()``.
+Bounds are inclusive (``Bounds(low, high)``, None = unbounded) unless given as ``gt`` / ``lt``
+(exclusive), on every number of a tuple; a numeric pair is an interval unless ``Unordered()``.
+This is the one home of the machinery of the renderer's config (:mod:`synth.config`) and the prior's
+(:mod:`prior.config`, :mod:`prior.train.config`, :mod:`prior.fit.config`): :func:`coerce`,
+:func:`read_toml`, :func:`parse_override`, :func:`apply` (each failure one line), :func:`load`
+(base <- TOML file <- every ``--set`` in order, *then* every check once, so their order never
+matters), :func:`to_dict`, :func:`to_toml`, :func:`reference` and :func:`markdown`.
 '''
 
 from __future__ import annotations
@@ -34,9 +26,9 @@ from __future__ import annotations
 import ast
 import dataclasses
 import difflib
+import functools
 import inspect
 import math
-import textwrap
 import tomllib
 import types
 import typing
@@ -92,19 +84,35 @@ def _metadata(doc: str, extras: tuple, where: str) -> dict[str, Any]:
     return md
 
 
+@functools.cache
+def _class_bodies(path: str) -> dict[str, list[ast.stmt]]:
+    """Qualified name -> body of every class in a source file (each file parsed once)."""
+    bodies: dict[str, list[ast.stmt]] = {}
+
+    def walk(node: ast.AST, prefix: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, ast.ClassDef):
+                bodies.setdefault(prefix + child.name, child.body)
+                walk(child, f"{prefix}{child.name}.")
+            else:
+                local = isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef))
+                walk(child, f"{prefix}{child.name}.<locals>." if local else prefix)
+
+    walk(ast.parse(Path(path).read_bytes()), "")
+    return bodies
+
+
 def _attribute_docs(cls: type) -> dict[str, str]:
     """Field name -> the string right under its declaration in the class source, white space folded."""
-    tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
-    body = next(n for n in ast.walk(tree) if isinstance(n, ast.ClassDef)).body
+    body = _class_bodies(inspect.getsourcefile(cls))[cls.__qualname__]
     return {a.target.id: " ".join(b.value.value.split()) for a, b in zip(body, body[1:])
             if isinstance(a, ast.AnnAssign) and isinstance(a.target, ast.Name)
             and isinstance(b, ast.Expr) and isinstance(b.value, ast.Constant) and isinstance(b.value.value, str)}
 
 
 def section(cls: type) -> type:
-    """``cls`` as a frozen dataclass, each field's doc (read from the class source), bounds and choices
-    (``Annotated`` metadata, outermost in the hint, so the plain hint is the field's type) in its
-    metadata. A field without a doc, a nested ``Annotated`` or a default out of bounds fails here."""
+    """``cls`` as a frozen dataclass, each field's doc, bounds and choices in its metadata. ``Annotated``
+    goes outermost; a field without a doc or a default, or a default out of bounds, fails here."""
     docs, hints = _attribute_docs(cls), typing.get_type_hints(cls, include_extras=True)
     for name in cls.__dict__.get("__annotations__", {}):
         where, hint = f"{cls.__qualname__}.{name}", hints[name]
@@ -116,10 +124,7 @@ def section(cls: type) -> type:
         md = _metadata(docs[name], hint.__metadata__ if annotated else (), where)
         setattr(cls, name, dataclasses.field(default=cls.__dict__.get(name, dataclasses.MISSING), metadata=md))
     cls = dataclasses.dataclass(frozen=True)(cls)
-    plain = typing.get_type_hints(cls)
-    for f in dataclasses.fields(cls):
-        if f.default is not dataclasses.MISSING:
-            coerce(f.default, plain[f.name], f"{cls.__qualname__}.{f.name}", dict(f.metadata), "its default")
+    check_section(cls(), cls.__qualname__, "its default")  # a section is built from its defaults alone
     return cls
 
 
@@ -369,10 +374,6 @@ def meaning(md) -> str:
     return doc
 
 
-def _shown(v) -> str:
-    return "unset" if v is None else repr(_plain(v))
-
-
 def reference(columns: dict[str, Any]) -> list[tuple[str, ...]]:
     """(key, type, one value per column, meaning) for every field; ``columns`` maps a column
     title to a config (all of one class), e.g. ``{"default": Config()}``."""
@@ -381,19 +382,18 @@ def reference(columns: dict[str, Any]) -> list[tuple[str, ...]]:
     for sec, cls in sections(type(cfgs[0])).items():
         hints = typing.get_type_hints(cls)
         for f in dataclasses.fields(cls):
-            values = tuple(_shown(getattr(getattr(c, sec), f.name)) for c in cfgs)
-            rows.append((f"{sec}.{f.name}", type_name(hints[f.name]), *values, meaning(f.metadata)))
+            values = (getattr(getattr(c, sec), f.name) for c in cfgs)
+            shown = ("unset" if v is None else repr(_plain(v)) for v in values)
+            rows.append((f"{sec}.{f.name}", type_name(hints[f.name]), *shown, meaning(f.metadata)))
     return rows
 
 
 def markdown(columns: dict[str, Any]) -> str:
     """The markdown table of :func:`reference` (``|`` in a cell escaped)."""
-    def cell(s: str) -> str:
-        return s.replace("|", "\\|")
-
+    escape = str.maketrans({"|": "\\|"})
     head = ["key", "type", *columns, "meaning"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for key, tp, *values, doc in reference(columns):
-        shown = " | ".join(f"`{cell(v)}`" for v in values)
-        lines.append(f"| `{key}` | {cell(tp)} | {shown} | {cell(doc)} |")
+        shown = " | ".join(f"`{v.translate(escape)}`" for v in values)
+        lines.append(f"| `{key}` | {tp.translate(escape)} | {shown} | {doc.translate(escape)} |")
     return "\n".join(lines) + "\n"

@@ -177,6 +177,14 @@ def test_section_refuses_misplaced_annotated_and_unknown_metadata():
             """a string is not metadata"""
 
 
+def test_section_refuses_a_field_without_default():
+    with pytest.raises(TypeError, match="missing 1 required"):  # a config builds its sections from defaults
+        @section
+        class NoDefault:
+            x: int
+            """no default"""
+
+
 def test_section_refuses_a_default_outside_its_bounds():
     with pytest.raises(ConfigError, match=r"Bad.x = 0 must be >= 1 \(its default\)"):
         @section
