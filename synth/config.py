@@ -3,11 +3,10 @@ Cafca paper, read from TOML and overridable with dotted ``--set section.key=valu
 
 Every section is a :func:`synth.configkit.section`: per field a default, its one-line doc
 right under it and, on its type, optional inclusive ``Bounds`` (applied to every number of a
-tuple) and ``Choices``. The machinery (types,
-TOML, overrides, did-you-mean, the reference table) is :mod:`synth.configkit`; this module
-holds the sections, the render presets and the cross-field rules (:func:`check_cross`),
-which run once after every override is applied. ``synth config show --explain`` prints the
-table; docs/config.md is generated from it.
+tuple) and ``Choices``. The machinery (types, TOML, overrides, did-you-mean, the reference
+table) is :mod:`synth.configkit`; this module holds the sections, the render presets and the
+cross-field rules (:func:`check_cross`), which run once after every override is applied.
+``synth config show --explain`` prints the table; docs/config.md is generated from it.
 """
 
 from __future__ import annotations
