@@ -61,8 +61,8 @@ PROFILES = {
                                               "train.preview_every=0", "train.bf16=true",
                                               "sampling.proposal_samples=[16,16]", "sampling.nerf_samples=24"],
                 fit_sets=["inversion.steps=30", "inversion.patches=1", "inversion.patch_size=16",
-                          "finetune.steps=100", "finetune.rays_per_step=256", "finetune.warmup_steps=10",
-                          "finetune.normal_weight=0", "finetune.bf16=true"]),
+                          "finetune.steps=300", "finetune.rays_per_step=256", "finetune.warmup_steps=10",
+                          "finetune.normal_weight=0", "finetune.bf16=true", "landmarks.sigma_px=0.3"]),
     # a few minutes end to end: checks the script, proves nothing
     "tiny": dict(rungs=[1, 2], expressions=1, views=6, res=32, test_ids=1, test_expressions=1, test_res=64,
                  train_steps=20, train_sets=["train.identities_per_batch=2", "train.views_per_identity=2",
