@@ -10,15 +10,19 @@ standing off the face, and tapered to zero above the brows (a fringe over the fo
 and below the chin.
 
 Strands that enter the wedge are turned around the axis, sideways and backwards, to its edge
-on their own side (the side where most of their points inside the wedge lie): every point is
-rotated about the axis by the angle it needs (a smooth, C1 ``soft max`` of its angle and the
-limit, so points just outside move a little and no corner appears at the edge), the rotation
-is carried on down the strand with an exponential decay over ``carry`` metres of arc length
-(the strand eases back instead of snapping back below the chin), and the strand is then
-rebuilt point by point with its original segment lengths (follow the leader: every segment
-keeps its length and points toward its turned target), twice. Rotation about the axis keeps
-the distance from it, and the head is narrower at the sides than in front, so turned points
-stay outside the head; the grooms' push-out runs afterwards anyway.
+on their own side (the side where most of their points near the wedge lie): each point needs
+a turn (a C1 ``soft max`` of its angle and the edge plus ``width``, so points just outside move
+a little and no corner appears at the edge); these turns are spread along the strand with
+smoothstep bumps, ``ahead`` metres toward the root (it starts turning before it reaches the
+wedge) and ``behind`` metres toward the tip (it eases back below the chin instead of snapping
+back), faded in over the first ``root`` metres (roots stay put); every point is rotated about
+the axis by its turn, and the strand is rebuilt point by point with its original segment
+lengths (follow the leader: every segment keeps its length and points toward its turned
+target); twice. Rotation about the axis keeps the distance from it, and the head is narrower
+at the sides than in front, so turned points stay outside the head; the grooms' push-out runs
+afterwards anyway. A strand that would need a turn of more than ``trim_deg`` (one hanging
+straight down in front of the face) cannot make it without a sharp bend: it is cut at its last
+point before the wedge instead (the last resort; above the brows that reads as a fringe).
 
 Deterministic (no random numbers) and vectorised over strands; loops run over the points of a
 strand only.
