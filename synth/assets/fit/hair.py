@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from synth.assets.fit.groom import Groom, Styling, setup
+from synth.assets.fit.keepout import face_keep_out, keep_out
 from synth.assets.fit.strands import (BACK, DOWN, FORWARD, LEFT, UP, add_curl, arc_length, grow, interpolate,
                                       push_out_strands, resample_fast, scale_count, transport_frames, trim_below)
 from synth.geometry.normals import normalize
@@ -232,6 +233,8 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
             sel_g = np.ones(G, bool)
         pts[sel_c], _ = interpolate(surface, g_tri[sel_g], g_bary[sel_g], guides[sel_g], c_tri[sel_c], c_bary[sel_c],
                                       k=3, rng=rng, jitter=0.08)
+    if "lm" in hf:  # strands turned out of the wedge in front of the inner face (keepout.py)
+        pts, turned, trimmed = keep_out(face_keep_out(surface.data, surface.V, hf["lm"], c), pts)
     clr = np.minimum(float(np.median(layer)), 0.6 * arc_length(pts))
     pts[:, 1:] = surface.push_out(pts[:, 1:], clr[:, 1:], iterations=2)
     return pts, clr, extra
