@@ -8,7 +8,10 @@ the project's venv; numpy and pillow suffice besides)::
 
 ``benchmarks/realism.py judge`` writes the PNGs, calls this script as a subprocess and reads
 the JSON: per image, ``detected`` (face detection, short-range model, confidence >= 0.5),
-``score`` and ``mesh`` (the 478 refined face-mesh points in pixels, or null).
+``score``, ``mesh`` (the 478 refined face-mesh points in pixels, or null) and ``mesh_mirrored``
+(the same on the left-right mirrored image, in the mirrored image's pixels, or null: the judge's
+self-consistency). Pixels are mediapipe's ``x * W``, ``y * H``: pixel centres at integers (the
+judge adds 0.5 px to reach synth's convention, benchmarks/realism_judge.py).
 """
 
 from __future__ import annotations
@@ -31,9 +34,10 @@ def main(png_dir: str, out: str) -> None:
             img = np.ascontiguousarray(np.asarray(Image.open(p).convert("RGB")))
             H, W = img.shape[:2]
             det = fd.process(img).detections
-            mesh = fm.process(img).multi_face_landmarks
+            mesh, mirrored = (fm.process(np.ascontiguousarray(im)).multi_face_landmarks for im in (img, img[:, ::-1]))
             res[p.stem] = {"detected": bool(det), "score": float(det[0].score[0]) if det else 0.0,
-                           "mesh": [[q.x * W, q.y * H] for q in mesh[0].landmark] if mesh else None}
+                           "mesh": [[q.x * W, q.y * H] for q in mesh[0].landmark] if mesh else None,
+                           "mesh_mirrored": [[q.x * W, q.y * H] for q in mirrored[0].landmark] if mirrored else None}
     Path(out).write_text(json.dumps({"mediapipe": mp.__version__, "images": res}))
 
 

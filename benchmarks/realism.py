@@ -4,6 +4,7 @@
     .venv/bin/python benchmarks/realism.py framing DATASET [DATASET ...]
     .venv/bin/python benchmarks/realism.py hair [--identities 12 --seed 0]
     .venv/bin/python benchmarks/realism.py judge DATASET --mp-python MPENV/bin/python [--max-azimuth 45]
+        [--detections MP.json]
     .venv/bin/python benchmarks/realism.py timing DATASET [DATASET ...]
 
 skin: the ITA histogram (six categories) and the CIELAB range of the skin albedo of the planned
@@ -18,10 +19,12 @@ hair: strands in front of the inner face (synth.assets.fit.occlusion) for the pl
   identities that have hair, seen from cameras at azimuth 0, +-30, +-45 (elevation 0).
 judge: mediapipe 0.10.21 (its own environment; benchmarks/mediapipe_judge.py) on the frames
   whose camera azimuth is within --max-azimuth, composited over mid grey: face-detection
-  rate, face-mesh rate, and the error of its points against the frame's ``landmarks_2d``,
-  normalised by the inter-ocular distance (outer eye corners, ibug 36-45): 68-point NME (its
-  mesh mapped to ibug68, :func:`ibug68_weights`) and the 7-point error of the issue's reference
-  (eye corners, nose tip, mouth corners).
+  rate, face-mesh rate, and the error of its points (shifted by +0.5 px to synth's pixel
+  convention) against the frame's ``landmarks_2d``, in units of the inter-ocular distance
+  (outer eye corners, ibug 36-45): 68-point NME with and without the jaw, per region and by
+  azimuth (its mesh mapped to ibug68, benchmarks/realism_judge.py), the issue's direct 7-point
+  error (eye corners, nose tip, mouth corners) and mediapipe against itself on the mirrored
+  image. --detections caches mediapipe's output.
 timing: Cycles seconds per frame (the worker's frame events).
 plot-skin OUT --inputs A.json B.json --labels before after: ITA histogram and L*-b* plot.
 sheet OUT DATASET ...: the most frontal frame of the first identities, one row per dataset.
@@ -31,11 +34,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
-import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -45,8 +45,6 @@ sys.path.insert(0, str(ROOT))
 
 CATS = ("very light", "light", "intermediate", "tan", "brown", "dark")
 HEAD_NOT_SKIN = (2, 3, 4, 5, 6, 7, 8, 10, 11)  # synth.dataset.segmentation.CLASSES, skin = 1
-#: the issue's 7-point reference: mediapipe index -> ibug68 index
-SEVEN = ((33, 36), (133, 39), (362, 42), (263, 45), (1, 30), (61, 48), (291, 54))
 
 
 def _lab_table(lab: np.ndarray, ita: np.ndarray) -> None:
@@ -195,33 +193,6 @@ def hair(args) -> dict:
     return {"rows": rows, "views": views, "views_with_strands_in_front": bad, "views_centre": bad_c}
 
 
-def ibug68_weights(model, k: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The mediapipe -> ibug68 mapping: each ibug68 point as a convex combination of the k
-    mediapipe points (refined iris points excluded: they follow the gaze) whose model surface
-    points (prior/fit/data correspondence) lie nearest to it on the template, with weights
-    (non-negative, summing to one) that best reproduce it. Returns (68, k) mediapipe indices,
-    (68, k) weights and the (68,) residual distances on the template (metres)."""
-    from scipy.optimize import nnls
-
-    from prior.fit.landmark_sources import load_correspondence
-
-    c = load_correspondence(model)
-    T = model.template.astype(np.float64)
-    keep = c["index"] < 468
-    pos = np.einsum("pkc,pk->pc", T[model.triangles[c["triangles"][keep]]], c["bary"][keep])
-    mp_idx = c["index"][keep]
-    tri, bary = model.landmarks["ibug68"]
-    ib = np.einsum("lkc,lk->lc", T[model.triangles[tri]], bary.astype(np.float64))
-    idx, w, res = np.zeros((68, k), np.int64), np.zeros((68, k)), np.zeros(68)
-    for j in range(68):
-        near = np.argsort(np.linalg.norm(pos - ib[j], axis=1))[:k]
-        A = np.vstack([pos[near].T, 10.0 * np.ones(k)])  # the last row asks for sum(w) = 1
-        w[j] = nnls(A, np.concatenate([ib[j], [10.0]]))[0]
-        idx[j] = mp_idx[near]
-        res[j] = np.linalg.norm(pos[near].T @ w[j] - ib[j])
-    return idx, w, res
-
-
 def _srgb8(fr) -> np.ndarray:
     """(H, W, 3) uint8 sRGB of a frame composited over mid grey."""
     rgb = fr.rgb_premultiplied + (1.0 - fr.alpha[..., None]) * 0.5  # linear
@@ -233,54 +204,6 @@ def _png(fr, path: Path) -> None:
     from PIL import Image
 
     Image.fromarray(_srgb8(fr)).save(path)
-
-
-def judge(args) -> dict:
-    from synth.appearance.skin import individual_typology_angle, ita_category
-    from synth.dataset.reader import iter_frames
-    from synth.model.default import load_default_model
-
-    idx, w, res = ibug68_weights(load_default_model())
-    truth, cats = {}, {}
-    with tempfile.TemporaryDirectory(prefix="synth-judge-") as d:
-        png = Path(d) / "png"
-        png.mkdir()
-        for fr in iter_frames(args.dataset):
-            if abs(fr.meta["camera"]["azimuth_deg"]) <= args.max_azimuth:
-                _png(fr, png / f"{fr.key}.png")
-                lm = np.asarray(fr.meta["landmarks_2d"], np.float64)
-                truth[fr.key] = lm
-                alb = (fr.meta.get("skin") or {}).get("albedo_linear_srgb")
-                cats[fr.key] = int(ita_category(individual_typology_angle(np.asarray(alb)))) if alb else -1
-        subprocess.run([args.mp_python, str(ROOT / "benchmarks" / "mediapipe_judge.py"), str(png), f"{d}/mp.json"],
-                       check=True, env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
-        det = json.loads(Path(f"{d}/mp.json").read_text())["images"]
-    n = len(truth)
-    n_det = sum(det[k]["detected"] for k in truth)
-    nme68, nme7, per = [], [], {}
-    for key, lm in truth.items():
-        mesh = det[key]["mesh"]
-        if mesh is None:
-            continue
-        P = np.asarray(mesh, np.float64)
-        iod = np.linalg.norm(lm[36] - lm[45])
-        mapped = np.einsum("lk,lkc->lc", w, P[idx])
-        nme68.append(np.linalg.norm(mapped - lm, axis=1).mean() / iod)
-        nme7.append(np.mean([np.linalg.norm(P[a] - lm[b]) for a, b in SEVEN]) / iod)
-        per[key] = {"nme68": nme68[-1], "nme7": nme7[-1], "ita_category": cats[key], "iod_px": float(iod)}
-    n_mesh = len(nme68)
-    print(f"\n### mediapipe {json.dumps(args.dataset)} (|azimuth| <= {args.max_azimuth} deg)\n")
-    print("| frames | face detected | face mesh | NME68 median | NME68 mean | 7-point median | 7-point mean |")
-    print("|---:|---:|---:|---:|---:|---:|---:|")
-    print(f"| {n} | {n_det}/{n} | {n_mesh}/{n} | {np.median(nme68):.1%} | {np.mean(nme68):.1%} | "
-          f"{np.median(nme7):.1%} | {np.mean(nme7):.1%} |")
-    print(f"\nmapping residual on the template: median {np.median(res) * 1000:.1f} mm, max {res.max() * 1000:.1f} mm\n")
-    print("| ITA category of the albedo | " + " | ".join(CATS) + " |\n|---|" + "---:|" * 6)
-    by = [[v["nme68"] for v in per.values() if v["ita_category"] == k] for k in range(6)]
-    print("| frames with a mesh | " + " | ".join(str(len(b)) for b in by) + " |")
-    print("| NME68 median | " + " | ".join(f"{np.median(b):.1%}" if b else "-" for b in by) + " |\n")
-    return {"frames": n, "detected": n_det, "mesh": n_mesh, "nme68": nme68, "nme7": nme7, "per_frame": per,
-            "mapping": {"mediapipe": idx.tolist(), "weights": np.round(w, 4).tolist(), "residual_m": res.tolist()}}
 
 
 def timing(args) -> dict:
@@ -363,6 +286,7 @@ def main(argv=None) -> None:
     p.add_argument("dataset")
     p.add_argument("--mp-python", required=True)
     p.add_argument("--max-azimuth", type=float, default=45.0)
+    p.add_argument("--detections", help="mediapipe's JSON: read it if it exists (no mediapipe run), else write it")
     p = sub.add_parser("timing")
     p.add_argument("datasets", nargs="+")
     p = sub.add_parser("plot-skin")
@@ -376,7 +300,9 @@ def main(argv=None) -> None:
     for q in sub.choices.values():
         q.add_argument("--json", help="also write the figures to this JSON file")
     args = ap.parse_args(argv)
-    res = {"skin": skin, "framing": framing, "hair": hair, "judge": judge, "timing": timing, "plot-skin": plot_skin,
+    from realism_judge import judge
+
+    res = {"skin": skin, "framing": framing, "hair": hair, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "plot-skin": plot_skin,
            "sheet": sheet}[args.cmd](args)
     if args.json:
         Path(args.json).write_text(json.dumps(res))

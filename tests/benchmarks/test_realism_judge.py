@@ -1,0 +1,126 @@
+"""benchmarks/realism_judge.py: the mediapipe -> ibug68 mapping and the judge's error metric
+(pure numpy; mediapipe itself is never needed here)."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def J():
+    spec = importlib.util.spec_from_file_location("realism_judge", ROOT / "benchmarks" / "realism_judge.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _faces(n, seed=0):
+    """(n, 68, 2) random point sets with the outer eye corners 36, 45 apart."""
+    g = np.random.default_rng(seed)
+    return g.uniform(0, 200, (n, 68, 2))
+
+
+def test_face_errors_against_a_rotation_reference(J):
+    truth, pred = _faces(5), _faces(5, 1)
+    err = J.face_errors(pred, truth)
+    for f in range(5):  # reference: rotate by minus the angle of the eye axis, divide by its length
+        d = truth[f, 45] - truth[f, 36]
+        a = np.arctan2(d[1], d[0])
+        R = np.array([[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]])
+        np.testing.assert_allclose(err[f], (pred[f] - truth[f]) @ R.T / np.hypot(*d), atol=1e-12)
+    # an upright face: x to the right, y down, in inter-ocular units
+    t = np.zeros((1, 68, 2))
+    t[0, 36], t[0, 45] = (10.0, 50.0), (50.0, 50.0)
+    p = t.copy()
+    p[0, 30] += (4.0, -2.0)
+    np.testing.assert_allclose(J.face_errors(p, t)[0, 30], (0.1, -0.05), atol=1e-12)
+
+
+@pytest.mark.parametrize("angle", [0.0, np.pi / 2, np.pi, -2.5])
+def test_face_errors_invariant_to_similarity(J, angle):
+    truth, pred = _faces(3, 2), _faces(3, 3)
+    R = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    move = lambda x: 3.7 * x @ R.T + (-40.0, 1e3)  # noqa: E731
+    np.testing.assert_allclose(J.face_errors(move(pred), move(truth)), J.face_errors(pred, truth), atol=1e-9)
+    assert np.all(J.nme(J.face_errors(truth, truth)) == 0)
+
+
+def test_fit_mapping_recovers_exact_convex_weights(J):
+    g = np.random.default_rng(4)
+    mesh = g.normal(0, 50, (30, 10, 2))
+    mesh[:, 0], mesh[:, 1] = (0, 0), (40, 0)  # so that ibug 36 and 45 below sit 40 px apart
+    cand = np.array([g.choice(10, 4, replace=False) for _ in range(68)])
+    w_true = g.dirichlet(np.ones(4), 68)
+    w_true[5] = (1.0, 0.0, 0.0, 0.0)  # a vertex of the hull
+    truth = np.einsum("lk,slkc->slc", w_true, mesh[:, cand])
+    w, rms = J.fit_mapping(mesh, truth, cand)
+    np.testing.assert_allclose(w, w_true, atol=1e-5)
+    assert rms.max() < 1e-5
+
+
+def test_fit_mapping_outside_the_hull_matches_a_constrained_solver(J):
+    from scipy.optimize import minimize
+
+    g = np.random.default_rng(5)
+    mesh = g.normal(0, 30, (12, 6, 2))
+    truth = g.normal(0, 30, (12, 68, 2))
+    truth[:, 45] = truth[:, 36] + (35.0, 5.0)
+    cand = np.tile(np.arange(5), (68, 1))
+    w, rms = J.fit_mapping(mesh, truth, cand)
+    assert np.all(w >= 0) and np.allclose(w.sum(1), 1, atol=1e-6)
+    iod = np.linalg.norm(truth[:, 45] - truth[:, 36], axis=-1)
+    for j in (0, 30, 67):
+        def cost(x, j=j):
+            return np.sum(((np.einsum("k,skc->sc", x, mesh[:, :5]) - truth[:, j]) / iod[:, None]) ** 2)
+        ref = minimize(cost, np.full(5, 0.2), method="SLSQP", bounds=[(0, 1)] * 5,
+                       constraints={"type": "eq", "fun": lambda x: x.sum() - 1}, options={"ftol": 1e-14})
+        assert cost(w[j]) <= ref.fun * (1 + 1e-5) + 1e-12
+        assert rms[j] == pytest.approx(np.sqrt(cost(w[j]) / len(mesh)), rel=1e-6)
+
+
+def test_single_candidate_is_the_point_itself(J):
+    mesh = _faces(4, 6)[:, :20]
+    truth = _faces(4, 7)
+    w, _ = J.fit_mapping(mesh, truth, np.full((68, 1), 3))
+    np.testing.assert_allclose(w, 1.0)
+    np.testing.assert_allclose(J.apply_mapping(mesh, np.full((68, 1), 3), w), np.repeat(mesh[:, 3:4], 68, 1))
+
+
+def test_mirror_permutation_on_the_default_model(J, default_model):
+    """IBUG68_MIRROR is an involution and pairs the default model's landmarks with their
+    mirror images (the template is left-right symmetric about x = 0 up to a few mm)."""
+    m = J.IBUG68_MIRROR
+    assert sorted(m) == list(range(68)) and np.all(m[m] == np.arange(68))
+    tri, bary = default_model.landmarks["ibug68"]
+    T = np.asarray(default_model.template, np.float64)
+    lm = np.einsum("lkc,lk->lc", T[default_model.triangles[tri]], bary)
+    mirrored = lm[m] * (-1.0, 1.0, 1.0)
+    assert np.abs(mirrored - lm).max() < 0.004  # metres; a wrong pairing is centimetres off
+    pts = _faces(2, 8)
+    np.testing.assert_allclose(J.unmirror(J.unmirror(pts, 256), 256), pts)
+    flipped = J.unmirror(pts, 256)
+    np.testing.assert_allclose(flipped[:, 16, 0], 256 - pts[:, 0, 0])
+
+
+def test_mediapipe_pixels_shift_to_synth_convention(J):
+    # mediapipe puts the centre of pixel column 10 at x = 10; synth at 10.5
+    np.testing.assert_allclose(J.to_synth_pixels([[10.0, 0.0]]), [[10.5, 0.5]])
+
+
+def test_sample_mapping_beats_the_template_mapping_on_held_out_samples(J, default_model):
+    idx, w, rms = J.sample_mapping(default_model, identities=12, views=4)
+    t_idx, t_w, t_res = J.template_mapping(default_model)
+    assert np.all(w >= 0) and np.allclose(w.sum(1), 1, atol=1e-6) and np.all(idx < J.MESH_POINTS)
+    mesh, ibug = J.model_samples(default_model, 7, 8, 4)  # another seed: other identities and cameras
+    assert not np.isnan(mesh[:, idx]).any()
+    new = J.nme(J.face_errors(J.apply_mapping(mesh, idx, w), ibug))
+    old = J.nme(J.face_errors(J.apply_mapping(mesh, t_idx, t_w), ibug))
+    assert np.median(new) < 0.012 and np.median(new) < 0.8 * np.median(old)
+    again = J.model_samples(default_model, 7, 8, 4)
+    np.testing.assert_array_equal(again[0], mesh)
