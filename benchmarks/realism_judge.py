@@ -19,7 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-MP_PIXEL_OFFSET = 0.5
+from prior.fit.landmark_sources import MP_PIXEL_OFFSET
+
 MESH_POINTS = 468  # the refined iris points 468-477 follow the gaze: never used for the mapping
 #: the issue's 7-point reference: mediapipe index -> ibug68 index
 SEVEN = ((33, 36), (133, 39), (362, 42), (263, 45), (1, 30), (61, 48), (291, 54))

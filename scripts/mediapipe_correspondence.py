@@ -133,7 +133,10 @@ def derive(work: Path, train: int, out_dir: Path | None) -> Path:
     F = len(keys)
     posed = [_posed(hm, truth[k]) for k in keys]
     cams = [(np.asarray(truth[k]["K"]), np.asarray(truth[k]["world_to_camera"])) for k in keys]
-    det_px = np.asarray([det["points"][k] for k in keys])  # (F, 478, 2)
+    from prior.fit.landmark_sources import MP_PIXEL_OFFSET
+
+    # mediapipe's pixel centres are at integers, synth's at +0.5
+    det_px = np.asarray([det["points"][k] for k in keys]) + MP_PIXEL_OFFSET  # (F, 478, 2)
     face_px = np.linalg.norm(det_px[:, 454] - det_px[:, 234], axis=-1)  # (F,) face width in pixels
     hits_t = np.full((F, N_POINTS), -1)
     hits_b = np.zeros((F, N_POINTS, 3))

@@ -28,6 +28,10 @@ CORRESPONDENCE_DIR = Path(__file__).resolve().parent / "data"
 #: mediapipe's points at the two sides of the face: their distance is the image's scale
 FACE_SIDES = (234, 454)
 
+#: mediapipe's ``x * W`` has pixel centres at integers, synth's at +0.5 (docs/conventions.md):
+#: mediapipe points are shifted by this many pixels (measured by resampling: benchmarks/realism_judge.py)
+MP_PIXEL_OFFSET = 0.5
+
 
 # --------------------------------------------------------------------------- synth frames
 
@@ -137,7 +141,8 @@ def mediapipe_observations(images, model, *, min_sigma_px: float = 1.0) -> tuple
             r = fm.process(im)
             if not r.multi_face_landmarks:
                 raise SynthError("no face found", f"image {i}", "use photos with one clearly visible face")
-            points.append([[p.x * W, p.y * H] for p in r.multi_face_landmarks[0].landmark])
+            points.append([[p.x * W + MP_PIXEL_OFFSET, p.y * H + MP_PIXEL_OFFSET]
+                           for p in r.multi_face_landmarks[0].landmark])
             masks.append(np.asarray(seg.process(im).segmentation_mask, np.float32))
     return mediapipe_points_observations(np.asarray(points), W, H, corr, min_sigma_px=min_sigma_px), masks
 
