@@ -3,8 +3,8 @@
 A shell rig (``synth.assets.fit.garment``, ``synth.assets.fit.headwear``) describes its mesh as
 :class:`Parts` built from a :class:`Body` and returns a :class:`Shell`: the parts, the body
 triangles it is bound to, its materials as :class:`Cloth` descriptions and its record.
-:func:`fit_shell` then trims the vertices of trimmable parts that ended up deep inside another
-body part (a chin sunk into the chest at -3 SD), pushes every other vertex out to
+:func:`fit_shell` then cuts trimmable parts where they ended up deep inside another body part
+(a chin sunk into the chest at -3 SD; :mod:`synth.assets.fit.trim`), pushes every other vertex out to
 ``clearance`` (:func:`synth.assets.fit.attach.push_out`) and binds the result to the body
 (:class:`synth.assets.fit.attach.Binding`); :meth:`FittedShell.follow` re-applies that
 binding to new body vertices (an expression change) and pushes out again. The Blender rigs
@@ -19,10 +19,8 @@ import numpy as np
 
 from synth.assets.fit.attach import Binding, body_query, push_out
 from synth.assets.fit.masks import region_mask
-from synth.assets.fit.meshops import clip_by_field, level_points, remove_faces, resample_loop, subdivide
-
-#: vertices of trimmable parts deeper than this inside the skin after shaping are trimmed, not pushed
-TRIM_DEPTH = 0.006
+from synth.assets.fit.meshops import boundary_loops, clip_by_field, level_points, resample_loop, subdivide
+from synth.assets.fit.trim import push_out_edges, trim_part
 from synth.geometry.normals import normalize, vertex_normals
 
 
@@ -157,14 +155,16 @@ class Body:
 
 
 class Parts:
-    """Accumulates mesh parts: (positions, faces, material slot, trimmable)."""
+    """Accumulates mesh parts: (positions, faces, material slot, trimmable, inside, smooth edge)."""
 
     def __init__(self):
-        self.P, self.F, self.M, self.T, self.R = [], [], [], [], []
+        self.P, self.F, self.M, self.T, self.R, self.S = [], [], [], [], [], []
 
-    def add(self, P, F, slot: int = 0, trim: bool = False, inside: bool = False):
+    def add(self, P, F, slot: int = 0, trim: bool = False, inside: bool = False, smooth_edge=False):
         """``trim``: vertices deep in another body part are trimmed; ``inside``: the part lies
-        inside the body on purpose (a hem cap) and is never pushed out."""
+        inside the body on purpose (a hem cap) and is never pushed out; ``smooth_edge`` (bool or
+        per vertex): the boundary loops through these vertices only are kept smooth through the
+        fit (a torso shell's necklines: every vertex but the hem's)."""
         if len(F) == 0:
             return
         self.P.append(np.asarray(P, np.float64))
@@ -172,13 +172,15 @@ class Parts:
         self.M.append(np.full(len(F), slot, np.int32))
         self.T.append(np.full(len(P), trim))
         self.R.append(np.full(len(P), inside))
+        self.S.append(np.array(np.broadcast_to(np.asarray(smooth_edge, bool), (len(P),))))
 
     def merged(self):
-        """(P, F, slot per face, trimmable per vertex, inside per vertex)."""
+        """(P, F, slot per face, trimmable / inside / smooth edge per vertex)."""
         off = np.cumsum([0] + [len(p) for p in self.P])
         P = np.concatenate(self.P)
         F = np.concatenate([f + o for f, o in zip(self.F, off[:-1])])
-        return P, F, np.concatenate(self.M), np.concatenate(self.T), np.concatenate(self.R)
+        return (P, F, np.concatenate(self.M), np.concatenate(self.T), np.concatenate(self.R),
+                np.concatenate(self.S))
 
 
 @dataclass(frozen=True)
@@ -219,25 +221,28 @@ class FittedShell:
     clearance: float
     info: dict
     inside: np.ndarray | None = None  # (V,) vertices never pushed out (hem caps)
+    edge_loops: list = field(default_factory=list)  # boundary loops kept smooth (necklines)
 
     def follow(self, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
         """Positions on new body vertices: the binding re-applied, then pushed out again."""
-        P = self.binding.apply(vertices)
-        out = np.ones(len(P), bool) if self.inside is None else ~self.inside
-        P[out] = push_out(P[out], body_query(vertices, triangles, self.body_tris), self.clearance, iterations=6)
-        return P
+        query = body_query(vertices, triangles, self.body_tris)
+        return push_out_edges(self.binding.apply(vertices), query, self.clearance, self.inside, self.edge_loops)
 
 
 def fit_shell(body: Body, shell: Shell, clearance: float) -> FittedShell:
-    """Trim deep vertices of trimmable parts, push out, bind."""
-    P, F, M, T, R = shell.parts.merged()
-    sd = body.query(P)
-    deep = T & (sd < -TRIM_DEPTH)
-    keep = ~deep[F].any(1)
-    P, F, used = remove_faces(P, F, keep)
-    M, R = M[keep], R[used]
-    P[~R] = push_out(P[~R], body.query, clearance, iterations=6)
+    """Trim the trimmable parts where they run deep inside the skin (:func:`trim_part`), push
+    out (keeping the smooth-edge parts' boundary loops smooth: :func:`push_out_edges`), bind."""
+    parts, trimmed = Parts(), 0
+    src = shell.parts
+    for P, F, M, T, R, S in zip(src.P, src.F, src.M, src.T, src.R, src.S):
+        if T.any():
+            P, F, S, n = trim_part(body.query, P, F, S)
+            trimmed += n
+        parts.add(P, F, int(M[0]), bool(T.any()), bool(R.any()), S)
+    P, F, M, _, R, S = parts.merged()
+    loops = [lo for lo in boundary_loops(F) if S[lo].all()]
+    P = push_out_edges(P, body.query, clearance, R, loops)
     binding = Binding(body.V, body.F, shell.anchor_tris, P)
-    info = dict(shell.info, vertices=int(len(P)), faces=int(len(F)), trimmed_vertices=int(deep.sum()))
+    info = dict(shell.info, vertices=int(len(P)), faces=int(len(F)), trimmed_vertices=int(trimmed))
     return FittedShell(shell.cls, shell.name, P, F, M, shell.cloths, binding, body.skin_tris, clearance, info,
-                       R if R.any() else None)
+                       R if R.any() else None, loops)

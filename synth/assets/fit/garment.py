@@ -15,8 +15,8 @@ fits any identity (tested at +-3 SD):
    the neckline loop, shirt collars, hoods (up: a smoothed offset of the head behind the face
    opening; down: a flattened tube on the upper back), drawstrings, ties, scarves (loop /
    drape / knot, ``scarf_thickness_m``) as swept tubes.
-3. **Fit** (:func:`synth.assets.fit.body.fit_shell`): vertices deep inside another body part
-   are trimmed with their faces; every other vertex closer than ``CLEARANCE`` to the skin (or
+3. **Fit** (:func:`synth.assets.fit.body.fit_shell`): the torso shell is clipped where it runs
+   deep inside another body part (:mod:`synth.assets.fit.trim`); every other vertex closer than ``CLEARANCE`` to the skin (or
    inside it) is moved to the closest skin point + ``CLEARANCE`` along the normal.
 4. **Update** (:meth:`synth.assets.fit.body.FittedShell.follow`): every vertex is bound to its
    closest neck/shoulder (or, for hoods, head) triangle in a local frame; the binding is

@@ -17,6 +17,9 @@ import numpy as np
 from synth.assets.fit.attach import push_out
 from synth.assets.fit.body import Body, Parts, WaveNoise
 from synth.assets.fit.hem import CAP_INSET, HEM_BAND, cap, hem_loops, smooth_loops
+
+#: passes of averaging along a torso shell's neckline loops (then evenly respaced)
+NECK_SMOOTHING = 12
 from synth.assets.fit.meshops import boundary_loops, grid_faces, icosphere, laplacian_smooth, sweep_tube
 from synth.geometry.normals import normalize
 
@@ -64,7 +67,9 @@ def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None
     P, F, cut, W = body.shell(body.torso_tris, np.minimum(f, hem_f), off_fn, weights=True)
     on_hem = cut & (np.abs(np.asarray(W @ hem_f)) < 1e-7)
     P = smooth_loops(P, F, on_hem)
-    parts.add(P, F, slot, trim=True)
+    # every other boundary loop (the neckline, a tank top's arm holes), spread evenly along itself
+    P = smooth_loops(P, F, ~on_hem, NECK_SMOOTHING, min_fraction=1.0, resample=True)
+    parts.add(P, F, slot, trim=True, smooth_edge=~on_hem)
     for loop in hem_loops(F, on_hem):
         Vc, Fc = cap(P, loop, inset=CAP_INSET)
         parts.add(Vc, Fc, slot, inside=True)

@@ -57,7 +57,8 @@ def _segment_distance(P: np.ndarray, A: np.ndarray, B: np.ndarray, chunk: int = 
     return out
 
 
-def _neighbour_mean_matrix(F: np.ndarray, n: int):
+def neighbour_mean_matrix(F: np.ndarray, n: int):
+    """(n, n) sparse matrix averaging every vertex with its mesh neighbours (edges of F)."""
     import scipy.sparse as sp
 
     E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
@@ -75,7 +76,7 @@ def cut_distance(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     F = np.asarray(F, np.int64)
     loop = cut_loop(F, V)
     d = _segment_distance(V, V[loop], V[np.roll(loop, -1)])
-    M = _neighbour_mean_matrix(F, len(V))
+    M = neighbour_mean_matrix(F, len(V))
     for _ in range(FIELD_SMOOTHING):
         d = M @ d
         d[loop] = 0.0  # the cut itself stays at distance 0
@@ -96,17 +97,43 @@ def hidden_polygons(V: np.ndarray, F: np.ndarray, poly_offsets: np.ndarray, poly
     return np.add.reduceat(hit, off[:-1]) > 0
 
 
-def smooth_loops(P: np.ndarray, F: np.ndarray, on_hem: np.ndarray, iterations: int = LOOP_SMOOTHING) -> np.ndarray:
-    """Smooth, along itself, every boundary loop of (P, F) that lies on the hem (``on_hem``
-    per vertex, mostly true on the loop): the clip of a triangle mesh leaves tiny edges where the
-    level set passes near a vertex; averaging along the loop removes the kinks they make."""
+def smooth_loops(P: np.ndarray, F: np.ndarray, on_cut: np.ndarray, iterations: int = LOOP_SMOOTHING,
+                 min_fraction: float = 0.8, resample: bool = False) -> np.ndarray:
+    """Smooth, along itself, every boundary loop of (P, F) that lies on a cut (at least
+    ``min_fraction`` of its vertices marked in ``on_cut``; the hem: mostly true on the loop): the
+    clip of a triangle mesh leaves tiny edges where the level set passes near a vertex, and a
+    union of two clips (a neckline and a trim) meets at a corner; averaging along the loop removes
+    the kinks they make. ``resample``: then spread the loop's vertices evenly along it
+    (:func:`relax_loop`)."""
     P = np.array(P, np.float64, copy=True)
     for loop in boundary_loops(F):
-        if on_hem[loop].mean() < 0.8:
+        if on_cut[loop].mean() < min_fraction or not on_cut[loop].any():
             continue
-        for _ in range(iterations):
-            P[loop] = 0.5 * P[loop] + 0.25 * (P[np.roll(loop, 1)] + P[np.roll(loop, -1)])
+        if resample:
+            P[loop] = relax_loop(P[loop], iterations)
+        else:
+            for _ in range(iterations):
+                P[loop] = 0.5 * P[loop] + 0.25 * (P[np.roll(loop, 1)] + P[np.roll(loop, -1)])
     return P
+
+
+def relax_loop(Q: np.ndarray, iterations: int) -> np.ndarray:
+    """A closed polyline averaged along itself ``iterations`` times (each vertex with its two
+    neighbours, 1/4 1/2 1/4), then its vertices spread at equal arc length along the result (in
+    order, the start chosen to move them least): averaging alone leaves a fold of the clip's
+    level set, or a cluster of tiny edges, as a knot of vertices whose turning angles are noise."""
+    Q = np.array(Q, np.float64, copy=True)
+    for _ in range(iterations):
+        Q = 0.5 * Q + 0.25 * (np.roll(Q, 1, 0) + np.roll(Q, -1, 0))
+    n = len(Q)
+    ext = np.vstack([Q, Q[:1]])
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(ext, axis=0), axis=1))])
+    L = s[-1]
+    if L <= 0:
+        return Q
+    step = np.arange(n) * (L / n)
+    t = np.mod(step + np.mean(s[:-1] - step), L)
+    return np.stack([np.interp(t, s, ext[:, k]) for k in range(3)], 1)
 
 
 def hem_loops(F: np.ndarray, on_hem: np.ndarray) -> list[np.ndarray]:
