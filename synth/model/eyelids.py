@@ -18,8 +18,9 @@ from the horizontal axis through the centre and an elevation ``alpha`` about tha
 3. **Resting on the eyeball.** Turning about an axis through the centre keeps distances to
    the centre; then every vertex near a margin moves radially, with falloff ``w_r``, by what
    its margin point needs to lie :data:`MARGIN_OFFSET_M` off the eyeball's surface (the
-   identity's sclera sphere plus the corneal bulge, as the eye is turned), and no rig vertex
-   stays closer to the surface than :data:`MARGIN_OFFSET_M`.
+   identity's sclera sphere plus the corneal bulge about the gaze, pitched but not turned
+   sideways: a lid that moved with the gaze yaw, which nothing else shows, would let landmark fits
+   trade gaze for blink), and no rig vertex stays closer to that surface than :data:`MARGIN_OFFSET_M`.
 
 The per-vertex data (which margin points a vertex refers to, weights) are fixed at build time
 (:func:`build_eyelid_rig`, stored under ``extra["eyelids"]`` of the model file); models
@@ -190,15 +191,18 @@ def apply_eyelids(rig: EyelidRig, shaped, joints, psi, eye_rot, ops=NUMPY_OPS):
         px, u, z = P[..., 0], -P[..., 1], P[..., 2]
         r = ops.sqrt(px * px + u * u + z * z)
         lat = ops.asin(ops.clip(px / r, -1.0, 1.0))  # angle off the vertical plane through the centre
-        fwd = -eye_rot[e.joint][:, :, 1]  # the gaze: the eye's rest forward (-Y) turned
-        alpha = ops.atan2(z, u) + ops.asin(ops.clip(fwd[:, 2], -1.0, 1.0))[:, None] * k(e.follow)
+        pitch = ops.asin(ops.clip(-eye_rot[e.joint][:, 2, 1], -1.0, 1.0))  # of the gaze, the turned -Y
+        alpha = ops.atan2(z, u) + pitch[:, None] * k(e.follow)
         if e.blink >= 0:
-            b = ops.clip(psi[:, e.blink], 0.0, 1.0)[:, None] * k(e.weight * e.upper)
+            b = psi[:, e.blink][:, None] * k(e.weight * e.upper)
             alpha = alpha - b * (_ref(alpha, e.upper_ref, k(e.upper_t)) - _ref(alpha, e.lower_ref, k(e.lower_t)))
             lat = lat - b * (_ref(lat, e.upper_ref, k(e.upper_t)) - _ref(lat, e.lower_ref, k(e.lower_t)))
         cl = ops.cos(lat)
         dirs = ops.stack([ops.sin(lat), -cl * ops.cos(alpha), cl * ops.sin(alpha)], -1)
         radius = ops.sqrt(((shaped[:, e.sclera_vertex] - joints[:, e.joint]) ** 2).sum(-1))
+        # the cornea about the gaze pitched but not turned sideways: lids that depended on the
+        # gaze yaw (unseen otherwise) would let landmark fits (prior.fit) trade gaze for blink
+        fwd = ops.stack([0.0 * pitch, -ops.cos(pitch), ops.sin(pitch)], -1)
         floor = _surface_radius(rig, dirs, fwd, radius, ops) + rig.offset
         up = k(e.upper.astype(np.float64))
         need = up * _ref(floor - r, e.upper_ref, k(e.upper_t)) + (1 - up) * _ref(floor - r, e.lower_ref, k(e.lower_t))
