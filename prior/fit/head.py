@@ -220,6 +220,18 @@ class TorchHeadModel:
             shaped[:, rows] = p
         return shaped[:, :sub.n]
 
+    def eyelid_parameters(self, share: float = 0.1) -> tuple[list[int], list[int]]:
+        """(expression indices, joint indices) on which the eyelid rig bends the lids
+        non-linearly: the eye joints, and the codes whose blendshape moves a lid-margin vertex
+        by at least ``share`` of the most any code does (the margins are what the rig lays on
+        the pitched cornea). Both empty for models without the rig."""
+        if self._eyelids is None:
+            return [], []
+        d = self.data
+        margins = np.concatenate([np.r_[d.regions[f"eyelid_{s}_upper"], d.regions[f"eyelid_{s}_lower"]] for s in "lr"])
+        move = np.abs(self._basis_np[self.Ki:, margins]).max(axis=(1, 2))
+        return np.nonzero(move >= share * move.max())[0].tolist(), sorted(e.joint for e in self._eyelids.eyes)
+
     def vertices(self, identity, expression, joint_rotations=None, translation=None) -> torch.Tensor:
         """(B, V, 3) posed vertices."""
         return self.points(self.full(), identity, expression, joint_rotations, translation)
