@@ -21,6 +21,9 @@ from the horizontal axis through the centre and an elevation ``alpha`` about tha
    identity's sclera sphere plus the corneal bulge about the gaze, pitched but not turned
    sideways: a lid that moved with the gaze yaw, which nothing else shows, would let landmark fits
    trade gaze for blink), and no rig vertex stays closer to that surface than :data:`MARGIN_OFFSET_M`.
+   The pitched cornea bends the margins (and ibug 36-47 on them) non-linearly with the pitch
+   and blink, which landmarks see only weakly: ``prior.fit.landmarks_fit`` gives the solver
+   the exact curvature of that block (docs/fitting.md, "Optimisation").
 
 The per-vertex data (which margin points a vertex refers to, weights) are fixed at build time
 (:func:`build_eyelid_rig`, stored under ``extra["eyelids"]`` of the model file); models
