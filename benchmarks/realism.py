@@ -264,7 +264,12 @@ def sheet(args) -> dict:
             a = abs(c["azimuth_deg"]) + abs(c["elevation_deg"])
             if fr.identity_index < args.identities and a < best.get(fr.identity_index, (1e9, None))[0]:
                 best[fr.identity_index] = (a, fr)
-        rows.append(np.concatenate([_srgb8(best[i][1]) for i in sorted(best)], axis=1))
+        tiles = [_srgb8(best[i][1]) for i in sorted(best)]
+        cols = args.columns or len(tiles)
+        for k in range(0, len(tiles), cols):  # one dataset may wrap onto several rows
+            row = tiles[k:k + cols]
+            row += [np.zeros_like(tiles[0])] * (cols - len(row))
+            rows.append(np.concatenate(row, axis=1))
     w = min(r.shape[1] for r in rows)
     Image.fromarray(np.concatenate([r[:, :w] for r in rows], axis=0)).save(args.out)
     return {}
@@ -297,6 +302,7 @@ def main(argv=None) -> None:
     p.add_argument("out")
     p.add_argument("datasets", nargs="+")
     p.add_argument("--identities", type=int, default=8)
+    p.add_argument("--columns", type=int, default=0, help="tiles per row (0: one row per dataset)")
     for q in sub.choices.values():
         q.add_argument("--json", help="also write the figures to this JSON file")
     args = ap.parse_args(argv)
