@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import signal
 from typing import Any, Callable, Sequence
 
 _FN: Callable[[Any], Any] | None = None
@@ -18,6 +19,14 @@ _FN: Callable[[Any], Any] | None = None
 def _call(x):
     assert _FN is not None
     return _FN(x)
+
+
+def _child_init() -> None:
+    """Forked children take the default SIGTERM (a handler inherited from the parent, e.g. a
+    command's graceful shutdown, would let ``Pool.terminate`` wait forever on a child blocked
+    on the task queue) and leave Ctrl-C to the parent."""
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def default_jobs() -> int:
@@ -34,8 +43,11 @@ def fork_map(fn: Callable[[Any], Any], items: Sequence[Any], jobs: int) -> list:
         return [fn(x) for x in items]
     _FN = fn
     try:
-        with mp.get_context("fork").Pool(min(jobs, len(items))) as pool:
-            return pool.map(_call, items, chunksize=1)
+        with mp.get_context("fork").Pool(min(jobs, len(items)), initializer=_child_init) as pool:
+            out = pool.map(_call, items, chunksize=1)
+            pool.close()  # children leave on the queue's sentinel; no terminate() needed
+            pool.join()
+            return out
     finally:
         _FN = None
 
