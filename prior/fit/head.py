@@ -18,13 +18,15 @@ and the gradients are computed for those rows only.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from types import SimpleNamespace
 
 import numpy as np
 import torch
 
 from prior.fit.rotations import axis_angle_to_matrix
 from synth.errors import CodeError
+from synth.model.eyelids import EyelidRig, apply_eyelids
 from synth.model.format import HeadModelData
 
 
@@ -33,10 +35,12 @@ class VertexSubset:
     """Rows of the model restricted to some vertices (all tensors on the model's device)."""
 
     index: torch.Tensor  # (n,) long, vertex indices into the full model
-    template: torch.Tensor  # (n*3,)
-    basis: torch.Tensor  # (Ki + Ke, n*3), scales applied
+    template: torch.Tensor  # (m*3,) of the m rows evaluated: the n vertices, then what the eyelid rig reads
+    basis: torch.Tensor  # (Ki + Ke, m*3), scales applied
     weights: torch.Tensor  # (n, J) skinning weights
     joints: torch.Tensor  # (k,) long, the joints with a non-zero weight on some vertex of the subset
+    eyelids: EyelidRig | None = None  # the rig with row indices (None: no lid vertex in the subset)
+    n: int = -1  # the first n rows are the subset's vertices (-1: all rows)
 
 
 @dataclass
@@ -80,6 +84,10 @@ class TorchHeadModel:
                                for s, (tri, bary) in data.landmarks.items()}
         self._subsets: dict[str, tuple[VertexSubset, torch.Tensor, torch.Tensor]] = {}
         self._full: VertexSubset | None = None
+        self._eyelids = EyelidRig.from_data(data)
+        self._ops = SimpleNamespace(atan2=torch.atan2, asin=torch.asin, acos=torch.acos, sqrt=torch.sqrt, sin=torch.sin,
+                                    cos=torch.cos, clip=torch.clamp, maximum=torch.maximum, stack=torch.stack,
+                                    const=self._t)
 
     def _t(self, a) -> torch.Tensor:
         return torch.as_tensor(np.asarray(a, np.float64), dtype=self.dtype, device=self.device)
@@ -92,12 +100,20 @@ class TorchHeadModel:
         if idx.size and (idx.min() < 0 or idx.max() >= self.V):
             raise CodeError("vertex index out of range", "vertex_index", f"indices must be in [0, {self.V})")
         d = self.data
+        rows, rig = idx, None
+        if self._eyelids is not None and np.isin(idx, np.concatenate([e.vertices for e in self._eyelids.eyes])).any():
+            # the rig moves a lid vertex from the margins and an eyeball radius: evaluate those rows too
+            rows = np.r_[idx, np.setdiff1d(self._eyelids.support(), idx)]
+            at = {int(v): i for i, v in enumerate(rows)}
+            rig = replace(self._eyelids, eyes=[replace(e, vertices=np.array([at[int(v)] for v in e.vertices], np.int64),
+                                                       sclera_vertex=at[e.sclera_vertex]) for e in self._eyelids.eyes])
         return VertexSubset(
             index=torch.as_tensor(idx, device=self.device),
-            template=self._t(d.template[idx]).reshape(-1),
-            basis=self._t(self._basis_np[:, idx]).reshape(self.Ki + self.Ke, -1),
+            template=self._t(d.template[rows]).reshape(-1),
+            basis=self._t(self._basis_np[:, rows]).reshape(self.Ki + self.Ke, -1),
             weights=self._t(d.skin_weights[idx]),
-            joints=torch.as_tensor(np.nonzero(np.any(d.skin_weights[idx] != 0, axis=0))[0], device=self.device))
+            joints=torch.as_tensor(np.nonzero(np.any(d.skin_weights[idx] != 0, axis=0))[0], device=self.device),
+            eyelids=rig, n=len(idx) if rig is not None else -1)
 
     def full(self) -> VertexSubset:
         if self._full is None:
@@ -180,6 +196,8 @@ class TorchHeadModel:
         beta, psi, rot, trans = self._codes(identity, expression, joint_rotations, translation)
         B = beta.shape[0]
         shaped = (torch.cat([beta, psi], 1) @ sub.basis + sub.template).reshape(B, -1, 3)
+        if sub.eyelids is not None:
+            shaped = self._move_eyelids(sub, shaped, beta, psi, rot)
         if rot is None and trans is None:
             return shaped
         P = self.pose(beta, rot, trans)
@@ -190,6 +208,29 @@ class TorchHeadModel:
         W, j = sub.weights[:, sub.joints], sub.joints
         M = (W @ P.rotations[:, j].reshape(B, -1, 9)).reshape(B, -1, 3, 3)
         return (M * shaped.unsqueeze(-2)).sum(-1) + W @ offset[:, j]
+
+    def _move_eyelids(self, sub: VertexSubset, shaped, beta, psi, rot) -> torch.Tensor:
+        """The eyelid rig (synth.model.eyelids, as HeadModel applies it), then only the subset's rows."""
+        B = shaped.shape[0]
+        rest = (beta @ self.joint_basis).reshape(-1, self.J, 3) + self.joint_rest
+        eye = torch.eye(3, dtype=self.dtype, device=self.device).expand(B, 3, 3)
+        eye_rot = {e.joint: eye if rot is None else axis_angle_to_matrix(rot[:, e.joint]) for e in sub.eyelids.eyes}
+        shaped = shaped.clone()
+        for rows, p in apply_eyelids(sub.eyelids, shaped, rest, psi, eye_rot, self._ops).values():
+            shaped[:, rows] = p
+        return shaped[:, :sub.n]
+
+    def eyelid_parameters(self, share: float = 0.1) -> tuple[list[int], list[int]]:
+        """(expression indices, joint indices) on which the eyelid rig bends the lids
+        non-linearly: the eye joints, and the codes whose blendshape moves a lid-margin vertex
+        by at least ``share`` of the most any code does (the margins are what the rig lays on
+        the pitched cornea). Both empty for models without the rig."""
+        if self._eyelids is None:
+            return [], []
+        d = self.data
+        margins = np.concatenate([np.r_[d.regions[f"eyelid_{s}_upper"], d.regions[f"eyelid_{s}_lower"]] for s in "lr"])
+        move = np.abs(self._basis_np[self.Ki:, margins]).max(axis=(1, 2))
+        return np.nonzero(move >= share * move.max())[0].tolist(), sorted(e.joint for e in self._eyelids.eyes)
 
     def vertices(self, identity, expression, joint_rotations=None, translation=None) -> torch.Tensor:
         """(B, V, 3) posed vertices."""

@@ -293,6 +293,21 @@ class _Problem:
                 hi["psi"].fill_(b)
         return torch.cat([lo[n].reshape(-1) for n in names]), torch.cat([hi[n].reshape(-1) for n in names])
 
+    def lid_block(self, names: list[str]) -> torch.Tensor:
+        """Indices into theta of the parameters the eyelid rig bends the landmarks with
+        (TorchHeadModel.eyelid_parameters: eye-region codes, fitted eye joints), for the
+        solver's exact curvature block (prior.fit.lm); empty without a rig."""
+        codes, joints = self.head.eyelid_parameters()
+        fitted = [k for k, j in enumerate(self.jidx.tolist()) if j in joints]
+        out, i = [], 0
+        for n in names:
+            if n == "psi":
+                out += [i + row * self.head.Ke + c for row in range(self.E) for c in codes]
+            elif n == "jrot":
+                out += [i + (row * len(self.jidx) + k) * 3 + a for row in range(self.E) for k in fitted for a in range(3)]
+            i += self.values[n].numel()
+        return torch.tensor(out, dtype=torch.long)
+
     def solve(self, names: list[str], max_iters: int):
         beta_at = None
         if "beta" in names:
@@ -313,7 +328,7 @@ class _Problem:
             lambda th: torch.cat(list(self.residual_parts(self.unpack(th, names)).values())),
             lambda th: self.identity_term(self.unpack(th, names)), curvature, self.pack(names),
             lower=lower, upper=upper, accept=lambda th: self.recentre(th, names) if "omega" in names else th,
-            max_iters=max_iters, rel_tol=self.opt.rel_tol)
+            max_iters=max_iters, rel_tol=self.opt.rel_tol, curved=self.lid_block(names))
         self.recentre(theta, names)
         return rep
 

@@ -8,7 +8,12 @@ semi-definite matrix (for the identity GMM: the responsibility-weighted precisio
 
 Each step solves (H + lambda diag(H)) delta = -g with H = J^T J + H_phi (Marquardt's
 scaling makes the step invariant to the units of each parameter: metres, radians, codes),
-accepts it if E decreases (then lambda shrinks) and otherwise raises lambda. Sizes here
+accepts it if E decreases (then lambda shrinks) and otherwise raises lambda. On an optional
+block of parameters (``curved``) H also gets the residuals' own curvature sum_i r_i Hess(r_i),
+which Gauss-Newton drops: where parameters are weakly determined (their J^T J is about the
+size of a regulariser's) and the residuals bend with them, that term dominates; without it
+the steps overshoot, get rejected, and the damping they leave behind makes every other
+direction crawl (the eyelid rig's lids riding on the pitched cornea, prior.fit.landmarks_fit). Sizes here
 are ~100-300 parameters and ~1,000 residuals, so the dense solve costs nothing.
 """
 
@@ -35,7 +40,8 @@ def levenberg_marquardt(residuals: Callable[[torch.Tensor], torch.Tensor],
                         scalar_curvature: Callable[[torch.Tensor], torch.Tensor],
                         theta: torch.Tensor, *, lower: torch.Tensor | None = None, upper: torch.Tensor | None = None,
                         accept: Callable[[torch.Tensor], torch.Tensor] | None = None,
-                        max_iters: int = 200, rel_tol: float = 1e-12, lam: float = 1e-3) -> tuple[torch.Tensor, LMReport]:
+                        max_iters: int = 200, rel_tol: float = 1e-12, lam: float = 1e-3,
+                        curved: torch.Tensor | None = None) -> tuple[torch.Tensor, LMReport]:
     """Minimise 0.5 |residuals(theta)|^2 + scalar(theta) from ``theta``, optionally within
     bounds ``lower <= theta <= upper`` (tensors like theta, +-inf where unbounded).
 
@@ -44,6 +50,9 @@ def levenberg_marquardt(residuals: Callable[[torch.Tensor], torch.Tensor],
     leave the box is stopped on its bound and held while the rest re-solve (see
     :func:`_bounded_step`). ``accept(theta)`` (optional) is called on every accepted iterate and
     returns the parameters to continue from (used to re-centre rotation parameters).
+    ``curved`` (optional, indices into theta): the block that gets the residuals' own curvature
+    (module docstring), projected onto the positive semi-definite matrices; keep it small (it
+    costs a Hessian of the residuals over the block per iteration).
     Converged when an accepted step lowers E by at most ``rel_tol`` relatively, or the
     projected gradient vanishes.
     """
@@ -72,6 +81,8 @@ def levenberg_marquardt(residuals: Callable[[torch.Tensor], torch.Tensor],
         if gnorm <= 1e-12 * max(1.0, abs(E)):
             return theta, LMReport(it - 1, True, E, gnorm, history)
         H = J.T @ J + scalar_curvature(theta)
+        if curved is not None and curved.numel():
+            H[curved[:, None], curved[None, :]] += _residual_curvature(residuals, theta, r, curved)
         d = H.diagonal().clamp_min(1e-12 * float(H.diagonal().max()) + 1e-30)
         while True:
             cand = theta + _bounded_step(H + lam * torch.diag(d), g, theta, lo, hi, free)
@@ -89,6 +100,17 @@ def levenberg_marquardt(residuals: Callable[[torch.Tensor], torch.Tensor],
         if decrease <= rel_tol * max(abs(E), 1.0):
             return theta, LMReport(it, True, E, gnorm, history)
     return theta, LMReport(max_iters, False, E, gnorm, history)
+
+
+def _residual_curvature(residuals, theta: torch.Tensor, r: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
+    """sum_i r_i Hess(r_i) over the parameters ``idx`` (the Hessian of r . residuals with r held),
+    with its negative eigenvalues set to 0 so that H stays positive semi-definite."""
+    def weighted(x):
+        return (r * residuals(theta.index_put((idx,), x))).sum()
+
+    C = torch.func.hessian(weighted)(theta[idx]).detach()
+    w, V = torch.linalg.eigh(0.5 * (C + C.T))
+    return (V * w.clamp_min(0.0)) @ V.T
 
 
 def _bounded_step(A: torch.Tensor, g: torch.Tensor, theta: torch.Tensor, lo: torch.Tensor, hi: torch.Tensor,

@@ -16,6 +16,7 @@ import numpy as np
 
 from synth.errors import CodeError
 from synth.geometry.rotations import axis_angle_to_matrix
+from synth.model.eyelids import EyelidRig, apply_eyelids
 from synth.model.format import HeadModelData
 
 
@@ -79,6 +80,7 @@ class HeadModel:
         # landmarks: vertex indices of the corners and barycentric weights
         self._lm = {s: (d.triangles[tri].astype(np.int64), bary.astype(dt)) for s, (tri, bary) in d.landmarks.items()}
         self.joint_index = {n: i for i, n in enumerate(d.joint_names)}
+        self._eyelids = EyelidRig.from_data(d)  # None for models without the rig (imported ones)
 
     # ---- public API -----------------------------------------------------------------
 
@@ -122,6 +124,8 @@ class HeadModel:
         shaped += self._template
         shaped = shaped.reshape(B, self.V, 3)
         joints = self._joints(beta)
+        if self._eyelids is not None:
+            self._move_eyelids(shaped, joints, psi, rot)
         G, A = self._chain(joints, rot, trans)
         posed = self._skin_vertices(shaped, A, rot is None and trans is None)
         lms = {}
@@ -157,6 +161,17 @@ class HeadModel:
                 raise CodeError("argument 'translation' contains NaN or Inf", "translation", "pass finite values")
             trans = np.broadcast_to(t, (B, 3))
         return rot, trans
+
+    def _move_eyelids(self, shaped: np.ndarray, joints: np.ndarray, psi: np.ndarray, rot) -> None:
+        """The eyelid rig (synth.model.eyelids), in place, before skinning."""
+        B = shaped.shape[0]
+        eye_rot = {}
+        for e in self._eyelids.eyes:
+            eye_rot[e.joint] = (np.broadcast_to(np.eye(3), (B, 3, 3)) if rot is None
+                                else axis_angle_to_matrix(rot[:, e.joint].astype(np.float64)))
+        moved = apply_eyelids(self._eyelids, shaped, joints, psi, eye_rot)
+        for idx, p in moved.values():
+            shaped[:, idx] = p
 
     def _joints(self, beta: np.ndarray) -> np.ndarray:
         return (beta @ self._joint_basis + self._joint_rest).reshape(-1, self.J, 3)

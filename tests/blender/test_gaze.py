@@ -9,10 +9,10 @@ pupil inside the ``eyes`` class), its camera ray is intersected with the sphere 
 compared with the JSON's gaze direction for that eye (yaw - vergence, pitch):
 angle error <= ``MAX_ERROR_DEG``.
 
-The skin is made transparent for the measurement: the eyelids do not follow vertical gaze in the
-head model, so above ~8 degrees of pitch the upper lid covers part of the pupil and the centroid
-of what is visible is no longer the pupil's centre (with the lids, +12 degrees reads as ~11
-degrees of error; docs/realism-eyes-garments.md).
+The skin is made transparent for the measurement, so that it reads the eye alone: the lids
+follow vertical gaze (``synth.model.eyelids``, upper lid x 0.8 of the pitch), but a lid resting
+low (as at -3 SD) can still cover the pupil's top in upgaze, and the centroid of what is visible
+is then not the pupil's centre (docs/realism-eyes-garments.md).
 
 The entrance pupil: the iris plane (limbus plane, distance ``h`` from the centre) seen through
 the corneal dome (apex at distance ``A``, radius of curvature ``r_c`` fitted to the dome), by

@@ -62,7 +62,11 @@ def test_joints(default_model):
 
 def test_zero_codes_give_the_template(default_model, default_head):
     v = default_head.vertices(np.zeros(default_head.Ki), np.zeros(default_head.Ke))
-    np.testing.assert_array_equal(v[0], default_model.template)
+    # the eyelid rig re-evaluates the lid vertices (through angles), within a float32 rounding
+    lids = np.unique(np.concatenate([e["vertices"] for e in default_model.extra["eyelids"]["eyes"]]))
+    rest = np.setdiff1d(np.arange(default_model.num_vertices), lids)
+    np.testing.assert_array_equal(v[0, rest], default_model.template[rest])
+    np.testing.assert_allclose(v[0, lids], default_model.template[lids], atol=1e-7, rtol=0)
 
 
 def test_template_is_mirror_symmetric(default_model):

@@ -137,3 +137,17 @@ def test_bad_shapes(th64, data):
         th64.landmarks(np.zeros((2, data.identity_dims)), np.zeros((3, data.expression_dims)))
     with pytest.raises(CodeError, match="landmark set"):
         th64.landmarks(np.zeros(data.identity_dims), np.zeros(data.expression_dims), landmark_set="nope")
+
+
+def test_eyelid_parameters(data, th64):
+    """What the landmark fit gives the solver's exact-curvature block (prior.fit.lm ``curved``):
+    the eye joints and the codes that move the lid margins; nothing for a model without the rig."""
+    import dataclasses
+
+    codes, joints = th64.eyelid_parameters()
+    names = [data.expression_names[i] for i in codes]
+    assert {"eyeBlinkLeft", "eyeBlinkRight", "eyeLookUpLeft", "eyeLookDownRight"} <= set(names)
+    assert not {"jawOpen", "mouthSmileLeft", "mouthPucker"} & set(names)
+    assert joints == sorted(data.joint_names.index(j) for j in ("eye_l", "eye_r"))
+    plain = dataclasses.replace(data, extra={k: v for k, v in data.extra.items() if k != "eyelids"})
+    assert TorchHeadModel(plain).eyelid_parameters() == ([], [])

@@ -79,3 +79,35 @@ def test_rosenbrock_and_accept_hook():
     assert rep.converged and len(seen) == rep.iterations
     np.testing.assert_allclose(got.numpy(), [1.0, 1.0], atol=1e-8)
     assert all(b <= a for a, b in zip(rep.history, rep.history[1:]))  # monotone
+
+
+def test_residual_curvature_matches_per_residual_hessians():
+    """The block's sum_i r_i Hess(r_i), against each residual's Hessian taken one by one
+    (torch.autograd.functional.hessian), then projected onto the PSD matrices by numpy."""
+    from prior.fit.lm import _residual_curvature
+
+    p = torch.tensor([1.3, -0.7, 0.4, 2.0], dtype=torch.float64)
+    idx = torch.tensor([0, 1, 3])
+
+    def res(q):
+        return torch.stack([q[0] * q[1] ** 2 - 1.0, torch.sin(q[0] * q[3]) + q[2], torch.exp(q[1]) * q[3] - 3.0])
+
+    r = res(p)
+    C = np.zeros((3, 3))
+    for i in range(3):
+        H = torch.autograd.functional.hessian(lambda x, i=i: res(p.index_put((idx,), x))[i], p[idx]).numpy()
+        C += float(r[i]) * H
+    w, V = np.linalg.eigh(C)
+    assert w.min() < 0  # an indefinite case: the projection matters
+    want = (V * np.maximum(w, 0.0)) @ V.T
+    got = _residual_curvature(res, p, r, idx).numpy()
+    np.testing.assert_allclose(got, want, atol=1e-12)
+
+
+def test_curved_block_reaches_scipy_optimum():
+    p0 = np.array([1.0, -0.5, 0.0])
+    ref = least_squares(_res_np, p0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+    got, rep = levenberg_marquardt(_res_t, _zero, _no_curv, torch.tensor(p0), rel_tol=1e-15,
+                                   curved=torch.tensor([0, 1]))
+    assert rep.converged
+    np.testing.assert_allclose(got.numpy(), ref, rtol=1e-7, atol=1e-9)

@@ -11,16 +11,19 @@ from synth.model.builders.makehuman.expressions import expression_space, express
 from synth.model.builders.makehuman.identity import (identity_pca, macro_targets, modifier_files, modifiers,
                                                      sample_identity_weights)
 from synth.model.builders.makehuman.landmarks import regions_and_landmarks
-from synth.model.builders.makehuman.mesh import CROP_MAX_ABS_X, CROP_MIN_Z, build_mesh, triangulate
+from synth.model.builders.makehuman.mesh import (CROP_MAX_ABS_X, CROP_MIN_Z, EYE_CORNEA_BULGE, EYE_LIMBUS_DEG,
+                                                 build_mesh, triangulate)
 from synth.model.builders.makehuman.skinning import JOINT_MIRROR, JOINT_NAMES, JOINT_PARENTS, skin_weights
 from synth.model.builders.makehuman.sources import (SOURCE, hm08_mirror, license_text, read_base_obj, read_target,
                                                     vertex_groups)
 from synth.model.builders.makehuman.targets import TargetSpace
+from synth.model.eyelids import build_eyelid_rig, rest_lids
 from synth.model.format import HeadModelData
 from synth.model.identity_gmm import fit_gmm
 
-BUILDER_VERSION = "3"  # bump on every output change ("3": ibug68 landmarks on mesh edges name another
-# adjacent triangle since synth.geometry.closest places them; their evaluated positions are unchanged)
+BUILDER_VERSION = "4"  # bump on every output change ("3": ibug68 landmarks on mesh edges name another
+# adjacent triangle since synth.geometry.closest places them; their evaluated positions are unchanged;
+# "4": the eyelid rig, extra["eyelids"], and a template whose lid margins rest on the eyeballs)
 SEED = 20241128
 N_SAMPLES = 3000  # identity samples before mirroring (the PCA sees 2 * N_SAMPLES)
 GMM_COMPONENTS = 6
@@ -76,6 +79,13 @@ def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dim
     tris, tri_uv = triangulate(mesh.base, mesh.polys, mesh.poly_uvs)
 
     regions, landmarks, landmark_names = regions_and_landmarks(mesh, template, tris, family, joint_rest, space, data)
+    eyelids = build_eyelid_rig(template, regions, joint_rest, list(JOINT_NAMES), names, EYE_LIMBUS_DEG,
+                               EYE_CORNEA_BULGE)
+    template = rest_lids(eyelids, template, joint_rest, list(JOINT_NAMES), names)
+    for eye in eyelids["eyes"]:  # the rig closes the upper lid: the sculpted blink keeps the rest
+        if eye["blink"] is not None:
+            keep = 1.0 - np.asarray(eye["weight"]) * np.asarray(eye["upper"])
+            ebasis[names.index(eye["blink"]), eye["vertices"]] *= keep[:, None]
 
     poly_offsets = np.concatenate([[0], np.cumsum([len(p) for p in mesh.polys])])
     return HeadModelData(
@@ -124,5 +134,6 @@ def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dim
             "mirror": mesh.mirror.astype(int).tolist(),
             "expression_joint_rotations": rotations,
             "eye_radius_m": round(mesh.eye_radius, 6),
+            "eyelids": eyelids,
         },
     )

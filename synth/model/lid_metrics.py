@@ -1,0 +1,57 @@
+"""Measurements of the eyelids on evaluated vertices, independent of the rig's own maths
+(``synth.model.eyelids``): the eyeball is measured from its vertices, not from the joints.
+
+- :func:`margin_gaps`: for every lid-margin vertex, its distance from the eyeball's surface
+  (negative: inside). The surface radius along a direction is interpolated from the eyeball's
+  own vertices by their angle from the eye's axis (sphere and corneal bulge alike).
+- :func:`lid_opening`: the largest distance from an upper-margin vertex to the lower margin
+  (a polyline): the opening when open, ~0 when the upper margin lies on the lower one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from synth.geometry.normals import normalize
+from synth.model.meshutil import fit_sphere
+
+
+def _eye(data, V: np.ndarray, side: str):
+    """(centre, forward axis, (angle, radius) profile sorted by angle) of one eye."""
+    c = fit_sphere(V[np.asarray(data.regions[f"sclera_{side}"], np.int64)])[0]
+    f = normalize(V[np.asarray(data.regions[f"iris_{side}"], np.int64)].mean(0) - c)
+    q = V[np.asarray(data.regions[f"eye_{side}"], np.int64)] - c
+    r = np.linalg.norm(q, axis=1)
+    t = np.arccos(np.clip(q @ f / r, -1.0, 1.0))
+    o = np.argsort(t)
+    return c, f, t[o], r[o]
+
+
+def margin_gaps(data, vertices, side: str) -> dict[str, np.ndarray]:
+    """{"upper": gaps, "lower": gaps} in metres for the margin vertices of eye ``side``."""
+    V = np.asarray(vertices, np.float64)
+    c, f, t_prof, r_prof = _eye(data, V, side)
+    out = {}
+    for lid in ("upper", "lower"):
+        q = V[np.asarray(data.regions[f"eyelid_{side}_{lid}"], np.int64)] - c
+        r = np.linalg.norm(q, axis=1)
+        t = np.arccos(np.clip(q @ f / r, -1.0, 1.0))
+        out[lid] = r - np.interp(t, t_prof, r_prof)
+    return out
+
+
+def _point_polyline_distance(p: np.ndarray, line: np.ndarray) -> np.ndarray:
+    a, b = line[:-1], line[1:]
+    ab = b - a
+    t = np.clip(np.einsum("psk,sk->ps", p[:, None] - a[None], ab) / np.maximum((ab * ab).sum(1), 1e-30), 0.0, 1.0)
+    closest = a[None] + t[..., None] * ab[None]
+    return np.linalg.norm(p[:, None] - closest, axis=2).min(1)
+
+
+def lid_opening(data, vertices, side: str) -> float:
+    """Largest distance (metres) from an upper-margin vertex to the lower margin of eye ``side``."""
+    V = np.asarray(vertices, np.float64)
+    up = V[np.asarray(data.regions[f"eyelid_{side}_upper"], np.int64)]
+    lo = np.asarray(data.regions[f"eyelid_{side}_lower"], np.int64)
+    lo = V[lo[np.argsort(V[lo, 0])]]
+    return float(_point_polyline_distance(up, lo).max())

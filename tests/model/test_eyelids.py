@@ -1,0 +1,124 @@
+"""The eyelid rig (synth.model.eyelids) on the default model, measured by synth.model.lid_metrics
+(which reads the eyeball from its vertices, not from the rig's joints and formula): the lids
+rest on the eyeball, a blink closes them, and they follow vertical gaze; at the +-3 SD
+identities of tests/support/asset_scene as well as at the mean."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from synth.conventions import gaze_axis_angle
+from synth.model.eyelids import FOLLOW_UPPER
+from synth.model.lid_metrics import lid_opening, margin_gaps
+from synth.model.meshutil import fit_sphere
+
+IDENTITIES = (0.0, 3.0, -3.0)  # x the alternating +-1 pattern of asset_scene's id+3 / id-3
+MAX_GAP_M = 0.3e-3
+MAX_PENETRATION_M = 0.05e-3  # the rig keeps margins 0.1 mm off; tolerance for the measurement
+MAX_CLOSED_OPENING_M = 0.5e-3
+
+
+def _eval(hm, sd: float, blink: float = 0.0, pitch: float = 0.0, yaw: float = 0.0) -> np.ndarray:
+    d = hm.data
+    beta = sd * np.where(np.arange(d.identity_dims) % 2 == 0, 1.0, -1.0)
+    psi = np.zeros(d.expression_dims)
+    for n in ("eyeBlinkLeft", "eyeBlinkRight"):
+        psi[d.expression_names.index(n)] = blink
+    rot = np.zeros((hm.J, 3))
+    rot[hm.joint_index["eye_l"]] = rot[hm.joint_index["eye_r"]] = gaze_axis_angle(yaw, pitch)
+    return hm.vertices(beta, psi, rot)[0].astype(np.float64)
+
+
+@pytest.fixture(scope="module")
+def hm(default_model):
+    from synth.model.head import HeadModel
+
+    return HeadModel(default_model, np.float64)
+
+
+@pytest.mark.parametrize("sd", IDENTITIES)
+@pytest.mark.parametrize("blink,pitch", [(0.0, 0.0), (1.0, 0.0), (0.0, 15.0), (0.0, -15.0), (1.0, 12.0), (0.5, -10.0)])
+def test_lid_margins_rest_on_the_eyeball(hm, sd, blink, pitch):
+    V = _eval(hm, sd, blink, pitch)
+    for side in "lr":
+        for lid, g in margin_gaps(hm.data, V, side).items():
+            assert -MAX_PENETRATION_M <= g.min() and g.max() <= MAX_GAP_M, (side, lid, g.min(), g.max())
+
+
+@pytest.mark.parametrize("sd", IDENTITIES)
+@pytest.mark.parametrize("blink,pitch,yaw", [(0.0, 0.0, 20.0), (0.0, 15.0, 10.0), (0.0, -15.0, -20.0), (0.5, -10.0, 5.0)])
+def test_lid_margins_with_sideways_gaze(hm, sd, blink, pitch, yaw):
+    """The rig places the cornea by the gaze pitch only (synth.model.eyelids), so with yaw the
+    cornea's side slides under the margins: measured -1.11..+1.26 mm at 20 degrees."""
+    V = _eval(hm, sd, blink, pitch, yaw)
+    for side in "lr":
+        for lid, g in margin_gaps(hm.data, V, side).items():
+            assert -1.3e-3 <= g.min() and g.max() <= 1.3e-3, (side, lid, g.min(), g.max())
+
+
+@pytest.mark.parametrize("sd", IDENTITIES)
+@pytest.mark.parametrize("pitch", [0.0, 15.0, -15.0])
+def test_blink_closes_the_lids(hm, sd, pitch):
+    for side in "lr":
+        open_ = lid_opening(hm.data, _eval(hm, sd, 0.0, pitch), side)
+        half = lid_opening(hm.data, _eval(hm, sd, 0.5, pitch), side)
+        closed = lid_opening(hm.data, _eval(hm, sd, 1.0, pitch), side)
+        assert open_ > 0.005 and closed <= MAX_CLOSED_OPENING_M, (side, open_, closed)
+        assert closed < half < open_
+
+
+def test_closed_lids_cover_the_eyeball(hm):
+    """Every lid vertex the rig moves stays outside the eyeball (sphere and cornea) when closed."""
+    from synth.model.eyelids import EyelidRig
+
+    rig = EyelidRig.from_data(hm.data)
+    for sd in IDENTITIES:
+        V = _eval(hm, sd, 1.0, 10.0)
+        for e, side in zip(rig.eyes, "lr"):
+            eye = V[np.asarray(hm.data.regions[f"eye_{side}"])]
+            c = fit_sphere(V[np.asarray(hm.data.regions[f"sclera_{side}"])])[0]
+            q = V[e.vertices] - c
+            # the eyeball vertex nearest in direction to each lid vertex bounds the surface there
+            qe = eye - c
+            re = np.linalg.norm(qe, axis=1)
+            near = np.argmax((q / np.linalg.norm(q, axis=1, keepdims=True)) @ (qe / re[:, None]).T, axis=1)
+            assert (np.linalg.norm(q, axis=1) - re[near]).min() > -0.3e-3, (sd, side)
+
+
+def _upper_elevation(hm, V, side: str) -> float:
+    """Elevation (degrees) about the eyeball's centre of the upper margin straight above it
+    (interpolated along the margin at the centre's x)."""
+    c = fit_sphere(V[np.asarray(hm.data.regions[f"sclera_{side}"])])[0]
+    p = V[np.asarray(hm.data.regions[f"eyelid_{side}_upper"])] - c
+    p = p[np.argsort(p[:, 0])]
+    return float(np.interp(0.0, p[:, 0], np.degrees(np.arctan2(p[:, 2], -p[:, 1]))))
+
+
+@pytest.mark.parametrize("sd", IDENTITIES)
+def test_upper_lid_follows_the_gaze_pitch(hm, sd):
+    a0 = _upper_elevation(hm, _eval(hm, sd), "l")
+    for pitch in (12.0, -12.0, 20.0):
+        V = _eval(hm, sd, 0.0, pitch)
+        gain = (_upper_elevation(hm, V, "l") - a0) / pitch
+        assert 0.6 <= gain <= 0.9 and abs(gain - FOLLOW_UPPER) < 0.1, (pitch, gain)
+    # on the mean head (tests/blender/test_gaze.py's), at +12 degrees, its steepest look up, the
+    # upper lid clears the pupil: the margin stays above the pupil's top (6.5 degrees off the
+    # gaze axis). Not at -3 SD: that identity's lid already rests 7.6 degrees above the centre.
+    if sd == 0.0:
+        assert _upper_elevation(hm, _eval(hm, sd, 0.0, 12.0), "l") > 12.0 + 6.5
+
+
+def test_models_without_the_rig_are_linear(default_model):
+    """An imported model (no extra["eyelids"]) is evaluated as before: blend, then skin."""
+    import dataclasses
+
+    from synth.model.head import HeadModel
+
+    plain = dataclasses.replace(default_model, extra={k: v for k, v in default_model.extra.items() if k != "eyelids"})
+    h = HeadModel(plain, np.float64)
+    psi = np.zeros(plain.expression_dims)
+    psi[plain.expression_names.index("eyeBlinkLeft")] = 1.0
+    v = h.vertices(np.zeros(plain.identity_dims), psi)[0]
+    want = plain.template.astype(np.float64) + plain.expression_basis[plain.expression_names.index("eyeBlinkLeft")]
+    np.testing.assert_allclose(v, want, atol=1e-9)
