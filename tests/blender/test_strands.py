@@ -35,11 +35,26 @@ def _closest_on_triangles(P, A, B, C):
     return trimesh.triangles.closest_point(np.stack([A, B, C], 1), P).reshape(shape)
 
 
+def _tie_sign(points, Q, d, tri):
+    """Sign of each point from its candidate closest points ``Q`` (n, m, 3), distances ``d``
+    (n, m) and triangles ``tri`` (n, m, 3, 3): a point is inside only if it is behind the plane
+    of every face at the closest distance (to 0.1 %). One of those faces alone is not enough: a
+    point in front of a thin convex fold (the edge of a lid seen from beyond its tip) is as close
+    to the fold's underside as to its top, and behind the underside's plane, yet outside.
+    Where the closest point is an edge, this agrees with the angle-weighted pseudo-normal
+    (Baerentzen and Aanaes 2005), which is exact for a closed mesh."""
+    n = np.cross(tri[..., 1, :] - tri[..., 0, :], tri[..., 2, :] - tri[..., 0, :])
+    h = ((points[:, None] - Q) * n).sum(-1) / np.maximum(np.linalg.norm(n, axis=-1), 1e-30)
+    tied = d <= d.min(1, keepdims=True) * (1.0 + 1e-3) + 1e-9
+    return np.where(np.where(tied, h, -np.inf).max(1) < 0.0, -1.0, 1.0)
+
+
 def surface_distance(points, V, T, k: int = 24, exact: bool = False):
-    """Unsigned and signed (by the closest face's normal) distance to a triangle mesh (the same
-    result as trimesh.proximity.closest_point, without needing rtree). The k triangles with the
-    nearest centroids are tried; with ``exact`` every point found farther than 0.1 mm is checked
-    against all triangles (a large triangle's centroid can be far from a point on it)."""
+    """Unsigned and signed distance to a triangle mesh (the same distances as
+    trimesh.proximity.closest_point, without needing rtree; the sign by :func:`_tie_sign`). The
+    k triangles with the nearest centroids are tried; with ``exact`` every point found farther
+    than 0.1 mm is checked against all triangles (a large triangle's centroid can be far from a
+    point on it)."""
     tri = V[T]
     cen = tri.mean(1)
     _, idx = cKDTree(cen).query(points, k=k)
@@ -47,19 +62,16 @@ def surface_distance(points, V, T, k: int = 24, exact: bool = False):
     Pk = np.broadcast_to(points[:, None], t.shape[:2] + (3,))
     Q = _closest_on_triangles(Pk, t[..., 0, :], t[..., 1, :], t[..., 2, :])
     d = np.linalg.norm(Pk - Q, axis=-1)
-    j = d.argmin(1)
-    i = np.arange(len(points))
-    best, q, tb = d[i, j], Q[i, j], idx[i, j]
+    best = d.min(1)
+    sign = _tie_sign(points, Q, d, t)
     redo = np.flatnonzero(best > 1e-4) if exact else np.zeros(0, np.int64)
     for a in range(0, len(redo), 64):
         r = redo[a:a + 64]
         Pa = np.broadcast_to(points[r][:, None], (len(r), len(T), 3))
         Qa = _closest_on_triangles(Pa, tri[None, :, 0], tri[None, :, 1], tri[None, :, 2])
         da = np.linalg.norm(Pa - Qa, axis=-1)
-        ja = da.argmin(1)
-        best[r], q[r], tb[r] = da[np.arange(len(r)), ja], Qa[np.arange(len(r)), ja], ja
-    n = np.cross(tri[tb, 1] - tri[tb, 0], tri[tb, 2] - tri[tb, 0])
-    sign = np.sign(((points - q) * n).sum(-1))
+        best[r] = da.min(1)
+        sign[r] = _tie_sign(points[r], Qa, da, np.broadcast_to(tri[None], (len(r),) + tri.shape))
     return best, sign * best
 
 
@@ -105,6 +117,29 @@ def _rig(cls):
 
 def _entry(cls, sid, params):
     return {"id": sid, "generator": f"procedural:{cls}", "params": dict(params)}
+
+
+def _thin_wedge(half_width: float = 0.2, scale: float = 0.002, length: float = 0.01):
+    """A closed triangular prism along x, outward-facing, whose cross-section (y, z) is a thin
+    wedge with its tip edge at the origin pointing to +y: the shape of a lid's edge."""
+    ring = np.array([[0.0, 0.0], [-1.0, -half_width], [-1.0, half_width]]) * scale
+    V = np.array([[x, y, z] for x in (-length, length) for y, z in ring])
+    T = np.array([[0, 1, 4], [0, 4, 3], [0, 5, 2], [0, 3, 5], [1, 2, 5], [1, 5, 4], [0, 2, 1], [3, 4, 5]])
+    return V, T[:, ::-1]
+
+
+@pytest.mark.parametrize("order", [1, -1])
+def test_surface_distance_sign_at_a_thin_fold(order):
+    V, T = _thin_wedge()
+    n = np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]])
+    assert np.all(((V[T].mean(1) - V.mean(0)) * n).sum(1) > 0)  # outward, as the head's faces
+    T = T[::order]
+    # beyond the tip, in front of the upper face and behind the lower face's plane (tied at the
+    # tip edge): outside; inside the wedge, tied between the two long faces: inside
+    P = np.array([[0.0, 0.0010, 0.0012], [0.0, -0.0010, 0.0], [0.0, 0.0, -0.0015], [0.0, -0.0030, 0.0]])
+    d, sd = surface_distance(P, V, T, k=len(T), exact=True)
+    assert np.allclose(d[0], np.hypot(0.0010, 0.0012)) and np.allclose(d[1], 0.0010 * np.sin(np.arctan(0.2)))
+    assert list(np.sign(sd)) == [1.0, -1.0, 1.0, 1.0]
 
 
 # --------------------------------------------------------------------------- attachment on hard cases
