@@ -122,5 +122,7 @@ def test_sample_mapping_beats_the_template_mapping_on_held_out_samples(J, defaul
     new = J.nme(J.face_errors(J.apply_mapping(mesh, idx, w), ibug))
     old = J.nme(J.face_errors(J.apply_mapping(mesh, t_idx, t_w), ibug))
     assert np.median(new) < 0.012 and np.median(new) < 0.8 * np.median(old)
+    # the same seed gives the same samples; compared to 1e-12 relative, not bit for bit: float64
+    # matrix products may differ in the last bit with the arrays' memory alignment (seen: 1.4e-13 px)
     again = J.model_samples(default_model, 7, 8, 4)
-    np.testing.assert_array_equal(again[0], mesh)
+    np.testing.assert_allclose(again[0], mesh, rtol=1e-12, atol=0)
