@@ -84,7 +84,7 @@ def build_front(spec: FrameSpec, n: int = 96) -> Front:
         wall = np.asarray(wall, np.int64)
         if side < 0:
             wall = wall[:, ::-1]
-        lens_parts.append((np.concatenate([fv, bv]), np.concatenate([F[:, ::-1], F + nv, wall])))
+        lens_parts.append((np.concatenate([fv, bv]), np.concatenate([F, (F + nv)[:, ::-1], wall])))
         centres.append(to3(np.zeros(1), np.zeros(1), np.zeros(1))[0])
 
         # rim: centre line offset outward from the lens edge (the lens sits in a groove)
