@@ -23,6 +23,7 @@ from synth.assets.fit.glasses.solve import FRAME_PARTS, GlassesFit, fit_glasses
 from synth.assets.fit.glasses.spec import COLOURS, METALLIC_COLOURS, FrameSpec, frame_spec
 
 PASS = CLASSES["glasses"].segmentation_id
+LENS_SHARP_DEG = 45.0  #: lens edges with a steeper dihedral angle (cap to wall: ~90) are shaded sharp
 TINTS = {"aviator": (0.30, 0.26, 0.16), "default": (0.35, 0.33, 0.30)}  # tint colour at full strength
 
 
@@ -97,6 +98,16 @@ def mesh_from_arrays(name: str, parts: list[tuple[np.ndarray, np.ndarray, int]])
     return new_triangle_mesh(name, np.concatenate(Vs), np.concatenate(Fs), np.concatenate(Ms))
 
 
+def lens_mesh(V: np.ndarray, F: np.ndarray):
+    """The lenses' mesh (closed solids wound outward, see ``synth.assets.fit.glasses.front``):
+    smooth shaded, with the normals split where the caps meet the edge wall (~90 degrees on
+    shared vertices), so the caps refract as smooth glass up to the rim (averaged normals would
+    tilt the outer ring of cap triangles by up to ~45 degrees)."""
+    me = mesh_from_arrays("glasses_lenses", [(V, F, 0)])
+    me.set_sharp_from_angle(angle=np.radians(LENS_SHARP_DEG))
+    return me
+
+
 class GlassesRig(Rig):
     def __init__(self, spec: FrameSpec, frame_ob, lens_ob, materials: dict, info: dict):
         super().__init__("glasses", [frame_ob, lens_ob], info)
@@ -112,8 +123,7 @@ class GlassesRig(Rig):
         frame_ob, lens_ob = self.objects
         slots = [(fit.parts[k][0], fit.parts[k][1], i) for i, k in enumerate(FRAME_PARTS)
                  if k in fit.parts and len(fit.parts[k][0])]
-        for ob, me in ((frame_ob, mesh_from_arrays("glasses_frame", slots)),
-                       (lens_ob, mesh_from_arrays("glasses_lenses", [(*fit.parts["lens"], 0)]))):
+        for ob, me in ((frame_ob, mesh_from_arrays("glasses_frame", slots)), (lens_ob, lens_mesh(*fit.parts["lens"]))):
             old = ob.data
             for m in old.materials:
                 me.materials.append(m)

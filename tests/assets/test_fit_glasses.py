@@ -87,6 +87,53 @@ def test_fit_all_styles_pure(default_head, case):
         assert 0.09 < min(fit.info["temple_length_m"]) and max(fit.info["temple_length_m"]) < 0.2
 
 
+def _inside_by_parity(P, tris, direction=(0.3141, 0.5926, 0.7418)):
+    """Inside test by ray parity (odd number of crossings of a fixed ray; Moller-Trumbore on
+    every triangle), independent of the triangles' winding."""
+    d = np.asarray(direction) / np.linalg.norm(direction)
+    a, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
+    h = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, h)
+    inside = []
+    for p in P:
+        s = p - a
+        u = np.einsum("ij,ij->i", s, h) / det
+        q = np.cross(s, e1)
+        v = (q @ d) / det
+        t = np.einsum("ij,ij->i", e2, q) / det
+        inside.append(int(((u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)).sum()) % 2 == 1)
+    return np.array(inside)
+
+
+def _lens_faces_outward(V, F, stride: int = 31):
+    """Fraction of (every ``stride``-th) lens faces whose normal points out of the solid: a point
+    just off the face along its normal is outside, just off against it inside (ray parity)."""
+    import trimesh
+
+    m = trimesh.Trimesh(V, F, process=False)
+    assert m.is_watertight and m.is_winding_consistent
+    tri = V[F]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    c = tri.mean(1)[::stride]
+    eps = 2e-4  # m, well under the lens thickness (1.8-2.2 mm)
+    out, inn = _inside_by_parity(c + eps * n[::stride], tri), _inside_by_parity(c - eps * n[::stride], tri)
+    return float(np.mean(~out & inn))
+
+
+def test_lenses_are_closed_and_wound_outward(default_head):
+    """Cycles decides entering vs leaving glass by the side of the geometric normal: lenses wound
+    inward refract as if leaving the glass and reflect totally beyond ~42 degrees (issue 13's
+    white discs). Every face of both lenses, every style, in frame space and fitted on a head."""
+    data, verts, lms = _head(default_head, "neutral")
+    for style in STYLES:
+        spec = frame_spec(style, {}, np.random.default_rng(7))
+        front = build_front(spec)
+        fit = fit_glasses(verts, data.triangles, data.regions, lms, spec, front=front)
+        for where, (V, F) in (("frame space", (front.lens_V, front.lens_F)), ("fitted", fit.parts["lens"])):
+            assert _lens_faces_outward(np.asarray(V, np.float64), np.asarray(F)) > 0.99, (style, where)
+
+
 def test_fit_deterministic_and_spec_from_params(default_head):
     data, verts, lms = _head(default_head, "neutral")
     spec = frame_spec("aviator", {"lens_width_m": 0.056, "lens_tint": 0.4, "frame_colour": "gold"},

@@ -53,7 +53,9 @@ def build_front(spec: FrameSpec, n: int = 96) -> Front:
         def to3(u, z, y):
             return np.stack([side * (cx + u), y, z], -1)
 
-        # lens: front cap from concentric rings, back cap, edge wall
+        # lens: front cap from concentric rings, back cap, edge wall; a closed solid wound
+        # outward (Cycles takes the geometric normal's side for entering vs leaving the glass:
+        # caps wound inward refract as if leaving it, with total reflection beyond ~42 degrees)
         K = 6
         ring_s = np.linspace(1.0, 0.0, K + 1)[:-1]
         front, back = [], []
@@ -84,7 +86,7 @@ def build_front(spec: FrameSpec, n: int = 96) -> Front:
         wall = np.asarray(wall, np.int64)
         if side < 0:
             wall = wall[:, ::-1]
-        lens_parts.append((np.concatenate([fv, bv]), np.concatenate([F[:, ::-1], F + nv, wall])))
+        lens_parts.append((np.concatenate([fv, bv]), np.concatenate([F, (F + nv)[:, ::-1], wall])))
         centres.append(to3(np.zeros(1), np.zeros(1), np.zeros(1))[0])
 
         # rim: centre line offset outward from the lens edge (the lens sits in a groove)
