@@ -19,8 +19,9 @@ rays from the pupil's top cross the hidden upper lid; Cycles ended most of them 
 weighted the few survivors up, so at 4 spp the pupil's top was speckled black and the dark-weighted
 centroid moved up by 0.9 px (1.88 degrees at +12 degrees pitch instead of 0.1).
 
-The test also checks that it can fail: every measured direction is compared with the gaze
-mirrored (yaw and pitch negated), which must be off by more than ``2 * MAX_ERROR_DEG``.
+The measurement must also tell a gaze from its mirror image: every measured direction of a
+turned eye is compared with the gaze with yaw and pitch negated, which must be off by more than
+``2 * MAX_ERROR_DEG`` (rendered with the pitch's sign flipped, the test fails at 19.8-24.3 degrees).
 
 The entrance pupil: the iris plane (limbus plane, distance ``h`` from the centre) seen through
 the corneal dome (apex at distance ``A``, radius of curvature ``r_c`` fitted to the dome), by
