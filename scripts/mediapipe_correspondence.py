@@ -128,11 +128,15 @@ def cast(points: np.ndarray, V: np.ndarray, tris: np.ndarray, K: np.ndarray, w2c
 def mirror_pairs(det: np.ndarray, unmirrored: np.ndarray) -> np.ndarray:
     """mediapipe's left-right partner of each point, from the data: ``pair[i] = j`` when point j
     found on the mirrored image and mapped back (``unmirrored``, (F, P, 2)) lands where point i is
-    found on the image (``det``); the assignment minimising the mean distance in face widths."""
+    found on the image (``det``); the assignment minimising the mean squared distance in face
+    widths, after moving each frame's mapped-back points onto the centroid of its points."""
     from scipy.optimize import linear_sum_assignment
 
     face = np.linalg.norm(det[:, 454] - det[:, 234], axis=-1)[:, None, None]
-    cost = np.mean(np.linalg.norm(det[:, :, None] - unmirrored[:, None], axis=-1) / face, axis=0)
+    # the two runs err by a shift of the whole face; the point set is its own mirror image, so
+    # both have the same centroid: align them on it first
+    unmirrored = unmirrored - unmirrored.mean(axis=1, keepdims=True) + det.mean(axis=1, keepdims=True)
+    cost = np.mean(np.sum((det[:, :, None] - unmirrored[:, None]) ** 2, axis=-1) / face ** 2, axis=0)
     rows, cols = linear_sum_assignment(cost)
     pair = np.empty(len(rows), np.int64)
     pair[rows] = cols
