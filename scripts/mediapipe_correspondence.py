@@ -201,6 +201,8 @@ def derive(work: Path, train: int, out_dir: Path | None) -> Path:
            "derivation": {"frames": len(keys), "mirrored_frames": len(mkeys), "identities": train,
                           "script": "scripts/mediapipe_correspondence.py"},
            "points": points}
+    if pair is not None:  # mediapipe's left-right partners (found from the data, mirror_pairs)
+        doc["mirror"] = pair.tolist()
     path = (out_dir or CORRESPONDENCE_DIR) / f"mediapipe-{model_key(model)}.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(doc, indent=0) + "\n")
