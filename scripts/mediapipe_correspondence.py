@@ -20,6 +20,11 @@ every training frame and projected with that frame's camera, and the candidate w
 smallest RMS distance to the detections, in units of each frame's face width (distance of
 points 234 and 454), is kept. That RMS ("sigma_face") becomes the point's sigma when fitting
 (times the detected face width). Points hit in fewer than half of the frames are left out.
+
+``detect`` also runs mediapipe on each image mirrored left-right. A point found there and
+mapped back (x -> W - x) is a second detection of its mirror partner (the partners come from
+the data, :func:`mirror_pairs`), so every point is derived from detections on both sides of
+the face: mediapipe's left-right bias does not leave the correspondence asymmetric.
 """
 
 from __future__ import annotations
@@ -38,16 +43,19 @@ def detect(work: Path) -> None:
     import mediapipe as mp
     from PIL import Image
 
-    out = {}
+    out, mirrored = {}, {}
     with mp.solutions.face_mesh.FaceMesh(static_image_mode=True, max_num_faces=1, refine_landmarks=True) as fm:
         for p in sorted((work / "png").glob("*.png")):
             img = np.asarray(Image.open(p).convert("RGB"))
-            r = fm.process(img)
             H, W = img.shape[:2]
-            out[p.stem] = None if not r.multi_face_landmarks else \
-                [[q.x * W, q.y * H] for q in r.multi_face_landmarks[0].landmark]
-    (work / "mediapipe.json").write_text(json.dumps({"mediapipe": mp.__version__, "points": out}))
-    print(f"{sum(v is not None for v in out.values())}/{len(out)} images with a face")
+            for dst, im in ((out, img), (mirrored, img[:, ::-1])):
+                r = fm.process(np.ascontiguousarray(im))
+                dst[p.stem] = None if not r.multi_face_landmarks else \
+                    [[q.x * W, q.y * H] for q in r.multi_face_landmarks[0].landmark]
+    (work / "mediapipe.json").write_text(json.dumps({"mediapipe": mp.__version__, "points": out,
+                                                     "points_mirrored": mirrored}))
+    print(f"{sum(v is not None for v in out.values())}/{len(out)} images with a face "
+          f"({sum(v is not None for v in mirrored.values())} mirrored)")
 
 
 # ---------------------------------------------------------------------------- project env
@@ -117,6 +125,24 @@ def cast(points: np.ndarray, V: np.ndarray, tris: np.ndarray, K: np.ndarray, w2c
     return out_t, out_b
 
 
+def mirror_pairs(det: np.ndarray, unmirrored: np.ndarray) -> np.ndarray:
+    """mediapipe's left-right partner of each point, from the data: ``pair[i] = j`` when point j
+    found on the mirrored image and mapped back (``unmirrored``, (F, P, 2)) lands where point i is
+    found on the image (``det``); the assignment minimising the mean squared distance in face
+    widths, after moving each frame's mapped-back points onto the centroid of its points."""
+    from scipy.optimize import linear_sum_assignment
+
+    face = np.linalg.norm(det[:, 454] - det[:, 234], axis=-1)[:, None, None]
+    # the two runs err by a shift of the whole face; the point set is its own mirror image, so
+    # both have the same centroid: align them on it first
+    unmirrored = unmirrored - unmirrored.mean(axis=1, keepdims=True) + det.mean(axis=1, keepdims=True)
+    cost = np.mean(np.sum((det[:, :, None] - unmirrored[:, None]) ** 2, axis=-1) / face ** 2, axis=0)
+    rows, cols = linear_sum_assignment(cost)
+    pair = np.empty(len(rows), np.int64)
+    pair[rows] = cols
+    return pair
+
+
 def derive(work: Path, train: int, out_dir: Path | None) -> Path:
     _setup_path()
     from prior.fit.landmark_sources import CORRESPONDENCE_DIR, model_key
@@ -137,36 +163,54 @@ def derive(work: Path, train: int, out_dir: Path | None) -> Path:
 
     # mediapipe's pixel centres are at integers, synth's at +0.5
     det_px = np.asarray([det["points"][k] for k in keys]) + MP_PIXEL_OFFSET  # (F, 478, 2)
-    face_px = np.linalg.norm(det_px[:, 454] - det_px[:, 234], axis=-1)  # (F,) face width in pixels
-    hits_t = np.full((F, N_POINTS), -1)
-    hits_b = np.zeros((F, N_POINTS, 3))
-    for f in range(F):
-        hits_t[f], hits_b[f] = cast(det_px[f], posed[f], tris, *cams[f])
+    obs, frame_of, pair = det_px, np.arange(F), None
+    mir = det.get("points_mirrored") or {}
+    mkeys = [f for f, k in enumerate(keys) if mir.get(k)]
+    if mkeys:  # the mirrored images: each point's detection there is one of its mirror partner here
+        W = np.asarray([truth[keys[f]]["width"] for f in mkeys], np.float64)
+        un = np.asarray([mir[keys[f]] for f in mkeys]) + MP_PIXEL_OFFSET
+        un[..., 0] = W[:, None] - un[..., 0]
+        pair = mirror_pairs(det_px[mkeys], un)
+        obs = np.concatenate([det_px, un[:, pair]])
+        frame_of = np.concatenate([frame_of, mkeys])
+    N = len(obs)
+    face_px = np.linalg.norm(obs[:, 454] - obs[:, 234], axis=-1)  # (N,) face width in pixels
+    hits_t = np.full((N, N_POINTS), -1)
+    hits_b = np.zeros((N, N_POINTS, 3))
+    for n in range(N):
+        hits_t[n], hits_b[n] = cast(obs[n], posed[frame_of[n]], tris, *cams[frame_of[n]])
     points = []
     for j in range(N_POINTS):
         ok = np.nonzero(hits_t[:, j] >= 0)[0]
-        if len(ok) < max(2, 0.5 * F):
+        if len(ok) < max(2, 0.5 * N):
             continue
-        cand_t, cand_b = hits_t[ok, j], hits_b[ok, j]  # one candidate surface point per frame that hit
-        # each candidate's 2D residual in every training frame, in units of that frame's face width
-        res = np.empty((len(ok), F))
+        cand_t, cand_b = hits_t[ok, j], hits_b[ok, j]  # one candidate surface point per detection that hit
+        # each candidate's 2D residual against every detection, in units of that detection's face width
+        res = np.empty((len(ok), N))
         for f in range(F):
             X = np.einsum("ck,ckd->cd", cand_b, posed[f][tris[cand_t]])
             uv, _ = project(*cams[f], X)
-            res[:, f] = np.linalg.norm(uv - det_px[f, j], axis=-1) / face_px[f]
+            for n in np.nonzero(frame_of == f)[0]:
+                res[:, n] = np.linalg.norm(uv - obs[n, j], axis=-1) / face_px[n]
         rms = np.sqrt(np.mean(res ** 2, axis=1))
         c = int(np.argmin(rms))
         points.append({"mediapipe": j, "triangle": int(cand_t[c]), "bary": [round(float(x), 6) for x in cand_b[c]],
                        "sigma_face": round(float(rms[c]), 6), "frames": int(len(ok))})
     doc = {"format": "synth-mediapipe-correspondence", "format_version": 1, "model": model.name,
            "model_key": model_key(model), "mediapipe": det["mediapipe"],
-           "derivation": {"frames": len(keys), "identities": train, "script": "scripts/mediapipe_correspondence.py"},
+           "derivation": {"frames": len(keys), "mirrored_frames": len(mkeys), "identities": train,
+                          "script": "scripts/mediapipe_correspondence.py"},
            "points": points}
+    if pair is not None:  # mediapipe's left-right partners (found from the data, mirror_pairs)
+        doc["mirror"] = pair.tolist()
     path = (out_dir or CORRESPONDENCE_DIR) / f"mediapipe-{model_key(model)}.json"
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(doc, indent=0) + "\n")
     sp = 100.0 * np.array([p["sigma_face"] for p in points])
-    print(f"{len(points)}/{N_POINTS} points mapped from {F} frames; RMS residual median {np.median(sp):.2f} %, "
+    if pair is not None:
+        print(f"mirror pairs: {int((pair == np.arange(N_POINTS)).sum())} points on the midline, "
+              f"{int((pair[pair] == np.arange(N_POINTS)).sum())}/{N_POINTS} pairs symmetric")
+    print(f"{len(points)}/{N_POINTS} points mapped from {F} frames (+{len(mkeys)} mirrored); RMS residual median {np.median(sp):.2f} %, "
           f"90th percentile {np.percentile(sp, 90):.2f} % of the face width -> {path}")
     return path
 
