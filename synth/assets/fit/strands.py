@@ -168,48 +168,42 @@ class Surface:
 
 class KeepOut:
     """Closed meshes the strands must stay out of (the eyeballs for lashes): the signed distance
-    to their union (angle-weighted pseudo-normal sign: exact inside/outside for a closed mesh,
-    where the head's one-sided test of :meth:`Surface.closest` can read a point deep in the eye
-    as outside because a thin lid fold is nearer), and two remedies: :meth:`pivot` turns whole
-    strands about their roots out of the meshes (the shape kept), :meth:`project` moves single
-    points out along the normal (the residue)."""
+    to them (angle-weighted pseudo-normal sign: exact inside/outside for closed meshes, where the
+    head's one-sided test of :meth:`Surface.closest` can read a point deep in the eye as outside
+    because a thin lid fold is nearer), and two remedies: :meth:`pivot` turns whole strands about
+    their roots out of the meshes (the shape kept), :meth:`project` moves single points out along
+    the normal (the residue). The regions must be disjoint closed meshes; they are queried as
+    one mesh."""
 
     def __init__(self, surface: Surface, regions):
-        self.sdf = []
+        m = np.zeros(len(surface.V), bool)
         for r in regions:
-            if r not in surface.data.regions:
-                continue
-            tris = surface.T[surface.mask(r)[surface.T].all(1)]
-            if len(tris):
-                used, inv = np.unique(tris, return_inverse=True)
-                self.sdf.append(SignedDistance(surface.V[used], inv.reshape(-1, 3), sign="pseudo"))
+            m |= surface.mask(r)
+        tris = surface.T[m[surface.T].all(1)]
+        self.sdf = None
+        if len(tris):
+            used, inv = np.unique(tris, return_inverse=True)
+            self.sdf = SignedDistance(surface.V[used], inv.reshape(-1, 3), sign="pseudo")
 
     def query(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Signed distance of points (..., 3) to the union (negative inside) and the unit normal
+        """Signed distance of points (..., 3) to the meshes (negative inside) and the unit normal
         that signed it."""
-        flat = P.reshape(-1, 3)
-        sd = np.full(len(flat), np.inf)
-        n = np.zeros_like(flat)
-        for f in self.sdf:
-            h = f.query(flat)
-            closer = h.signed < sd
-            sd = np.where(closer, h.signed, sd)
-            n[closer] = h.normal[closer]
-        return sd.reshape(P.shape[:-1]), n.reshape(P.shape)
+        h = self.sdf.query(P.reshape(-1, 3))
+        return h.signed.reshape(P.shape[:-1]), h.normal.reshape(P.shape)
 
     def _short(self, P, c):
         """(N,) largest clearance deficit of each strand's non-root points (<= 0: clear)."""
         sd, _ = self.query(P[:, 1:])
         return np.max(c[:, 1:] - sd, axis=1)
 
-    def pivot(self, P: np.ndarray, clearance, steps: int = 24, refine: int = 6) -> np.ndarray:
+    def pivot(self, P: np.ndarray, clearance, steps: int = 12, refine: int = 6) -> np.ndarray:
         """Turn each strand with a point closer than its clearance (broadcastable to P.shape[:-1];
         -inf: ignored) rigidly about its root, its mean direction toward the meshes' outward normal
         at the root, by the smallest angle that clears every point (searched in ``steps`` up to
         the normal, then bisected ``refine`` times); a strand not cleared even along the normal
         is turned onto it. Strands already clear are not touched."""
         P = np.array(P, np.float64)
-        if not self.sdf:
+        if self.sdf is None:
             return P
         c = np.broadcast_to(np.asarray(clearance, np.float64), P.shape[:-1])
         bad = np.flatnonzero(self._short(P, c) > 0.0)
@@ -252,7 +246,7 @@ class KeepOut:
     def project(self, P: np.ndarray, clearance, iterations: int = 3) -> np.ndarray:
         """Move points closer than their clearance (-inf: ignored) out along the normal."""
         P = np.array(P, np.float64)
-        if not self.sdf:
+        if self.sdf is None:
             return P
         c = np.broadcast_to(np.asarray(clearance, np.float64), P.shape[:-1])
         for _ in range(iterations):
