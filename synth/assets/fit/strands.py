@@ -155,15 +155,21 @@ class Surface:
 
     def push_out(self, P: np.ndarray, clearance, iterations: int = 2) -> np.ndarray:
         """Move points below ``clearance`` (broadcastable to P.shape[:-1]) out along the normal."""
-        P = np.array(P, np.float64)
-        c = np.broadcast_to(np.asarray(clearance, np.float64), P.shape[:-1])
-        for _ in range(iterations):
-            d, n = self.signed_offset(P)
-            deficit = np.maximum(c - d, 0.0)
-            if not np.any(deficit > 0):
-                break
-            P += deficit[..., None] * n
-        return P
+        return _push_along(P, clearance, self.signed_offset, iterations)
+
+
+def _push_along(P: np.ndarray, clearance, query, iterations: int) -> np.ndarray:
+    """Move points whose height ``query(P) -> (height, unit normal)`` is below ``clearance`` out
+    along that normal, ``iterations`` times at most."""
+    P = np.array(P, np.float64)
+    c = np.broadcast_to(np.asarray(clearance, np.float64), P.shape[:-1])
+    for _ in range(iterations):
+        d, n = query(P)
+        deficit = np.maximum(c - d, 0.0)
+        if not np.any(deficit > 0):
+            break
+        P += deficit[..., None] * n
+    return P
 
 
 class KeepOut:
@@ -245,17 +251,9 @@ class KeepOut:
 
     def project(self, P: np.ndarray, clearance, iterations: int = 3) -> np.ndarray:
         """Move points closer than their clearance (-inf: ignored) out along the normal."""
-        P = np.array(P, np.float64)
         if self.sdf is None:
-            return P
-        c = np.broadcast_to(np.asarray(clearance, np.float64), P.shape[:-1])
-        for _ in range(iterations):
-            sd, n = self.query(P)
-            deficit = np.maximum(c - sd, 0.0)
-            if not np.any(deficit > 0):
-                break
-            P += deficit[..., None] * n
-        return P
+            return np.array(P, np.float64)
+        return _push_along(P, clearance, self.query, iterations)
 
 
 # --------------------------------------------------------------------------- strand shapes
