@@ -14,7 +14,8 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from synth.assets.fit.groom import Groom, Styling, attach
-from synth.assets.fit.strands import Surface, arc_length, resample_fast, transport_frames
+from synth.assets.fit.strands import KeepOut, Surface, arc_length, resample_fast, transport_frames
+from synth.geometry.normals import normalize
 from tests.support import asset_scene
 
 
@@ -74,6 +75,42 @@ def test_resample_and_frames_on_a_helix():
     for u, v in ((tan, b1), (tan, b2), (b1, b2)):
         assert np.abs((u * v).sum(-1)).max() < 1e-9
     assert np.allclose(np.linalg.norm(b1, axis=-1), 1.0)
+
+
+def test_keep_out_turns_strands_out_of_a_closed_mesh_by_the_smallest_angle():
+    """A ball (icosphere, radius 1 cm, region "ball") and straight 5 mm strands rooted 0.1 mm above
+    it, leaning 10-60 degrees into it from the tangent plane: KeepOut.pivot turns each about its
+    root, shape kept, until every point is 0.3 mm off the ball, by the angle a brute-force scan of
+    the exact sphere gives (to 0.5 degree: the icosphere's facets lie up to 3 um inside the
+    sphere); strands already clear, and those given no clearance, are left alone; project moves
+    single points out to their clearance."""
+    R, clr = 0.01, 3e-4
+    ball = trimesh.creation.icosphere(subdivisions=5, radius=R)
+    ctx = SimpleNamespace(data=SimpleNamespace(triangles=np.asarray(ball.faces, np.int64),
+                                               regions={"ball": np.arange(len(ball.vertices))}),
+                          vertices=np.asarray(ball.vertices, np.float64))
+    keep = KeepOut(Surface(ctx), ["ball", "absent"])
+    lean = np.radians([10.0, 25.0, 40.0, 60.0, -30.0])  # the last leans away: already clear
+    root = np.array([0.0, 0.0, R + 1e-4])
+    d = np.stack([np.cos(lean), np.zeros_like(lean), -np.sin(lean)], 1)
+    pts = root + d[:, None] * np.linspace(0.0, 0.005, 6)[None, :, None]
+    c = np.full(pts.shape[:2], clr)
+    c[:, 0] = -np.inf
+    out = keep.pivot(pts, c)
+    assert np.array_equal(out[:, 0], pts[:, 0]) and np.array_equal(out[-1], pts[-1])
+    assert np.allclose(np.linalg.norm(out[:, 1:] - root, axis=2), np.linalg.norm(pts[:, 1:] - root, axis=2), atol=1e-12)
+    assert (np.linalg.norm(out[:, 1:], axis=2) - R >= clr - 5e-6).all()  # facets lie < 3 um inside the sphere
+    turned = np.degrees(np.arccos(np.clip(np.einsum("nd,nd->n", normalize(out[:, -1] - root), d), -1, 1)))
+    scan = np.radians(np.arange(0.0, 120.0, 0.01))
+    for i, a in enumerate(lean[:-1]):  # turning up by t in the x-z plane: direction angle a - t below the tangent
+        dirs = np.stack([np.cos(a - scan), np.zeros_like(scan), -np.sin(a - scan)], 1)
+        far = np.linalg.norm(root + dirs[:, None] * np.linspace(0.001, 0.005, 5)[None, :, None], axis=2) - R
+        need = np.degrees(scan[np.argmax((far >= clr).all(1))])
+        assert abs(turned[i] - need) < 0.5, (np.degrees(a), turned[i], need)
+    assert np.array_equal(keep.pivot(pts, np.full(pts.shape[:2], -np.inf)), pts)
+    inside = np.array([[[0.0, 0.0, 0.5 * R], [0.0, 0.002, 0.0]]])
+    moved = keep.project(inside, np.array([[clr, -np.inf]]))
+    assert np.linalg.norm(moved[0, 0]) == pytest.approx(R + clr, abs=6e-6) and np.array_equal(moved[0, 1], inside[0, 1])
 
 
 # --------------------------------------------------------------------------- the grooms on the default head

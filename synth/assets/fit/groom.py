@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from synth.appearance import pigment as pig
-from synth.assets.fit.strands import Surface
+from synth.assets.fit.strands import KeepOut, Surface
 
 
 @dataclass
@@ -107,6 +107,7 @@ class Groom:
     roughness: float
     coat: float = 0.0
     exact: bool = False  # exact (per-triangle) push-out on update (small strand sets)
+    keep_out: tuple[str, ...] = ()  # closed-mesh regions the strands pivot out of (lashes: eyeballs)
 
 
 @dataclass
@@ -120,6 +121,9 @@ class Attachment:
     #: exact (per-triangle) collision push-out; the small strand sets (brows, lashes, beards)
     #: use it, scalp hair uses the fast nearest-vertex test only (update speed)
     exact: bool = False
+    #: closed-mesh regions (the eyeballs for lashes) the strands stay out of: strands are turned
+    #: about their roots out of them before the push-out and single points projected out after it
+    keep_out: tuple[str, ...] = ()
 
     def positions(self, ctx) -> np.ndarray:
         """The strands on the current head of ``ctx`` (``vertices``, ``data``)."""
@@ -128,12 +132,21 @@ class Attachment:
         F = surface.frames(self.tri)
         pts = root[:, None] + np.einsum("ndk,npk->npd", F, self.local)
         fin = np.isfinite(self.clearance)
+        keep = KeepOut(surface, self.keep_out) if self.keep_out else None
+        if keep is not None:
+            pts = keep.pivot(pts, self.clearance)
         if fin.any():
             c = np.where(fin, self.clearance, -1.0)
-            moved = surface.push_out(pts, c, iterations=2)
+            # the fast nearest-vertex test reads the tangent plane of a vertex across a thin lid
+            # fold and pushes lash points through it into the eye: exact sets near a keep-out
+            # mesh take the exact test alone
+            fast = not (self.exact and keep is not None)
+            moved = surface.push_out(pts, c, iterations=2) if fast else pts
             if self.exact:
                 moved = surface.push_out_exact(moved, c)
             pts = np.where(fin[..., None], moved, pts)
+        if keep is not None:
+            pts = keep.project(pts, self.clearance)
         pts[:, 0] = root
         return pts
 
@@ -149,4 +162,4 @@ def attach(g: Groom) -> tuple[np.ndarray, Attachment]:
     local = np.einsum("npd,ndk->npk", pts - root[:, None], F)
     clr = np.broadcast_to(np.asarray(g.clearance, np.float64), pts.shape[:2]).copy()
     clr[:, 0] = -np.inf
-    return pts, Attachment(g.tri, g.bary, local, clr, bool(g.exact))
+    return pts, Attachment(g.tri, g.bary, local, clr, bool(g.exact), tuple(g.keep_out))
