@@ -226,7 +226,8 @@ class FittedShell:
     def follow(self, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
         """Positions on new body vertices: the binding re-applied, then pushed out again."""
         query = body_query(vertices, triangles, self.body_tris)
-        return push_out_edges(self.binding.apply(vertices), query, self.clearance, self.inside, self.edge_loops)
+        return push_out_edges(self.binding.apply(vertices), query, self.clearance, self.inside, self.edge_loops,
+                              rest=self.P)
 
 
 def fit_shell(body: Body, shell: Shell, clearance: float) -> FittedShell:

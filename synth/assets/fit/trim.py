@@ -24,7 +24,7 @@ import numpy as np
 
 from synth.assets.fit.attach import push_out
 from synth.assets.fit.hem import neighbour_mean_matrix, relax_loop, smooth_loops
-from synth.assets.fit.meshops import clip_by_field, remove_faces
+from synth.assets.fit.meshops import boundary_loops, clip_by_field, remove_faces
 
 #: vertices of trimmable parts deeper than this inside the skin after shaping are cut away
 TRIM_DEPTH = 0.006
@@ -32,10 +32,18 @@ TRIM_DEPTH = 0.006
 FIELD_SMOOTHING = 4
 #: passes of averaging along each boundary loop the cut touched
 LOOP_SMOOTHING = 24
-#: rounds of (averaging along the loop, push-out) for a loop the push-out moved
-RELAX_ROUNDS = 6
-#: passes of averaging along the loop per round
+#: passes of averaging along a loop the push-out moved, before it is pushed out as a whole
 RELAX_PASSES = 4
+#: Gaussian (vertices) over which a loop's motion is averaged when it follows the body
+FOLLOW_SIGMA = 4.0
+#: steps of (push-out, averaging) of a loop's displacement (:func:`fair_push`)
+FAIR_ITERATIONS = 60
+#: averaging passes of the displacement per step
+FAIR_PASSES = 2
+#: shrinking of the displacement per averaging pass (its reach: ~ sqrt(0.25 / FAIR_DECAY) vertices)
+FAIR_DECAY = 0.01
+#: the loop is pushed to the clearance plus this (m), so the last averaging leaves it outside
+FAIR_MARGIN = 0.001
 #: pieces with fewer than this fraction of the part's faces are dropped after the cut
 MIN_PIECE = 0.02
 
@@ -49,6 +57,28 @@ def _pieces(F: np.ndarray, n: int) -> np.ndarray:
     A = coo_matrix((np.ones(len(r)), (r, F.ravel())), shape=(len(F), n)).tocsr()
     _, lab = connected_components(A @ A.T, directed=False)
     return lab
+
+
+def _open_only(F: np.ndarray, g: np.ndarray, smooth: np.ndarray) -> np.ndarray:
+    """``g`` with every region to cut (``g < 0``, connected over the part's edges) that does not
+    reach a smooth-edge boundary vertex (the neckline) lifted to ``+0``: such a region would
+    leave a hole, a second opening, in the garment; its vertices are pushed out instead."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    neg = g < 0
+    E = E[neg[E[:, 0]] & neg[E[:, 1]]]
+    n = len(g)
+    _, lab = connected_components(coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n)), directed=False)
+    edge = np.zeros(n, bool)
+    for lo in boundary_loops(F):
+        edge[lo] = smooth[lo]
+    opening = np.zeros(lab.max() + 1, bool)
+    opening[lab[neg & edge]] = True
+    g = g.copy()
+    g[neg & ~opening[lab]] = 0.0
+    return g
 
 
 def trim_part(query, P: np.ndarray, F: np.ndarray, smooth: np.ndarray):
@@ -66,6 +96,9 @@ def trim_part(query, P: np.ndarray, F: np.ndarray, smooth: np.ndarray):
         g = M @ g
     if (g >= 0).all():
         return P, F, smooth, 0
+    g = _open_only(F, g, np.asarray(smooth, bool))
+    if (g >= 0).all():
+        return P, F, smooth, 0
     W, Fc, cut = clip_by_field(F, g, len(P))
     Pc = np.asarray(W @ P)
     Sc = np.asarray(W @ np.asarray(smooth, np.float64)) > 0.5
@@ -78,21 +111,58 @@ def trim_part(query, P: np.ndarray, F: np.ndarray, smooth: np.ndarray):
     return Pc, Fc, Sc, int((g < 0).sum())
 
 
-def push_out_edges(P: np.ndarray, query, clearance: float, inside: np.ndarray | None, loops) -> np.ndarray:
+def fair_push(Q: np.ndarray, query, clearance: float) -> np.ndarray:
+    """A closed loop (a neckline) moved out of the skin to ``clearance`` as a whole, so that it
+    stays smooth.
+
+    Pushing every vertex to its closest skin point (:func:`push_out`) puts neighbours on two
+    surfaces where the loop crosses a crease (a -3 SD chin on the chest, a jaw closing on a
+    collar): a spike. Here the loop's displacement ``U`` is relaxed instead: in each of
+    :data:`FAIR_ITERATIONS` steps the vertices closer than ``clearance + FAIR_MARGIN`` are
+    pushed out to it, then ``U`` is averaged along the loop :data:`FAIR_PASSES` times and
+    shrunk by :data:`FAIR_DECAY` per pass. The pushes from two surfaces balance into a loop that
+    bridges the crease; away from the contact the displacement fades over ~5 vertices (a screened
+    string). What the last averaging left closer than ``clearance`` is pushed out vertex by
+    vertex (moves under ``FAIR_MARGIN``)."""
+    Q = np.asarray(Q, np.float64)
+    U = np.zeros_like(Q)
+    target = clearance + FAIR_MARGIN
+    for _ in range(FAIR_ITERATIONS):
+        h = query.query(Q + U)
+        short = target - h.signed
+        bad = short > 1e-7
+        if not bad.any():
+            break
+        U[bad] += short[bad, None] * h.normal[bad]
+        for _ in range(FAIR_PASSES):
+            U = (1.0 - FAIR_DECAY) * (0.5 * U + 0.25 * (np.roll(U, 1, 0) + np.roll(U, -1, 0)))
+    return Q + U
+
+
+def push_out_edges(P: np.ndarray, query, clearance: float, inside: np.ndarray | None, loops,
+                   rest: np.ndarray | None = None) -> np.ndarray:
     """Push every vertex not ``inside`` out of the skin to ``clearance``
-    (:func:`synth.assets.fit.attach.push_out`), then relax each of ``loops`` (smooth boundary
-    loops: hems, necklines) the push moved: where a chin presses on a neckline, the pushed
-    vertices jump onto the chin while their neighbours stay, a spike in the loop. Rounds of
-    averaging along the loop and pushing out again turn it into a curve that bends around the
-    chin."""
+    (:func:`synth.assets.fit.attach.push_out`), except the vertices of ``loops`` (smooth
+    boundary loops: necklines), which are pushed out as whole loops (:func:`fair_push`): where
+    a chin presses on a neckline, vertices pushed one by one jump onto the chin while their
+    neighbours stay, a spike in the loop.
+
+    ``rest``: the positions the loops were smooth at (the build, for
+    :meth:`~synth.assets.fit.body.FittedShell.follow`): a loop then starts from those plus its
+    motion since, averaged along the loop (Gaussian, :data:`FOLLOW_SIGMA` vertices): neighbours
+    bound to body triangles that move apart (the -3 SD neck folds where the chin sinks in)
+    would fold the loop. Without ``rest`` a loop the push moved is first smoothed
+    (:data:`RELAX_PASSES`, :func:`synth.assets.fit.hem.relax_loop`)."""
+    from scipy.ndimage import gaussian_filter1d
+
     P = np.array(P, np.float64, copy=True)
     out = np.ones(len(P), bool) if inside is None else ~np.asarray(inside, bool)
     before = P.copy()
     P[out] = push_out(P[out], query, clearance, iterations=6)
     for lo in loops:
-        if not np.any(P[lo] != before[lo]):
-            continue
-        for _ in range(RELAX_ROUNDS):
-            P[lo] = relax_loop(P[lo], RELAX_PASSES)
-            P[lo] = push_out(P[lo], query, clearance, iterations=3)
+        if rest is not None:
+            move = gaussian_filter1d(before[lo] - rest[lo], FOLLOW_SIGMA, axis=0, mode="wrap")
+            P[lo] = fair_push(rest[lo] + move, query, clearance)
+        elif np.any(P[lo] != before[lo]):
+            P[lo] = fair_push(relax_loop(before[lo], RELAX_PASSES), query, clearance)
     return P
