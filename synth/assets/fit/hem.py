@@ -31,9 +31,6 @@ FIELD_SMOOTHING = 12
 LOOP_SMOOTHING = 8
 #: averaging passes between two respacings of a neckline loop (:func:`relax_loop`)
 RELAX_ROUND = 4
-#: a loop is smoothed around a vertical axis only if it stays this far (fraction of its median
-#: radius) from it (:func:`relax_loop`)
-AXIS_CLEARANCE = 10.0
 #: the garment is kept this far (m of the hem field) above the hem whatever the neckline
 HEM_BAND = 0.02
 #: how far (m) the cap's rim sits inside the garment's hem edge (no coincident edges)
@@ -123,23 +120,13 @@ def smooth_loops(P: np.ndarray, F: np.ndarray, on_cut: np.ndarray, iterations: i
 
 
 def relax_loop(Q: np.ndarray, iterations: int) -> np.ndarray:
-    """A closed polyline smoothed along itself, as much as ``iterations`` passes of averaging
-    each vertex with its two neighbours (1/4 1/2 1/4) would, with its vertices spread evenly.
-
-    A loop around a vertical axis (a neckline: it winds once around its centroid seen from
-    above, never closer to it than :data:`AXIS_CLEARANCE` of its median radius) is smoothed
-    as cylindrical coordinates ``r(theta), z(theta)`` sampled at equal angles (:func:`_fair_around`):
-    it can then neither fold back on itself (a fold of the clip's level set where a trim meets
-    the neckline, or a binding turned over by an expression change, left one vertex turning by
-    up to 180 degrees) nor bunch up. Any other loop (a tank top's arm hole) gets rounds of
-    :data:`RELAX_ROUND` averaging passes, each followed by a respacing at equal arc length:
-    averaging over a cluster of tiny clip edges alone leaves a corner that the respacing turns
-    into one sharp vertex."""
-    Q = np.array(Q, np.float64, copy=True)
-    fair = _fair_around(Q, np.sqrt(iterations / 2.0))
-    if fair is not None:
-        return fair
-    Q = _respace(Q)
+    """A closed polyline smoothed along itself: its vertices spread at equal arc length, then
+    rounds of :data:`RELAX_ROUND` averaging passes (each vertex with its two neighbours, 1/4 1/2
+    1/4), each followed by a respacing, ``iterations`` passes in all. The first respacing makes
+    the averaging act over arc length, not vertex indices: the clip leaves clusters of tiny
+    edges where its level set passes near a vertex or two clips meet, and averaging over them
+    alone leaves a corner that a later respacing turns into one sharp vertex."""
+    Q = _respace(np.array(Q, np.float64, copy=True))
     done = 0
     while done < iterations:
         for _ in range(min(RELAX_ROUND, iterations - done)):
@@ -147,36 +134,6 @@ def relax_loop(Q: np.ndarray, iterations: int) -> np.ndarray:
         done += RELAX_ROUND
         Q = _respace(Q)
     return Q
-
-
-def _fair_around(Q: np.ndarray, sigma: float) -> np.ndarray | None:
-    """The loop as ``r(theta)`` and ``z(theta)`` around its centroid's vertical axis (the
-    vertices sorted by angle, so a fold's branches interleave), each averaged circularly with
-    a Gaussian of ``sigma`` samples and resampled at ``len(Q)`` equal angles, in the loop's
-    direction, starting near its first vertex. None if the loop does not wind once around the
-    axis clear of it."""
-    from scipy.ndimage import gaussian_filter1d
-
-    n = len(Q)
-    c = Q.mean(0)
-    d = Q[:, :2] - c[:2]
-    r = np.hypot(d[:, 0], d[:, 1])
-    th = np.arctan2(d[:, 1], d[:, 0])
-    step = np.angle(np.exp(1j * (np.roll(th, -1) - th)))
-    wind = step.sum() / (2 * np.pi)
-    if n < 16 or abs(abs(wind) - 1.0) > 0.01 or r.min() < AXIS_CLEARANCE * np.median(r):
-        return None
-    sign = np.sign(wind)
-    o = np.argsort(th, kind="stable")
-    ts, rs, zs = th[o], r[o], Q[o, 2]
-    grid = th[0] + sign * 2 * np.pi * np.arange(n) / n
-    g = np.mod(grid + np.pi, 2 * np.pi) - np.pi
-    ext = np.concatenate([ts - 2 * np.pi, ts, ts + 2 * np.pi])
-    rg = np.interp(g, ext, np.tile(rs, 3))
-    zg = np.interp(g, ext, np.tile(zs, 3))
-    rg = gaussian_filter1d(rg, sigma, mode="wrap")
-    zg = gaussian_filter1d(zg, sigma, mode="wrap")
-    return np.stack([c[0] + rg * np.cos(grid), c[1] + rg * np.sin(grid), zg], 1)
 
 
 def _respace(Q: np.ndarray) -> np.ndarray:

@@ -37,7 +37,9 @@ RELAX_PASSES = 4
 #: Gaussian (vertices) over which a loop's motion is averaged when it follows the body
 FOLLOW_SIGMA = 4.0
 #: steps of (push-out, averaging) of a loop's displacement (:func:`fair_push`)
-FAIR_ITERATIONS = 60
+FAIR_ITERATIONS = 100
+#: fraction of the shortfall a step pushes out (damped: pushes from two surfaces balance)
+FAIR_STEP = 0.5
 #: averaging passes of the displacement per step
 FAIR_PASSES = 2
 #: shrinking of the displacement per averaging pass (its reach: ~ sqrt(0.25 / FAIR_DECAY) vertices)
@@ -119,11 +121,11 @@ def fair_push(Q: np.ndarray, query, clearance: float) -> np.ndarray:
     surfaces where the loop crosses a crease (a -3 SD chin on the chest, a jaw closing on a
     collar): a spike. Here the loop's displacement ``U`` is relaxed instead: in each of
     :data:`FAIR_ITERATIONS` steps the vertices closer than ``clearance + FAIR_MARGIN`` are
-    pushed out to it, then ``U`` is averaged along the loop :data:`FAIR_PASSES` times and
+    pushed out by :data:`FAIR_STEP` of their shortfall, then ``U`` is averaged along the loop :data:`FAIR_PASSES` times and
     shrunk by :data:`FAIR_DECAY` per pass. The pushes from two surfaces balance into a loop that
     bridges the crease; away from the contact the displacement fades over ~5 vertices (a screened
-    string). What the last averaging left closer than ``clearance`` is pushed out vertex by
-    vertex (moves under ``FAIR_MARGIN``)."""
+    string). What the steps leave inside the skin (a crease the damped pushes did
+    not resolve) is pushed out vertex by vertex."""
     Q = np.asarray(Q, np.float64)
     U = np.zeros_like(Q)
     target = clearance + FAIR_MARGIN
@@ -133,10 +135,13 @@ def fair_push(Q: np.ndarray, query, clearance: float) -> np.ndarray:
         bad = short > 1e-7
         if not bad.any():
             break
-        U[bad] += short[bad, None] * h.normal[bad]
+        U[bad] += FAIR_STEP * short[bad, None] * h.normal[bad]
         for _ in range(FAIR_PASSES):
             U = (1.0 - FAIR_DECAY) * (0.5 * U + 0.25 * (np.roll(U, 1, 0) + np.roll(U, -1, 0)))
-    return Q + U
+    X = Q + U
+    left = query(X) < 0.0
+    X[left] = push_out(X[left], query, clearance, iterations=3)
+    return X
 
 
 def push_out_edges(P: np.ndarray, query, clearance: float, inside: np.ndarray | None, loops,
