@@ -28,6 +28,12 @@ from synth.assets.fit.meshops import boundary_loops, clip_by_field, remove_faces
 
 #: vertices of trimmable parts deeper than this inside the skin after shaping are cut away
 TRIM_DEPTH = 0.006
+#: parts are also cut where the skin across from their closest skin point (along its normal) is
+#: nearer than this (m): a crease, where the chin rests on the chest at -3 SD; a neckline left in
+#: it has no room to lie smoothly outside both sheets
+CREASE_GAP = 0.012
+#: slack (m) on that test, so that a single sheet is never taken for a crease
+CREASE_TOLERANCE = 0.0005
 #: passes of neighbour averaging of the depth field before the cut
 FIELD_SMOOTHING = 4
 #: passes of averaging along each boundary loop the cut touched
@@ -90,7 +96,10 @@ def trim_part(query, P: np.ndarray, F: np.ndarray, smooth: np.ndarray):
     how many of the part's vertices were cut away."""
     P = np.asarray(P, np.float64)
     F = np.asarray(F, np.int64)
-    g = np.asarray(query(P), np.float64) + TRIM_DEPTH
+    h = query.query(P)
+    probe = 0.5 * CREASE_GAP
+    across = np.asarray(query(h.point + h.normal * probe), np.float64)
+    g = np.minimum(h.signed + TRIM_DEPTH, across - (probe - CREASE_TOLERANCE))
     if (g >= 0).all():
         return P, F, smooth, 0
     M = neighbour_mean_matrix(F, len(P))
@@ -104,9 +113,11 @@ def trim_part(query, P: np.ndarray, F: np.ndarray, smooth: np.ndarray):
     W, Fc, cut = clip_by_field(F, g, len(P))
     Pc = np.asarray(W @ P)
     Sc = np.asarray(W @ np.asarray(smooth, np.float64)) > 0.5
+    designed = len(np.unique(_pieces(F, len(P))))
     lab = _pieces(Fc, len(Pc))
     size = np.bincount(lab)
-    keep = size[lab] >= MIN_PIECE * len(Fc)
+    largest = np.argsort(-size, kind="stable")[:designed]
+    keep = np.isin(lab, largest) & (size[lab] >= MIN_PIECE * len(Fc))
     Pc, Fc, used = remove_faces(Pc, Fc, keep)
     cut, Sc = cut[used], Sc[used]
     Pc = smooth_loops(Pc, Fc, cut & Sc, LOOP_SMOOTHING, min_fraction=0.0, resample=True)
