@@ -39,12 +39,14 @@ from synth.assets.fit.body import Body, Cloth, Parts, Shell
 from synth.assets.fit.garment_parts import (crew_neckline, front_weight, hanging_strip, hood_up, neck_tube,
                                             necktie, shirt_collar, torso_shell, vee_neckline,
                                             wrinkle_offset)
-from synth.assets.fit.meshops import icosphere, smoothstep
+from synth.assets.fit.meshops import icosphere, smooth_max, smooth_min, smoothstep
 
 #: minimum distance (m) kept between every garment vertex and the skin
 CLEARANCE = 0.0015
 #: width (m) of the tank top's band along the hem, over the arm stumps
 TANK_BAND = 0.035
+#: rounding (m of the fields) of the corners of a tank top's openings
+TANK_ROUND = 0.035
 
 #: colour names -> sRGB HSV (h, s, v in [0, 1])
 COLOURS = {
@@ -235,10 +237,11 @@ def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
             V = body.V
             th = fr.theta(V)
             zr = fr.z_ring(th)
-            torso = np.minimum(zr - 0.05 - 0.04 * front_weight(th) - V[:, 2], 0.13 - np.abs(V[:, 0]))
+            torso = smooth_min(zr - 0.05 - 0.04 * front_weight(th) - V[:, 2], 0.13 - np.abs(V[:, 0]), TANK_ROUND)
             strap = np.minimum(w / 2 - np.abs(np.abs(V[:, 0]) - xs), zr + 0.01 - V[:, 2])
             band = TANK_BAND - body.hem  # a band along the hem covers the arm stumps (the bust's cut)
-            return np.maximum(np.maximum(torso, strap), band)
+            # the openings' corners (strap on torso, torso on band) rounded: arm holes, not notches
+            return smooth_max(smooth_max(torso, strap, TANK_ROUND), band, TANK_ROUND)
         torso_shell(body, parts, lambda t: fr.z_ring(t), wr(base, 0.001), extra_field=extra, rim=0.0)
         info["strap_width_m"] = w
     else:

@@ -24,7 +24,7 @@ import numpy as np
 
 from synth.assets.fit.attach import push_out
 from synth.assets.fit.hem import neighbour_mean_matrix, relax_loop, smooth_loops
-from synth.assets.fit.meshops import boundary_loops, clip_by_field, remove_faces
+from synth.assets.fit.meshops import boundary_loops, clip_by_field, negative_regions, remove_faces
 
 #: vertices of trimmable parts deeper than this inside the skin after shaping are cut away
 TRIM_DEPTH = 0.006
@@ -71,14 +71,9 @@ def _open_only(F: np.ndarray, g: np.ndarray, smooth: np.ndarray) -> np.ndarray:
     """``g`` with every region to cut (``g < 0``, connected over the part's edges) that does not
     reach a smooth-edge boundary vertex (the neckline) lifted to ``+0``: such a region would
     leave a hole, a second opening, in the garment; its vertices are pushed out instead."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
     neg = g < 0
-    E = E[neg[E[:, 0]] & neg[E[:, 1]]]
+    lab = negative_regions(F, g)
     n = len(g)
-    _, lab = connected_components(coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n)), directed=False)
     edge = np.zeros(n, bool)
     for lo in boundary_loops(F):
         edge[lo] = smooth[lo]
