@@ -31,7 +31,7 @@ TRIM_DEPTH = 0.006
 #: parts are also cut where the skin across from their closest skin point (along its normal) is
 #: nearer than this (m): a crease, where the chin rests on the chest at -3 SD; a neckline left in
 #: it has no room to lie smoothly outside both sheets
-CREASE_GAP = 0.012
+CREASE_GAP = 0.016
 #: slack (m) on that test, so that a single sheet is never taken for a crease
 CREASE_TOLERANCE = 0.0005
 #: passes of neighbour averaging of the depth field before the cut
