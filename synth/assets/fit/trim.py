@@ -1,21 +1,28 @@
-"""Trimming a garment part where another body part sinks into it (pure numpy).
+"""Trimming a garment part where another body part sinks into it, and pushing its smooth
+boundary loops out of the skin as whole loops (pure numpy).
 
 At -3 SD the chin sinks into the chest: the torso shell built from the neck and shoulder skin
 runs through the chin. Such a part is cut where it lies deeper than :data:`TRIM_DEPTH` inside
-the skin; what stays is pushed out by the fit (:func:`synth.assets.fit.body.fit_shell`).
+the skin, or where it lies in a crease (the skin across from its closest skin point nearer than
+:data:`CREASE_GAP`: the chin resting on the chest, where no neckline fits outside both sheets);
+what stays is pushed out by the fit (:func:`synth.assets.fit.body.fit_shell`).
 
 The cut is made so that the opening stays one smooth loop (``docs/realism-eyes-garments.md``):
 
-1. the signed depth of every vertex (``query``: the skin's signed distance) plus
-   ``TRIM_DEPTH`` is averaged :data:`FIELD_SMOOTHING` times over the part's neighbours (the
-   depth jumps where the closest skin changes from the neck to the chin, and single deep
-   vertices would leave pinholes and dangling triangles);
-2. the part is clipped exactly at the zero level of that field
+1. that field (depth plus ``TRIM_DEPTH``, or the crease's gap) is averaged
+   :data:`FIELD_SMOOTHING` times over the part's neighbours (the depth jumps where the closest
+   skin changes from the neck to the chin, and single deep vertices would leave pinholes);
+2. a region to cut that does not reach the part's smooth edge (the neckline) is left (it would
+   be a hole: a second opening); its vertices are pushed out instead;
+3. the part is clipped exactly at the zero level of the field
    (:func:`synth.assets.fit.meshops.clip_by_field`), which merges with the neckline opening;
-3. pieces cut off from the rest (fewer than :data:`MIN_PIECE` of the faces) are dropped;
-4. every boundary loop the cut touched is smoothed along itself (:data:`LOOP_SMOOTHING`
-   passes; :func:`synth.assets.fit.hem.smooth_loops`): the clip leaves tiny edges where the
-   level set passes near a vertex, and a corner where it crosses the neckline.
+4. only as many pieces as the part had are kept (islands left between cuts would be openings
+   too), and none under :data:`MIN_PIECE` of the faces;
+5. every boundary loop the cut touched is smoothed along itself (:data:`LOOP_SMOOTHING`
+   passes; :func:`synth.assets.fit.hem.smooth_loops`).
+
+:func:`push_out_edges` then pushes the part out of the skin, its necklines as whole loops
+(:func:`fair_push`).
 """
 
 from __future__ import annotations
