@@ -188,11 +188,12 @@ def unmirror(mapped: np.ndarray, width: int) -> np.ndarray:
     return out
 
 
-def summarise(err: np.ndarray, err7: np.ndarray) -> dict:
-    """Medians and means of the per-frame errors: ``err`` (F, 68, 2) :func:`face_errors` of the
-    mapped mesh, ``err7`` (F,) the issue's direct 7-point error."""
-    out = {"nme68": nme(err), "nme68_no_jaw": nme(err, NO_JAW), "nme7": np.asarray(err7),
-           "nme7_mapped": nme(err, [s[1] for s in SEVEN])}
+def summarise(err: np.ndarray, err7: np.ndarray | None = None) -> dict:
+    """Per-frame errors by measure: ``err`` (F, 68, 2) :func:`face_errors` of the mapped mesh,
+    ``err7`` (F,) the issue's direct 7-point error (left out when None)."""
+    out = {"nme68": nme(err), "nme68_no_jaw": nme(err, NO_JAW), "nme7_mapped": nme(err, [s[1] for s in SEVEN])}
+    if err7 is not None:
+        out["nme7"] = np.asarray(err7)
     out.update({f"region_{k}": nme(err, list(r)) for k, r in REGIONS.items()})
     return out
 
@@ -241,7 +242,7 @@ def judge(args, png, categories) -> dict:
                        for i in mir]).reshape(-1, 68, 2)
     mapped = apply_mapping(mesh[mir], idx, w)
     self_nme = np.linalg.norm(back - mapped, axis=-1).mean(axis=1) / iod[mir]
-    both = summarise(face_errors(0.5 * (mapped + back), lm[mir]), np.full(len(mir), np.nan))
+    both = summarise(face_errors(0.5 * (mapped + back), lm[mir]))
     fmt = lambda x: f"{np.median(x):.1%} / {np.mean(x):.1%}" if len(x) else "-"  # noqa: E731
     print(f"\n### mediapipe {json.dumps(args.dataset)} (|azimuth| <= {args.max_azimuth} deg), median / mean\n")
     print("| frames | face detected | face mesh | NME68 | NME68 without jaw | 7-point (direct) | 7-point (mapped) |")
@@ -268,6 +269,6 @@ def judge(args, png, categories) -> dict:
     print("| NME68 median | " + " | ".join(f"{np.median(b):.1%}" if len(b) else "-" for b in by) + " |\n")
     return {"frames": n, "detected": n_det, "mesh": len(keys), **{k: v.tolist() for k, v in s.items()},
             "mirror_self_nme68": self_nme.tolist(), "keys": keys,
-            "mirror_averaged": {"keys": [keys[i] for i in mir], **{k: v.tolist() for k, v in both.items() if k != "nme7"}},
+            "mirror_averaged": {"keys": [keys[i] for i in mir], **{k: v.tolist() for k, v in both.items()}},
             "per_frame_error": np.round(err, 5).tolist(),
             "mapping": {"mediapipe": idx.tolist(), "weights": np.round(w, 4).tolist(), "rms_iod": rms.tolist()}}
