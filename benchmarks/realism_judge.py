@@ -198,6 +198,37 @@ def summarise(err: np.ndarray, err7: np.ndarray | None = None) -> dict:
     return out
 
 
+def face_frame(points: np.ndarray) -> np.ndarray:
+    """ibug68 points (F, 68, 2) in their own face frame: origin midway between the outer eye
+    corners 36 and 45, axes and unit as :func:`face_errors`."""
+    p = np.asarray(points, np.float64)
+    ex = p[:, 45] - p[:, 36]
+    iod = np.linalg.norm(ex, axis=-1)
+    ex = ex / iod[:, None]
+    ey = np.stack([-ex[:, 1], ex[:, 0]], -1)
+    c = p - 0.5 * (p[:, 45] + p[:, 36])[:, None]
+    return np.stack([np.einsum("flc,fc->fl", c, ex), np.einsum("flc,fc->fl", c, ey)], -1) / iod[:, None, None]
+
+
+def shrink(err: np.ndarray, truth: np.ndarray) -> dict:
+    """How much of our landmarks' shape variation the judge reproduces, per region: the least-squares
+    slope ``k`` of the judge's error on our shape's deviation from the frames' mean shape, both in
+    the face frame (``err`` (F, 68, 2) :func:`face_errors`, ``truth`` (F, 68, 2) pixels), each
+    point's mean error removed. ``k`` = 0: the judge follows our shapes; ``k`` = -0.3: it reproduces
+    70 % of their variation (pulls them toward the mean face); ``k`` > 0: it exaggerates them.
+    Returns {region: (k, error std, std left after removing k * deviation)}."""
+    dev = face_frame(truth)
+    dev = dev - dev.mean(0)
+    e = np.asarray(err, np.float64)
+    e = e - e.mean(0)
+    out = {}
+    for name, r in REGIONS.items():
+        d, x = dev[:, list(r)].ravel(), e[:, list(r)].ravel()
+        k = float(d @ x / (d @ d)) if d @ d > 0 else 0.0
+        out[name] = (k, float(x.std()), float((x - k * d).std()))
+    return out
+
+
 def judge(args, png, categories) -> dict:
     """``realism.py judge`` (see its doc and docs/realism.md); ``png(frame, path)`` writes a frame
     composited over grey, ``categories`` names the six ITA categories."""
@@ -263,6 +294,14 @@ def judge(args, png, categories) -> dict:
     print(f"mapping: RMS residual on the model samples median {np.median(rms):.2%}, max {rms.max():.2%} "
           f"of the inter-ocular distance; mediapipe against itself on the mirrored image ({len(mir)} frames): "
           f"NME68 {fmt(self_nme)}\n")
+    front = az < 15
+    sk = shrink(err[front], lm[front]) if front.sum() >= 3 else None
+    if sk is not None:
+        print(f"Shape variation the judge reproduces ({int(front.sum())} frames, abs(azimuth) < 15 deg; slope k of its "
+              "error on our shape's deviation from the mean, 1 + k reproduced; error std before / after removing it):\n")
+        print("| | " + " | ".join(REGIONS) + " |\n|---|" + "---:|" * len(REGIONS))
+        print("| k | " + " | ".join(f"{sk[r][0]:+.2f}" for r in REGIONS) + " |")
+        print("| error std | " + " | ".join(f"{sk[r][1]:.3f} / {sk[r][2]:.3f}" for r in REGIONS) + " |\n")
     print("| ITA category of the albedo | " + " | ".join(categories) + " |\n|---|" + "---:|" * 6)
     by = [s["nme68"][[meta[k][0] == c for k in keys]] for c in range(6)]
     print("| frames with a mesh | " + " | ".join(str(len(b)) for b in by) + " |")
@@ -270,5 +309,5 @@ def judge(args, png, categories) -> dict:
     return {"frames": n, "detected": n_det, "mesh": len(keys), **{k: v.tolist() for k, v in s.items()},
             "mirror_self_nme68": self_nme.tolist(), "keys": keys,
             "mirror_averaged": {"keys": [keys[i] for i in mir], **{k: v.tolist() for k, v in both.items()}},
-            "per_frame_error": np.round(err, 5).tolist(),
+            "per_frame_error": np.round(err, 5).tolist(), "shrink_frontal": sk,
             "mapping": {"mediapipe": idx.tolist(), "weights": np.round(w, 4).tolist(), "rms_iod": rms.tolist()}}

@@ -126,3 +126,31 @@ def test_sample_mapping_beats_the_template_mapping_on_held_out_samples(J, defaul
     # matrix products may differ in the last bit with the arrays' memory alignment (seen: 1.4e-13 px)
     again = J.model_samples(default_model, 7, 8, 4)
     np.testing.assert_allclose(again[0], mesh, rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("factor", [0.7, 1.0, 1.2])
+def test_shrink_recovers_a_judge_that_scales_shape_variation(J, factor):
+    """A judge that reproduces ``factor`` of every frame's deviation from the mean shape, plus a
+    fixed per-point offset and small noise, reads as k = factor - 1 in every region, whatever
+    the frames' position, size and roll in the image."""
+    rng = np.random.default_rng(3)
+    F = 40
+    base = rng.normal(size=(68, 2))
+    base[36], base[45] = (-1.0, 0.0), (1.0, 0.0)
+    shapes = base + 0.15 * rng.normal(size=(F, 68, 2))
+    shapes[:, 36], shapes[:, 45] = (-1.0, 0.0), (1.0, 0.0)  # eye corners fixed: the face frame is exact
+    judged = shapes.mean(0) + factor * (shapes - shapes.mean(0)) + 0.05 + 0.002 * rng.normal(size=shapes.shape)
+    judged[:, 36], judged[:, 45] = shapes[:, 36], shapes[:, 45]
+    ang = rng.uniform(-0.5, 0.5, F)
+    R = np.stack([np.stack([np.cos(ang), -np.sin(ang)], -1), np.stack([np.sin(ang), np.cos(ang)], -1)], -2)
+    scale, shift = rng.uniform(20, 60, F), rng.uniform(50, 200, (F, 2))
+    place = lambda p: np.einsum("fij,flj->fli", R, p) * scale[:, None, None] + shift[:, None]  # noqa: E731
+    truth, pred = place(shapes), place(judged)
+    out = J.shrink(J.face_errors(pred, truth), truth)
+    assert set(out) == set(J.REGIONS)
+    for name, (k, before, after) in out.items():
+        r = [i for i in J.REGIONS[name] if i not in (36, 45)]
+        assert k == pytest.approx(factor - 1, abs=0.02), name
+        assert after <= before + 1e-12
+        if factor != 1.0 and len(r) == len(J.REGIONS[name]):
+            assert after < 0.5 * before, name
