@@ -224,9 +224,12 @@ class FittedShell:
     edge_loops: list = field(default_factory=list)  # boundary loops kept smooth (necklines)
 
     def follow(self, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-        """Positions on new body vertices: the binding re-applied, then pushed out again."""
+        """Positions on new body vertices: the binding re-applied, then pushed out again (the
+        necklines from their build shape plus the body's motion averaged along them:
+        :func:`synth.assets.fit.trim.push_out_edges`)."""
         query = body_query(vertices, triangles, self.body_tris)
-        return push_out_edges(self.binding.apply(vertices), query, self.clearance, self.inside, self.edge_loops)
+        return push_out_edges(self.binding.apply(vertices), query, self.clearance, self.inside, self.edge_loops,
+                              rest=self.P)
 
 
 def fit_shell(body: Body, shell: Shell, clearance: float) -> FittedShell:
