@@ -26,7 +26,6 @@ V_TIP_RADIUS = 0.006
 MIN_OPENING = 8
 from synth.assets.fit.meshops import (boundary_loops, grid_faces, icosphere, laplacian_smooth, negative_regions,
                                      sweep_tube)
-from synth.geometry.normals import normalize
 
 
 def front_weight(th):
@@ -83,19 +82,13 @@ def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None
     P = smooth_loops(P, F, on_hem)
     # every other boundary loop (the neckline, a tank top's arm holes), spread evenly along itself
     P = smooth_loops(P, F, ~on_hem, NECK_SMOOTHING, min_fraction=1.0, resample=True)
-    parts.add(P, F, slot, trim=True, smooth_edge=~on_hem)
+    # the rim tubes are laid on the necklines after the fit (``trim.add_rims``): the trim and the
+    # push-out move them
+    spec = (rim, rim_flatten, slot if rim_slot is None else rim_slot) if rim > 0 else None
+    parts.add(P, F, slot, trim=True, smooth_edge=~on_hem, rim=spec)
     for loop in hem_loops(F, on_hem):
         Vc, Fc = cap(P, loop, inset=CAP_INSET)
         parts.add(Vc, Fc, slot, inside=True)
-    if rim > 0 and len(F):
-        for loop in boundary_loops(F):
-            if cut[loop].mean() < 0.8 or len(loop) < 8 or on_hem[loop].mean() >= 0.8:
-                continue
-            path = P[loop]
-            # push the rim centre out so the tube sits on the shell
-            path = path + normalize(path - body.query.query(path).point) * rim * 0.6
-            Vt, Ft = sweep_tube(path[::2] if len(path) > 60 else path, rim, 8, closed=True, flatten=rim_flatten)
-            parts.add(Vt, Ft, slot if rim_slot is None else rim_slot)
     return P, F, cut
 
 

@@ -22,16 +22,22 @@ The cut is made so that the opening stays one smooth loop (``docs/realism-eyes-g
    passes; :func:`synth.assets.fit.hem.smooth_loops`).
 
 :func:`push_out_edges` then pushes the part out of the skin, its necklines as whole loops
-(:func:`fair_push`).
+(:func:`fair_push`), and :func:`add_rims` lays the part's rim tubes (ribbed / rolled edges) on
+the necklines where they ended up: a rim made before the trim stayed on the neckline as
+designed, up to 12 cm from where the trim and the push-out left it (a dark slit between rim and
+shell where the crease trim lowered a crew neck's front by 4 mm).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
 from synth.assets.fit.attach import push_out
 from synth.assets.fit.hem import neighbour_mean_matrix, relax_loop, smooth_loops
-from synth.assets.fit.meshops import boundary_loops, clip_by_field, negative_regions, remove_faces
+from synth.assets.fit.meshops import boundary_loops, clip_by_field, negative_regions, remove_faces, sweep_tube
+from synth.geometry.normals import normalize
 
 #: vertices of trimmable parts deeper than this inside the skin after shaping are cut away
 TRIM_DEPTH = 0.006
@@ -61,6 +67,12 @@ FAIR_DECAY = 0.01
 FAIR_MARGIN = 0.001
 #: pieces with fewer than this fraction of the part's faces are dropped after the cut
 MIN_PIECE = 0.02
+#: sides of a rim tube's section
+RIM_SIDES = 8
+#: a rim's centre line lies this fraction of its radius outside its neckline (away from the skin)
+RIM_OUT = 0.6
+#: necklines longer than this (vertices) carry a rim on every other vertex
+RIM_STRIDE_ABOVE = 60
 
 
 def _pieces(F: np.ndarray, n: int) -> np.ndarray:
@@ -183,4 +195,52 @@ def push_out_edges(P: np.ndarray, query, clearance: float, inside: np.ndarray | 
             P[lo] = fair_push(rest[lo] + move, query, clearance)
         elif np.any(P[lo] != before[lo]):
             P[lo] = fair_push(relax_loop(before[lo], RELAX_PASSES), query, clearance)
+    return P
+
+
+@dataclass(frozen=True)
+class Rim:
+    """A tube laid along a neckline (a ribbed or rolled edge): its loop's vertex indices in the
+    shell, the tube's vertices ``start:stop`` in the shell, its radius and flattening."""
+
+    loop: np.ndarray
+    start: int
+    stop: int
+    radius: float
+    flatten: float
+
+
+def rim_tube(L: np.ndarray, query, radius: float, flatten: float, clearance: float):
+    """(vertices, faces) of a closed tube of ``radius`` along the neckline points ``L``, its
+    centre line :data:`RIM_OUT` of the radius outside the neckline (away from the closest skin
+    point), pushed out of the skin to ``clearance``."""
+    path = L[::2] if len(L) > RIM_STRIDE_ABOVE else L
+    path = path + normalize(path - query.query(path).point) * radius * RIM_OUT
+    Vt, Ft = sweep_tube(path, radius, RIM_SIDES, closed=True, flatten=flatten)
+    return push_out(Vt, query, clearance, iterations=6), Ft
+
+
+def add_rims(P: np.ndarray, F: np.ndarray, M: np.ndarray, specs, query, clearance: float):
+    """The shell (P, F, M) with a rim tube along each fitted neckline of ``specs`` (``(loop,
+    (radius, flatten, slot))``; loops under 8 vertices get none), and the :class:`Rim` list."""
+    Ps, Fs, Ms, rims = [P], [F], [M], []
+    n = len(P)
+    for lo, (radius, flatten, slot) in specs:
+        if len(lo) < 8:
+            continue
+        Vt, Ft = rim_tube(P[lo], query, radius, flatten, clearance)
+        rims.append(Rim(np.asarray(lo), n, n + len(Vt), float(radius), float(flatten)))
+        Ps.append(Vt)
+        Fs.append(Ft + n)
+        Ms.append(np.full(len(Ft), slot, M.dtype))
+        n += len(Vt)
+    return np.concatenate(Ps), np.concatenate(Fs), np.concatenate(Ms), rims
+
+
+def place_rims(P: np.ndarray, rims, query, clearance: float) -> np.ndarray:
+    """``P`` with every rim's tube laid anew along its neckline's current positions (after
+    :meth:`~synth.assets.fit.body.FittedShell.follow`'s push-out)."""
+    P = np.array(P, np.float64, copy=True)
+    for r in rims:
+        P[r.start:r.stop] = rim_tube(P[r.loop], query, r.radius, r.flatten, clearance)[0]
     return P
