@@ -46,7 +46,7 @@ CLEARANCE = 0.0015
 #: width (m) of the tank top's band along the hem, over the arm stumps
 TANK_BAND = 0.035
 #: rounding (m) of the corner where a turtleneck's collar top meets the cap under the jaw
-COLLAR_ROUND = 0.03
+COLLAR_ROUND = 0.045
 #: rounding (m of the fields) of the corners of a tank top's openings
 TANK_ROUND = 0.035
 

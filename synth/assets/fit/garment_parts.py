@@ -21,7 +21,7 @@ from synth.assets.fit.hem import CAP_INSET, HEM_BAND, cap, hem_loops, smooth_loo
 #: passes of averaging along a torso shell's neckline loops (then evenly respaced)
 NECK_SMOOTHING = 12
 #: radius (m) of the rounded tip of a V neckline
-V_TIP_RADIUS = 0.006
+V_TIP_RADIUS = 0.01
 #: an opening of a torso shell's field must span this many body vertices (smaller ones are closed)
 MIN_OPENING = 8
 from synth.assets.fit.meshops import (boundary_loops, grid_faces, icosphere, laplacian_smooth, negative_regions,

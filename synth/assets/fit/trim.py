@@ -65,6 +65,11 @@ FAIR_PASSES = 2
 FAIR_DECAY = 0.01
 #: the loop is pushed to the clearance plus this (m), so the last averaging leaves it outside
 FAIR_MARGIN = 0.001
+#: rounds of (push what the steps left inside out, average the loop, steps again) before the
+#: rest is pushed out vertex by vertex
+FAIR_ROUNDS = 3
+#: averaging passes along the loop in each of those rounds
+FAIR_ROUND_PASSES = 4
 #: pieces with fewer than this fraction of the part's faces are dropped after the cut
 MIN_PIECE = 0.02
 #: sides of a rim tube's section
@@ -151,7 +156,22 @@ def fair_push(Q: np.ndarray, query, clearance: float) -> np.ndarray:
     bridges the crease; away from the contact the displacement fades over ~5 vertices (a screened
     string). What the steps leave inside the skin (a crease the damped pushes did
     not resolve) is pushed out vertex by vertex."""
-    Q = np.asarray(Q, np.float64)
+    X = _fair_steps(np.asarray(Q, np.float64), query, clearance)
+    for _ in range(FAIR_ROUNDS):
+        left = query(X) < 0.0
+        if not left.any():
+            break
+        X[left] = push_out(X[left], query, clearance, iterations=3)
+        for _ in range(FAIR_ROUND_PASSES):
+            X = 0.5 * X + 0.25 * (np.roll(X, 1, 0) + np.roll(X, -1, 0))
+        X = _fair_steps(X, query, clearance)
+    left = query(X) < 0.0
+    X[left] = push_out(X[left], query, clearance, iterations=3)
+    return X
+
+
+def _fair_steps(Q: np.ndarray, query, clearance: float) -> np.ndarray:
+    """``Q`` plus its relaxed push-out displacement (:func:`fair_push`'s steps)."""
     U = np.zeros_like(Q)
     target = clearance + FAIR_MARGIN
     for _ in range(FAIR_ITERATIONS):
@@ -163,10 +183,7 @@ def fair_push(Q: np.ndarray, query, clearance: float) -> np.ndarray:
         U[bad] += FAIR_STEP * short[bad, None] * h.normal[bad]
         for _ in range(FAIR_PASSES):
             U = (1.0 - FAIR_DECAY) * (0.5 * U + 0.25 * (np.roll(U, 1, 0) + np.roll(U, -1, 0)))
-    X = Q + U
-    left = query(X) < 0.0
-    X[left] = push_out(X[left], query, clearance, iterations=3)
-    return X
+    return Q + U
 
 
 def push_out_edges(P: np.ndarray, query, clearance: float, inside: np.ndarray | None, loops,
