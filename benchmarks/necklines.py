@@ -6,9 +6,11 @@ Builds every garment id of ``tests/assets/test_fit_shells.py`` (same parameter v
 schedule: each hard case built, then the expression changed and ``FittedShell.follow`` run) and
 measures every neckline loop (``FittedShell.edge_loops``: the torso shells' boundary loops off
 the hem) with :func:`synth.assets.fit.hem.turning_angles`. Prints, per garment id: the build
-time (mean over the 5 cases, fit included), the numbers of neckline loops per build seen (the
-designed openings: 1 per torso shell, 2 with an undershirt; a tank top 3), the worst turning
-angle; overall the fraction of loop vertices turning more than 30 degrees; then the
+time (mean over the 5 cases, fit included), the ``follow`` time (mean over the 4 expression
+changes), the numbers of neckline loops per build seen (the designed openings: 1 per torso
+shell, 2 with an undershirt; a tank top 3), the worst turning angle, and how far the worst
+neckline vertex lies outside its rim tube (``FittedShell.rims``; the test's measure, negative:
+inside); overall the fraction of loop vertices turning more than 30 degrees; then the
 ``--worst`` worst loops with their case.
 """
 
@@ -32,7 +34,7 @@ def measure(worst_n: int = 8) -> dict:
     from synth.assets.fit.hem import turning_angles
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
-    from tests.assets.test_fit_shells import GARMENTS, SCHEDULE
+    from tests.assets.test_fit_shells import GARMENTS, SCHEDULE, _rim_cover
     from tests.support import asset_scene
 
     hm = HeadModel(load_default_model())
@@ -50,15 +52,22 @@ def measure(worst_n: int = 8) -> dict:
                                               ctx.rng("garment")), CLEARANCE)
             dt = time.perf_counter() - t0
             shells.append((aid, s))
-            per.setdefault(aid, {"time": [], "loops": [], "worst": 0.0})["time"].append(dt)
+            per.setdefault(aid, {"time": [], "follow": [], "loops": [], "worst": 0.0, "rim": None})["time"].append(dt)
         stages = [(a, "build", [(aid, s, s.P) for aid, s in shells])]
         if b != a:
             asset_scene.set_case_arrays(ctx, hm, b)
-            stages.append((b, "update", [(aid, s, s.follow(ctx.vertices, ctx.data.triangles)) for aid, s in shells]))
+            items = []
+            for aid, s in shells:
+                t0 = time.perf_counter()
+                items.append((aid, s, s.follow(ctx.vertices, ctx.data.triangles)))
+                per[aid]["follow"].append(time.perf_counter() - t0)
+            stages.append((b, "update", items))
         for case, stage, items in stages:
             for aid, s, v in items:
                 r = per[aid]
                 r["loops"].append(len(s.edge_loops))
+                for rim in s.rims:
+                    r["rim"] = max(r["rim"] if r["rim"] is not None else -1.0, float(_rim_cover(v, rim).max()))
                 for lo in s.edge_loops:
                     t = turning_angles(v[lo])
                     sharp += int((t > LIMIT).sum())
@@ -75,11 +84,13 @@ def main() -> None:
     ap.add_argument("--worst", type=int, default=8)
     args = ap.parse_args()
     res = measure(args.worst)
-    print("| garment | build s (mean of 5) | loops per build | worst turning angle |")
-    print("|---|---:|---:|---:|")
+    print("| garment | build s (mean of 5) | follow s (mean of 4) | loops per build | worst turning angle "
+          "| worst neckline vertex outside its rim |")
+    print("|---|---:|---:|---:|---:|---:|")
     for aid, r in res["per"].items():
         lo = "/".join(map(str, sorted(set(r["loops"]))))
-        print(f"| {aid} | {np.mean(r['time']):.2f} | {lo} | {r['worst']:.1f}° |")
+        rim = "no rim" if r["rim"] is None else f"{1000 * r['rim']:.2f} mm"
+        print(f"| {aid} | {np.mean(r['time']):.2f} | {np.mean(r['follow']):.2f} | {lo} | {r['worst']:.1f}° | {rim} |")
     print(f"\nneckline vertices turning > {LIMIT:.0f}°: {res['sharp']} of {res['total']} "
           f"({100 * res['sharp'] / max(res['total'], 1):.2f} %)")
     print("worst loops (angle, garment, case, stage, loop length, vertex position):")
