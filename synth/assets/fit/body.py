@@ -20,7 +20,7 @@ import numpy as np
 from synth.assets.fit.attach import Binding, body_query, push_out
 from synth.assets.fit.masks import region_mask
 from synth.assets.fit.meshops import boundary_loops, clip_by_field, level_points, resample_loop, subdivide
-from synth.assets.fit.trim import push_out_edges, trim_part
+from synth.assets.fit.trim import Rim, add_rims, place_rims, push_out_edges, trim_part
 from synth.geometry.normals import normalize, vertex_normals
 
 
@@ -155,18 +155,22 @@ class Body:
 
 
 class Parts:
-    """Accumulates mesh parts: (positions, faces, material slot, trimmable, inside, smooth edge)."""
+    """Accumulates mesh parts: (positions, faces, material slot, trimmable, inside, smooth edge,
+    rim)."""
 
     def __init__(self):
-        self.P, self.F, self.M, self.T, self.R, self.S = [], [], [], [], [], []
+        self.P, self.F, self.M, self.T, self.R, self.S, self.rim = [], [], [], [], [], [], []
 
-    def add(self, P, F, slot: int = 0, trim: bool = False, inside: bool = False, smooth_edge=False):
+    def add(self, P, F, slot: int = 0, trim: bool = False, inside: bool = False, smooth_edge=False, rim=None):
         """``trim``: vertices deep in another body part are trimmed; ``inside``: the part lies
         inside the body on purpose (a hem cap) and is never pushed out; ``smooth_edge`` (bool or
         per vertex): the boundary loops through these vertices only are kept smooth through the
-        fit (a torso shell's necklines: every vertex but the hem's)."""
+        fit (a torso shell's necklines: every vertex but the hem's); ``rim``: ``(radius,
+        flatten, slot)`` of a tube laid on those loops once they are fitted
+        (:func:`synth.assets.fit.trim.add_rims`), or None."""
         if len(F) == 0:
             return
+        self.rim.append(rim)
         self.P.append(np.asarray(P, np.float64))
         self.F.append(np.asarray(F, np.int64))
         self.M.append(np.full(len(F), slot, np.int32))
@@ -222,27 +226,40 @@ class FittedShell:
     info: dict
     inside: np.ndarray | None = None  # (V,) vertices never pushed out (hem caps)
     edge_loops: list = field(default_factory=list)  # boundary loops kept smooth (necklines)
+    rims: list[Rim] = field(default_factory=list)  # tubes laid on necklines
 
     def follow(self, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-        """Positions on new body vertices: the binding re-applied, then pushed out again."""
+        """Positions on new body vertices: the binding re-applied, then pushed out again (the
+        necklines from their build shape plus the body's motion averaged along them:
+        :func:`synth.assets.fit.trim.push_out_edges`), and the rims laid anew on the necklines
+        (:func:`synth.assets.fit.trim.place_rims`)."""
         query = body_query(vertices, triangles, self.body_tris)
-        return push_out_edges(self.binding.apply(vertices), query, self.clearance, self.inside, self.edge_loops)
+        skip = np.zeros(len(self.P), bool) if self.inside is None else self.inside.copy()
+        for r in self.rims:
+            skip[r.start:r.stop] = True  # placed from their neckline below
+        P = push_out_edges(self.binding.apply(vertices), query, self.clearance, skip, self.edge_loops, rest=self.P)
+        return place_rims(P, self.rims, query, self.clearance)
 
 
 def fit_shell(body: Body, shell: Shell, clearance: float) -> FittedShell:
     """Trim the trimmable parts where they run deep inside the skin (:func:`trim_part`), push
-    out (keeping the smooth-edge parts' boundary loops smooth: :func:`push_out_edges`), bind."""
+    out (keeping the smooth-edge parts' boundary loops smooth: :func:`push_out_edges`), lay the
+    rims on the fitted necklines (:func:`add_rims`), bind."""
     parts, trimmed = Parts(), 0
     src = shell.parts
-    for P, F, M, T, R, S in zip(src.P, src.F, src.M, src.T, src.R, src.S):
+    for P, F, M, T, R, S, rim in zip(src.P, src.F, src.M, src.T, src.R, src.S, src.rim):
         if T.any():
             P, F, S, n = trim_part(body.query, P, F, S)
             trimmed += n
-        parts.add(P, F, int(M[0]), bool(T.any()), bool(R.any()), S)
+        parts.add(P, F, int(M[0]), bool(T.any()), bool(R.any()), S, rim)
     P, F, M, _, R, S = parts.merged()
     loops = [lo for lo in boundary_loops(F) if S[lo].all()]
     P = push_out_edges(P, body.query, clearance, R, loops)
+    owner = np.repeat(np.arange(len(parts.P)), [len(p) for p in parts.P])
+    specs = [(lo, parts.rim[owner[lo[0]]]) for lo in loops if parts.rim[owner[lo[0]]] is not None]
+    P, F, M, rims = add_rims(P, F, M, specs, body.query, clearance)
+    R = np.concatenate([R, np.zeros(len(P) - len(R), bool)])
     binding = Binding(body.V, body.F, shell.anchor_tris, P)
     info = dict(shell.info, vertices=int(len(P)), faces=int(len(F)), trimmed_vertices=int(trimmed))
     return FittedShell(shell.cls, shell.name, P, F, M, shell.cloths, binding, body.skin_tris, clearance, info,
-                       R if R.any() else None, loops)
+                       R if R.any() else None, loops, rims)

@@ -39,12 +39,16 @@ from synth.assets.fit.body import Body, Cloth, Parts, Shell
 from synth.assets.fit.garment_parts import (crew_neckline, front_weight, hanging_strip, hood_up, neck_tube,
                                             necktie, shirt_collar, torso_shell, vee_neckline,
                                             wrinkle_offset)
-from synth.assets.fit.meshops import icosphere, smoothstep
+from synth.assets.fit.meshops import icosphere, smooth_max, smooth_min, smoothstep
 
 #: minimum distance (m) kept between every garment vertex and the skin
 CLEARANCE = 0.0015
 #: width (m) of the tank top's band along the hem, over the arm stumps
 TANK_BAND = 0.035
+#: rounding (m) of the corner where a turtleneck's collar top meets the cap under the jaw
+COLLAR_ROUND = 0.045
+#: rounding (m of the fields) of the corners of a tank top's openings
+TANK_ROUND = 0.035
 
 #: colour names -> sRGB HSV (h, s, v in [0, 1])
 COLOURS = {
@@ -174,7 +178,9 @@ def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
         def off(P, N):
             up = smoothstep(0.0, 0.02, P[:, 2] - (fr.z_ring(fr.theta(P)) + 0.005))
             return wrf(P, N) + 0.003 * up
-        z = lambda t: np.minimum(fr.z_ring(t) + h, fr.z_cap(t))  # noqa: E731
+        def z(t):  # the collar's top: h above the neck base, under the jaw, the corner between rounded
+            top = fr.z_ring(t) + h
+            return smooth_min(top, np.minimum(fr.z_cap(t), top + 1.0), COLLAR_ROUND)
         torso_shell(body, parts, z, off, rim=0.006, rim_flatten=0.9)
         # folded roll: a second tube a little under the top
         neck_tube(body, parts, 0, lambda t: z(t) - 0.018, base + 0.009, 0.012)
@@ -235,10 +241,11 @@ def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
             V = body.V
             th = fr.theta(V)
             zr = fr.z_ring(th)
-            torso = np.minimum(zr - 0.05 - 0.04 * front_weight(th) - V[:, 2], 0.13 - np.abs(V[:, 0]))
-            strap = np.minimum(w / 2 - np.abs(np.abs(V[:, 0]) - xs), zr + 0.01 - V[:, 2])
+            torso = smooth_min(zr - 0.05 - 0.04 * front_weight(th) - V[:, 2], 0.13 - np.abs(V[:, 0]), TANK_ROUND)
+            strap = smooth_min(w / 2 - np.abs(np.abs(V[:, 0]) - xs), zr + 0.01 - V[:, 2], 0.5 * w)
             band = TANK_BAND - body.hem  # a band along the hem covers the arm stumps (the bust's cut)
-            return np.maximum(np.maximum(torso, strap), band)
+            # the openings' corners (strap on torso, torso on band) rounded: arm holes, not notches
+            return smooth_max(smooth_max(torso, strap, TANK_ROUND), band, TANK_ROUND)
         torso_shell(body, parts, lambda t: fr.z_ring(t), wr(base, 0.001), extra_field=extra, rim=0.0)
         info["strap_width_m"] = w
     else:

@@ -20,8 +20,12 @@ from synth.assets.fit.hem import CAP_INSET, HEM_BAND, cap, hem_loops, smooth_loo
 
 #: passes of averaging along a torso shell's neckline loops (then evenly respaced)
 NECK_SMOOTHING = 12
-from synth.assets.fit.meshops import boundary_loops, grid_faces, icosphere, laplacian_smooth, sweep_tube
-from synth.geometry.normals import normalize
+#: radius (m) of the rounded tip of a V neckline
+V_TIP_RADIUS = 0.01
+#: an opening of a torso shell's field must span this many body vertices (smaller ones are closed)
+MIN_OPENING = 8
+from synth.assets.fit.meshops import (boundary_loops, grid_faces, icosphere, laplacian_smooth, negative_regions,
+                                     sweep_tube)
 
 
 def front_weight(th):
@@ -37,10 +41,15 @@ def crew_neckline(body: Body, rise: float, drop: float):
 
 
 def vee_neckline(body: Body, rise: float, depth: float, half_angle: float):
+    """A V ``depth`` deep, ``half_angle`` wide (radians around the neck) on a crew line; its tip
+    rounded to a radius of about :data:`V_TIP_RADIUS` (a hyperbola in theta: a sharp tip is one
+    loop vertex turning by 100-130 degrees)."""
     fr = body.frame
+    slope = depth / max(half_angle * fr.radius, 1e-6)  # height per length along the neck
+    a = V_TIP_RADIUS * slope / fr.radius  # hyperbola parameter (radians) for that tip radius
 
     def z(th):
-        v = depth * np.maximum(0.0, 1.0 - np.abs(th) / half_angle)
+        v = depth * np.maximum(0.0, 1.0 - (np.sqrt(np.asarray(th) ** 2 + a * a) - a) / half_angle)
         return np.minimum(fr.z_ring(th) + rise + 0.008 * (1 - np.cos(th)) - v, fr.z_cap(th))
     return z
 
@@ -64,24 +73,22 @@ def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None
     hem_f = body.hem
     # a neckline never reaches the hem (a deep V on a short torso): it stops HEM_BAND above it
     f = np.maximum(f, HEM_BAND - hem_f)
+    # pinholes (a field just under 0 at a few vertices) would be openings of a dozen vertices
+    lab = negative_regions(body.F[body.torso_tris], np.where(np.isin(np.arange(len(f)), body.F[body.torso_tris]), f, 1.0))
+    size = np.bincount(lab)
+    f = np.where((f < 0) & (size[lab] < MIN_OPENING), 0.0, f)
     P, F, cut, W = body.shell(body.torso_tris, np.minimum(f, hem_f), off_fn, weights=True)
     on_hem = cut & (np.abs(np.asarray(W @ hem_f)) < 1e-7)
     P = smooth_loops(P, F, on_hem)
     # every other boundary loop (the neckline, a tank top's arm holes), spread evenly along itself
     P = smooth_loops(P, F, ~on_hem, NECK_SMOOTHING, min_fraction=1.0, resample=True)
-    parts.add(P, F, slot, trim=True, smooth_edge=~on_hem)
+    # the rim tubes are laid on the necklines after the fit (``trim.add_rims``): the trim and the
+    # push-out move them
+    spec = (rim, rim_flatten, slot if rim_slot is None else rim_slot) if rim > 0 else None
+    parts.add(P, F, slot, trim=True, smooth_edge=~on_hem, rim=spec)
     for loop in hem_loops(F, on_hem):
         Vc, Fc = cap(P, loop, inset=CAP_INSET)
         parts.add(Vc, Fc, slot, inside=True)
-    if rim > 0 and len(F):
-        for loop in boundary_loops(F):
-            if cut[loop].mean() < 0.8 or len(loop) < 8 or on_hem[loop].mean() >= 0.8:
-                continue
-            path = P[loop]
-            # push the rim centre out so the tube sits on the shell
-            path = path + normalize(path - body.query.query(path).point) * rim * 0.6
-            Vt, Ft = sweep_tube(path[::2] if len(path) > 60 else path, rim, 8, closed=True, flatten=rim_flatten)
-            parts.add(Vt, Ft, slot if rim_slot is None else rim_slot)
     return P, F, cut
 
 

@@ -29,6 +29,8 @@ HEM_MARGIN = 0.025
 FIELD_SMOOTHING = 12
 #: smoothing passes of the hem polyline itself (along the loop, after the clip)
 LOOP_SMOOTHING = 8
+#: averaging passes between two respacings of a neckline loop (:func:`relax_loop`)
+RELAX_ROUND = 4
 #: the garment is kept this far (m of the hem field) above the hem whatever the neckline
 HEM_BAND = 0.02
 #: how far (m) the cap's rim sits inside the garment's hem edge (no coincident edges)
@@ -118,13 +120,25 @@ def smooth_loops(P: np.ndarray, F: np.ndarray, on_cut: np.ndarray, iterations: i
 
 
 def relax_loop(Q: np.ndarray, iterations: int) -> np.ndarray:
-    """A closed polyline averaged along itself ``iterations`` times (each vertex with its two
-    neighbours, 1/4 1/2 1/4), then its vertices spread at equal arc length along the result (in
-    order, the start chosen to move them least): averaging alone leaves a fold of the clip's
-    level set, or a cluster of tiny edges, as a knot of vertices whose turning angles are noise."""
-    Q = np.array(Q, np.float64, copy=True)
-    for _ in range(iterations):
-        Q = 0.5 * Q + 0.25 * (np.roll(Q, 1, 0) + np.roll(Q, -1, 0))
+    """A closed polyline smoothed along itself: its vertices spread at equal arc length, then
+    rounds of :data:`RELAX_ROUND` averaging passes (each vertex with its two neighbours, 1/4 1/2
+    1/4), each followed by a respacing, ``iterations`` passes in all. The first respacing makes
+    the averaging act over arc length, not vertex indices: the clip leaves clusters of tiny
+    edges where its level set passes near a vertex or two clips meet, and averaging over them
+    alone leaves a corner that a later respacing turns into one sharp vertex."""
+    Q = _respace(np.array(Q, np.float64, copy=True))
+    done = 0
+    while done < iterations:
+        for _ in range(min(RELAX_ROUND, iterations - done)):
+            Q = 0.5 * Q + 0.25 * (np.roll(Q, 1, 0) + np.roll(Q, -1, 0))
+        done += RELAX_ROUND
+        Q = _respace(Q)
+    return Q
+
+
+def _respace(Q: np.ndarray) -> np.ndarray:
+    """The closed polyline's vertices spread at equal arc length along it (in order, the start
+    chosen to move them least)."""
     n = len(Q)
     ext = np.vstack([Q, Q[:1]])
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(ext, axis=0), axis=1))])

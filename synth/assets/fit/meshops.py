@@ -1,6 +1,6 @@
 """Mesh operations for the fitted shells (garments, headwear), pure numpy.
 
-* ``smoothstep`` (unit vectors and normals come from :mod:`synth.geometry.normals`);
+* ``smoothstep``, ``smooth_max`` / ``smooth_min`` (rounded corners of fields; unit vectors and normals come from :mod:`synth.geometry.normals`);
 * :func:`clip_by_field` cuts a triangle set at the zero level of a per-vertex scalar field
   (neckline, cap plane...) exactly, returning new vertices as sparse linear combinations of
   body vertices (``W``, a scipy CSR matrix), so a shell is ``W @ V + offset * normal``;
@@ -22,6 +22,19 @@ from synth.geometry.normals import normalize
 def smoothstep(e0: float, e1: float, x):
     t = np.clip((np.asarray(x, np.float64) - e0) / (e1 - e0), 0.0, 1.0)
     return t * t * (3.0 - 2.0 * t)
+
+
+def smooth_max(a, b, k: float):
+    """max(a, b) with the corner rounded over about ``k`` (same units): a hyperbola that is
+    never below the maximum and at most k/2 above it (where a == b)."""
+    a = np.asarray(a, np.float64)
+    b = np.asarray(b, np.float64)
+    return 0.5 * (a + b + np.sqrt((a - b) ** 2 + k * k))
+
+
+def smooth_min(a, b, k: float):
+    """min(a, b) rounded over about ``k`` (:func:`smooth_max` mirrored)."""
+    return -smooth_max(-np.asarray(a, np.float64), -np.asarray(b, np.float64), k)
 
 
 def clip_by_field(F: np.ndarray, f: np.ndarray, n_vertices: int):
@@ -82,6 +95,20 @@ def clip_by_field(F: np.ndarray, f: np.ndarray, n_vertices: int):
     W = sparse.csr_matrix((vals, (ri, ci)), shape=(M, n_vertices))
     faces = np.array(out, np.int64).reshape(-1, 3)
     return W, faces, cut
+
+
+def negative_regions(F: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """(V,) label of the connected region of ``f < 0`` (over the edges of ``F``) of every vertex
+    (a vertex with ``f >= 0`` is a region of its own)."""
+    from scipy.sparse.csgraph import connected_components
+
+    F = np.asarray(F, np.int64)
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    neg = np.asarray(f) < 0
+    E = E[neg[E[:, 0]] & neg[E[:, 1]]]
+    n = len(neg)
+    A = sparse.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    return connected_components(A, directed=False)[1]
 
 
 def subdivide(W, faces: np.ndarray, is_cut: np.ndarray | None = None):
