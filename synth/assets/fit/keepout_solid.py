@@ -150,8 +150,8 @@ class KeepOut:
         P[bad, 1:] = turned(_smallest_turn(full, clear, steps, refine)[:, None])[:, 0]
         return P
 
-    def bend(self, P: np.ndarray, clearance, steps: int = 8, refine: int = 5, rings: int = 10,
-             azimuths: int = 8, widest: float = np.radians(150.0)) -> np.ndarray:
+    def bend(self, P: np.ndarray, clearance, steps: int = 6, refine: int = 5, rings: int = 6,
+             azimuths: int = 6, widest: float = np.radians(150.0)) -> np.ndarray:
         """Walk the strands from the root: where point k is closer than its clearance
         (broadcastable to P.shape[:-1]; -inf: ignored), turn points k onward rigidly about point
         k - 1 by the smallest angle that clears point k: first toward the outward normal at
