@@ -134,5 +134,6 @@ class ClosestPoints:
         return Closest(*(np.concatenate(x) for x in zip(*parts)))
 
     def _query(self, P) -> Closest:
-        _, cand = self.tree.query(P, k=self.k, workers=-1)
+        # threads pay off for large batches only (each query starts them anew); same answer
+        _, cand = self.tree.query(P, k=self.k, workers=-1 if len(P) >= 1024 else 1)
         return nearest_on_candidates(P, self.V, self.F, self.faces[np.asarray(cand).reshape(len(P), -1)], self.by)

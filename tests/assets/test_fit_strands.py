@@ -14,7 +14,8 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from synth.assets.fit.groom import Groom, Styling, attach
-from synth.assets.fit.strands import KeepOut, Surface, arc_length, resample_fast, transport_frames
+from synth.assets.fit.keepout_solid import KeepOut
+from synth.assets.fit.strands import Surface, arc_length, resample_fast, transport_frames
 from synth.geometry.normals import normalize
 from tests.support import asset_scene
 

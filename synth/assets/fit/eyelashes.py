@@ -6,9 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from synth.appearance import pigment as pig
-from synth.assets.fit.groom import Groom, Styling, colour_of
-from synth.assets.fit.strands import (DOWN, FORWARD, LEFT, UP, KeepOut, Surface, arc_length, push_out_strands,
-                                      scale_count)
+from synth.assets.fit.groom import Groom, Styling, attach, colour_of
+from synth.assets.fit.strands import DOWN, FORWARD, LEFT, UP, Surface, arc_length, push_out_strands, scale_count
 from synth.geometry.normals import normalize
 
 
@@ -118,14 +117,14 @@ def groom(ctx, entry) -> Groom:
     layer = np.full(N, 0.0003)
     pts = push_out_strands(surface, pts, layer, exact=True)
     clr = np.minimum(layer[:, None], 0.6 * arc_length(pts))
-    # out of the eyeballs (the head's push-out can miss them where a thin lid fold is nearer)
-    eyes = KeepOut(surface, EYEBALLS)
-    pts = eyes.project(eyes.pivot(pts, clr), np.where(np.arange(npts) > 0, clr, -np.inf))
     styling = Styling(root_radius=(1.1e-4 if mascara else 7e-5) * float(np.sqrt(140.0 / max(n_up, 1))) ** 0.5,
                         tip_shape=0.3, clump=clumping, clump_distance=0.0015, clump_shape=0.7,
                         seed=int(rng.integers(0, 2 ** 31)))
     info = {"style": sid, "colour": colour, "pigment": pg.as_dict(), "guides": N, "upper_per_eye": n_up,
             "length_scale": lscale, "curl": curl}
-    return Groom("eyelashes", f"eyelashes_{sid}", surface, pts, tri, bary, clr, styling, info, pg,
-                 roughness=0.25, coat=0.3 if mascara else 0.0, exact=True,
-                 keep_out=EYEBALLS)
+    g = Groom("eyelashes", f"eyelashes_{sid}", surface, pts, tri, bary, clr, styling, info, pg,
+              roughness=0.25, coat=0.3 if mascara else 0.0, exact=True, keep_out=EYEBALLS, keep_skin=True)
+    # out of the eyeballs and the lids (the head's push-out can miss the eye where a thin lid
+    # fold is nearer): the same settling as on every posed head
+    g.pts = attach(g)[1].positions(ctx)
+    return g

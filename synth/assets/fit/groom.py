@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from synth.appearance import pigment as pig
-from synth.assets.fit.strands import KeepOut, Surface
+from synth.assets.fit.keepout_solid import KeepOut
+from synth.assets.fit.strands import Surface
 
 
 @dataclass
@@ -108,6 +109,7 @@ class Groom:
     coat: float = 0.0
     exact: bool = False  # exact (per-triangle) push-out on update (small strand sets)
     keep_out: tuple[str, ...] = ()  # closed-mesh regions the strands pivot out of (lashes: eyeballs)
+    keep_skin: bool = False  # the skin near the roots joins the keep-out; strands bend out of it (lashes)
 
 
 @dataclass
@@ -124,6 +126,26 @@ class Attachment:
     #: closed-mesh regions (the eyeballs for lashes) the strands stay out of: strands are turned
     #: about their roots out of them before the push-out and single points projected out after it
     keep_out: tuple[str, ...] = ()
+    #: the skin near the roots joins the keep-out (lashes: the opposite lid of a closed eye):
+    #: strands bend out of it joint by joint (``KeepOut.bend``)
+    keep_skin: bool = False
+
+    def keep(self, surface: Surface, root: np.ndarray) -> KeepOut | None:
+        """The keep-out on ``surface``: the ``keep_out`` meshes and, with ``keep_skin``, the skin
+        within twice the longest strand (plus 1 mm) of the roots, which holds the closest skin
+        point of every strand point."""
+        if not self.keep_out:
+            return None
+        reach = 2.0 * float(np.linalg.norm(np.diff(self.local, axis=1), axis=2).sum(1).max(initial=0.0)) + 1e-3
+        return KeepOut(surface, self.keep_out, root if self.keep_skin else None, reach)
+
+    def clear(self, keep: KeepOut | None, pts: np.ndarray) -> np.ndarray:
+        """Strands turned out of the keep-out meshes (rigidly about the root), then bent out of
+        the skin (joint by joint), as declared."""
+        if keep is None:
+            return pts
+        pts = keep.pivot(pts, self.clearance)
+        return keep.bend(pts, self.clearance) if self.keep_skin else pts
 
     def positions(self, ctx) -> np.ndarray:
         """The strands on the current head of ``ctx`` (``vertices``, ``data``)."""
@@ -132,10 +154,9 @@ class Attachment:
         F = surface.frames(self.tri)
         pts = root[:, None] + np.einsum("ndk,npk->npd", F, self.local)
         fin = np.isfinite(self.clearance)
-        keep = KeepOut(surface, self.keep_out) if self.keep_out else None
-        if keep is not None:
-            pts = keep.pivot(pts, self.clearance)
-        if fin.any():
+        keep = self.keep(surface, root)
+        pts = self.clear(keep, pts)
+        if fin.any() and not self.keep_skin:
             c = np.where(fin, self.clearance, -1.0)
             # the fast nearest-vertex test reads the tangent plane of a vertex across a thin lid
             # fold and pushes lash points through it into the eye: exact sets near a keep-out
@@ -162,4 +183,4 @@ def attach(g: Groom) -> tuple[np.ndarray, Attachment]:
     local = np.einsum("npd,ndk->npk", pts - root[:, None], F)
     clr = np.broadcast_to(np.asarray(g.clearance, np.float64), pts.shape[:2]).copy()
     clr[:, 0] = -np.inf
-    return pts, Attachment(g.tri, g.bary, local, clr, bool(g.exact), tuple(g.keep_out))
+    return pts, Attachment(g.tri, g.bary, local, clr, bool(g.exact), tuple(g.keep_out), bool(g.keep_skin))

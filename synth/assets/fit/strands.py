@@ -19,7 +19,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from synth.geometry.normals import face_normals, normalize, vertex_normals
-from synth.geometry.rotations import axis_angle_to_matrix, rotate_between
+from synth.geometry.rotations import rotate_between
 from synth.geometry.sdf import SignedDistance
 
 UP = np.array([0.0, 0.0, 1.0])
@@ -170,90 +170,6 @@ def _push_along(P: np.ndarray, clearance, query, iterations: int) -> np.ndarray:
             break
         P += deficit[..., None] * n
     return P
-
-
-class KeepOut:
-    """Closed meshes the strands must stay out of (the eyeballs for lashes): the signed distance
-    to them (angle-weighted pseudo-normal sign: exact inside/outside for closed meshes, where the
-    head's one-sided test of :meth:`Surface.closest` can read a point deep in the eye as outside
-    because a thin lid fold is nearer), and two remedies: :meth:`pivot` turns whole strands about
-    their roots out of the meshes (the shape kept), :meth:`project` moves single points out along
-    the normal (the residue). The regions must be disjoint closed meshes; they are queried as
-    one mesh."""
-
-    def __init__(self, surface: Surface, regions):
-        m = np.zeros(len(surface.V), bool)
-        for r in regions:
-            m |= surface.mask(r)
-        tris = surface.T[m[surface.T].all(1)]
-        self.sdf = None
-        if len(tris):
-            used, inv = np.unique(tris, return_inverse=True)
-            self.sdf = SignedDistance(surface.V[used], inv.reshape(-1, 3), sign="pseudo")
-
-    def query(self, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Signed distance of points (..., 3) to the meshes (negative inside) and the unit normal
-        that signed it."""
-        h = self.sdf.query(P.reshape(-1, 3))
-        return h.signed.reshape(P.shape[:-1]), h.normal.reshape(P.shape)
-
-    def _short(self, P, c):
-        """(N,) largest clearance deficit of each strand's non-root points (<= 0: clear)."""
-        sd, _ = self.query(P[:, 1:])
-        return np.max(c[:, 1:] - sd, axis=1)
-
-    def pivot(self, P: np.ndarray, clearance, steps: int = 12, refine: int = 6) -> np.ndarray:
-        """Turn each strand with a point closer than its clearance (broadcastable to P.shape[:-1];
-        -inf: ignored) rigidly about its root, its mean direction toward the meshes' outward normal
-        at the root, by the smallest angle that clears every point (searched in ``steps`` up to
-        the normal, then bisected ``refine`` times); a strand not cleared even along the normal
-        is turned onto it. Strands already clear are not touched."""
-        P = np.array(P, np.float64)
-        if self.sdf is None:
-            return P
-        c = np.broadcast_to(np.asarray(clearance, np.float64), P.shape[:-1])
-        bad = np.flatnonzero(self._short(P, c) > 0.0)
-        if not len(bad):
-            return P
-        root = P[bad, 0]
-        rel = P[bad, 1:] - root[:, None]
-        _, n = self.query(root)
-        w = normalize(rel.sum(1))
-        axis = np.cross(w, n)
-        ok = np.linalg.norm(axis, axis=1) > 1e-9
-        bad, root, rel, n, w, axis = bad[ok], root[ok], rel[ok], n[ok], w[ok], normalize(axis[ok])
-        full = np.arccos(np.clip(np.einsum("nd,nd->n", w, n), -1.0, 1.0))
-
-        def turned(t):
-            R = axis_angle_to_matrix(axis * t[:, None])
-            return np.concatenate([root[:, None], root[:, None] + np.einsum("nij,npj->npi", R, rel)], 1)
-
-        lo = np.zeros(len(bad))
-        hi = full.copy()
-        open_ = np.ones(len(bad), bool)
-        for k in range(1, steps + 1):
-            t = full * (k / steps)
-            clear = self._short(turned(t), c[bad]) <= 0.0
-            hit = open_ & clear
-            hi[hit] = t[hit]
-            open_ &= ~clear
-            lo[open_] = t[open_]
-            if not open_.any():
-                break
-        lo[open_] = hi[open_]  # never cleared: onto the normal
-        for _ in range(refine):
-            mid = 0.5 * (lo + hi)
-            clear = self._short(turned(mid), c[bad]) <= 0.0
-            hi = np.where(clear, mid, hi)
-            lo = np.where(clear, lo, mid)
-        P[bad] = turned(hi)
-        return P
-
-    def project(self, P: np.ndarray, clearance, iterations: int = 3) -> np.ndarray:
-        """Move points closer than their clearance (-inf: ignored) out along the normal."""
-        if self.sdf is None:
-            return np.array(P, np.float64)
-        return _push_along(P, clearance, self.query, iterations)
 
 
 # --------------------------------------------------------------------------- strand shapes
