@@ -45,15 +45,20 @@ def test_killed_controller_strands_nothing_and_the_rerun_finishes(tmp_path):
 
 
 def test_sigterm_mid_render_stops_the_worker_and_releases_its_claim(tmp_path):
-    """SIGTERM to a worker inside Cycles at 512 samples: it exits within 5 s, its claim is gone,
-    the controller reports the stopped worker (exit 3) and the rerun finishes."""
+    """SIGTERM to a worker inside Cycles: it exits within 5 s, its claim is gone, the
+    controller reports the stopped worker (exit 3) and the rerun finishes.
+
+    One frame at 4096 samples takes ~18 s in Cycles on a quiet 2-core machine (512 samples,
+    as in the issue, took ~2.3 s: a fixed wait after the claim could land after the frame,
+    which failed CI); the scene is built ~3 s after the claim, so 10 s after it the worker is
+    inside Cycles on a quiet machine and on a loaded one."""
     out = tmp_path / "ds"
-    args = ["render", "--identities", 1, "--expressions", 1, "--views", 3, "--preset", "ci",
-            "--set", "render.samples=512", "--out", out, "-q"]
+    args = ["render", "--identities", 1, "--expressions", 1, "--views", 1, "--preset", "ci",
+            "--set", "render.samples=4096", "--out", out, "-q"]
     ctl = start_synth(*args)
     try:
         holder = wait_for(lambda: lease_holder(out, "shard_000000"), "the worker's claim")
-        time.sleep(8.0)  # as in the issue: well inside the first frame's Cycles render
+        time.sleep(10.0)
         pid = holder["pid"]
         assert alive(pid) and not staged(out), "the worker should still be rendering its first frame"
         os.kill(pid, signal.SIGTERM)
@@ -68,7 +73,7 @@ def test_sigterm_mid_render_stops_the_worker_and_releases_its_claim(tmp_path):
     assert "stopped (SIGTERM)" in err and "synth: error: 1 shard(s) failed after their retries" in err
     p = synth(*args, check=False)
     assert p.returncode == 0, p.stderr
-    assert "3/3 frames in 1/1 shards committed" in p.stdout
+    assert "1/1 frames in 1/1 shards committed" in p.stdout
 
 
 def test_sigterm_to_the_controller_stops_everything_like_ctrl_c(tmp_path):
