@@ -10,6 +10,7 @@ import math
 from typing import Any
 
 import bpy
+import numpy as np
 
 VIEW_LAYER = "ViewLayer"
 
@@ -131,6 +132,35 @@ def uniform_environment(strength: float = 1.0, color=(1.0, 1.0, 1.0)) -> None:
     bg = world.node_tree.nodes["Background"]
     bg.inputs["Color"].default_value = (*color, 1.0)
     bg.inputs["Strength"].default_value = float(strength)
+    scene.world = world
+
+
+def studio_environment(env: dict, strength: float = 1.0, color=(1.0, 1.0, 1.0)) -> None:
+    """The procedural studio environment of the plan's lighting record ``env``
+    (synth.appearance.lighting): an equirectangular float image made in memory (no file)."""
+    from synth.appearance.lighting import Studio, studio_map
+
+    s = Studio(key_deg=tuple(env["key_deg"]), key_size_deg=float(env["key_size_deg"]),
+               key_share=float(env["key_share"]), fill_deg=tuple(env["fill_deg"]),
+               fill_size_deg=float(env["fill_size_deg"]), fill_share=float(env["fill_share"]),
+               rotation_deg=float(env.get("rotation_deg", 0.0)))
+    L = studio_map(s)
+    H, W = L.shape[:2]
+    rgba = np.ones((H, W, 4), np.float32)
+    rgba[..., :3] = L * np.asarray(color, np.float32)
+    img = bpy.data.images.new("synth_studio", W, H, alpha=False, float_buffer=True)
+    img.colorspace_settings.name = "Linear Rec.709"
+    img.pixels.foreach_set(rgba[::-1].ravel())  # Blender's rows start at the bottom
+    scene = bpy.context.scene
+    world = bpy.data.worlds.new("synth_studio")
+    world.use_nodes = True
+    nt = world.node_tree
+    tex = nt.nodes.new("ShaderNodeTexEnvironment")
+    tex.image = img
+    tex.interpolation = "Linear"
+    bg = nt.nodes["Background"]
+    bg.inputs["Strength"].default_value = float(strength)
+    nt.links.new(tex.outputs["Color"], bg.inputs["Color"])
     scene.world = world
 
 

@@ -79,8 +79,11 @@ def _set_environment(ident: dict, plan) -> dict:
 
     env = dict(ident.get("lighting") or plan.lighting())
     strength = float(env.get("strength", 1.0))
-    if env.get("environment", "uniform") == "uniform":
+    kind = env.get("environment", "uniform")
+    if kind == "uniform":
         bscene.uniform_environment(strength, tuple(env.get("color", (1.0, 1.0, 1.0))))
+    elif kind == "studio":
+        bscene.studio_environment(env, strength, tuple(env.get("color", (1.0, 1.0, 1.0))))
     else:
         path = env.get("file")
         if not path:

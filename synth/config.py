@@ -166,12 +166,29 @@ class SkinConfig:
 
 @section
 class LightingConfig:
-    environment: Annotated[str, Choices("uniform", "hdri")] = "uniform"
-    """'uniform' (paper: one uniform well-lit environment) or 'hdri'"""
+    environment: Annotated[str, Choices("studio", "uniform", "hdri")] = "studio"
+    """'studio' (one soft procedural environment, the same for every identity: key, fill and ambient; the paper's
+    single environment chosen to minimize shadows on the face), 'uniform' (constant radiance: no shading) or
+    'hdri' (environment maps from lighting.hdri_files)"""
     strength: Annotated[float, Bounds(0.0, 1e4)] = 1.0
     """environment strength"""
     color: Annotated[tuple[float, float, float], Bounds(0.0, 1e4)] = (1.0, 1.0, 1.0)
-    """uniform environment colour (linear RGB)"""
+    """colour of the uniform and studio environments (linear RGB)"""
+    studio_key_deg: Annotated[tuple[float, float], Bounds(-360.0, 360.0), Unordered()] = (-35.0, 30.0)
+    """studio key light direction (azimuth, elevation), camera convention: azimuth 0 in front of the face, + toward
+    the subject's left"""
+    studio_key_size_deg: Annotated[float, Bounds(5.0, 90.0)] = 25.0
+    """angular spread of the studio key light"""
+    studio_key_share: Annotated[float, Bounds(0.0, 1.0)] = 0.45
+    """share of the studio environment's power in the key light"""
+    studio_fill_deg: Annotated[tuple[float, float], Bounds(-360.0, 360.0), Unordered()] = (60.0, 5.0)
+    """studio fill light direction (azimuth, elevation)"""
+    studio_fill_size_deg: Annotated[float, Bounds(5.0, 90.0)] = 45.0
+    """angular spread of the studio fill light"""
+    studio_fill_share: Annotated[float, Bounds(0.0, 1.0)] = 0.2
+    """share of the studio environment's power in the fill light (the rest is ambient, sky brighter than floor)"""
+    studio_rotation_deg: Annotated[Interval, Bounds(-360.0, 360.0)] = (0.0, 0.0)
+    """rotation of the studio environment about the vertical, drawn per identity ([0, 0]: the same for all)"""
     hdri_files: tuple[str, ...] = ()
     """environment maps drawn per identity when environment = 'hdri'"""
     hdri_rotation_deg: Annotated[Interval, Bounds(-360.0, 360.0)] = (-180.0, 180.0)
@@ -247,6 +264,10 @@ def check_cross(cfg: Config, where: str) -> None:
     if not (lim[0] < -30.0 and lim[1] > 55.0):
         raise ConfigError(f"config value skin.ita_limits_deg = {list(lim)} must reach below -30 and above 55",
                           where, "widen it, e.g. [-55, 62] (use skin.ita_weights to drop a category)")
+    if cfg.lighting.studio_key_share + cfg.lighting.studio_fill_share > 1.0:
+        raise ConfigError(f"config values lighting.studio_key_share + studio_fill_share = "
+                          f"{cfg.lighting.studio_key_share + cfg.lighting.studio_fill_share:g} exceed 1", where,
+                          "lower them: their sum is the share of the environment's power in the two lights")
     if cfg.lighting.environment == "hdri" and not cfg.lighting.hdri_files:
         raise ConfigError("config value lighting.hdri_files is empty but lighting.environment = 'hdri'", where,
                           "list environment maps in lighting.hdri_files or use environment = 'uniform'")

@@ -20,7 +20,9 @@ def test_defaults_mirror_the_paper():
     assert c.dataset.expressions_per_identity == 13
     assert c.dataset.views_per_expression == 30
     assert c.camera.min_separation_deg == 25.0
-    assert c.lighting.environment == "uniform" and c.lighting.hdri_files == ()
+    # one environment for every identity, soft ("chosen to minimize shadows on the face")
+    assert c.lighting.environment == "studio" and c.lighting.studio_rotation_deg == (0.0, 0.0)
+    assert c.lighting.hdri_files == ()
     assert c.render.preset == "preview" and c.dataset.identities_per_shard == 1
 
 

@@ -111,6 +111,13 @@ def sample_lighting(seed: int, identity: int, lighting) -> dict[str, Any]:
     if lighting.environment == "uniform":
         return {"environment": "uniform", "strength": lighting.strength, "color": list(lighting.color)}
     rng = seeds.generator(seed, seeds.Stream.LIGHTING, identity=identity)
+    if lighting.environment == "studio":
+        lo, hi = lighting.studio_rotation_deg
+        return {"environment": "studio", "strength": lighting.strength, "color": list(lighting.color),
+                "key_deg": list(lighting.studio_key_deg), "key_size_deg": lighting.studio_key_size_deg,
+                "key_share": lighting.studio_key_share, "fill_deg": list(lighting.studio_fill_deg),
+                "fill_size_deg": lighting.studio_fill_size_deg, "fill_share": lighting.studio_fill_share,
+                "rotation_deg": round(float(lo + rng.random() * (hi - lo)), 8)}
     files = lighting.hdri_files
     f = files[min(len(files) - 1, int(rng.random() * len(files)))]
     lo, hi = lighting.hdri_rotation_deg

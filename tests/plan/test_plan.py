@@ -101,7 +101,7 @@ def test_header_summary_and_reader(plan20, toy):
     assert h["run_seed"] == 7 and h["model"]["path"] == str(Path(toy).resolve())
     assert h["config"]["dataset"]["views_per_expression"] == 30 and h["config"]["render"]["resolution"] == [256, 256]
     assert plan.expected()["shard_000019"][0] == "id000019_ex00_v00" and len(plan.expected()["shard_000000"]) == 390
-    assert plan.render_settings()["preset"] == "preview" and plan.lighting()["environment"] == "uniform"
+    assert plan.render_settings()["preset"] == "preview" and plan.lighting()["environment"] == "studio"
     assert plan.model_data().name == "toy-ellipsoid"
     s = json.loads((plan20 / "summary.json").read_text())
     assert s["plan_hash"] == plan.plan_hash and s["frames"] == 7800
