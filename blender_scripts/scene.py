@@ -161,6 +161,11 @@ def studio_environment(env: dict, strength: float = 1.0, color=(1.0, 1.0, 1.0)) 
     bg = nt.nodes["Background"]
     bg.inputs["Strength"].default_value = float(strength)
     nt.links.new(tex.outputs["Color"], bg.inputs["Color"])
+    # No importance map: the lobes are broad (>= 5 degrees, 25 by default), so BSDF sampling
+    # finds them. 12 preview frames, Cycles s: uniform 38.7, studio with the automatic map 51.8
+    # (+34 %), a 64 px manual map 45.4 (+17 %), none 37.5; skin pixels none vs automatic: 1.5-2.6 %
+    # apart (noise), mean ratio 0.996-1.003.
+    world.cycles.sampling_method = "NONE"
     scene.world = world
 
 
