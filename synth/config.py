@@ -270,7 +270,7 @@ def check_cross(cfg: Config, where: str) -> None:
                           "lower them: their sum is the share of the environment's power in the two lights")
     if cfg.lighting.environment == "hdri" and not cfg.lighting.hdri_files:
         raise ConfigError("config value lighting.hdri_files is empty but lighting.environment = 'hdri'", where,
-                          "list environment maps in lighting.hdri_files or use environment = 'uniform'")
+                          "list environment maps in lighting.hdri_files or use environment = 'studio' or 'uniform'")
     from synth.plan.expressions import PRESETS
 
     for p in e.presets:
