@@ -125,7 +125,7 @@ def drop_render_cache() -> None:
 
 
 def uniform_environment(strength: float = 1.0, color=(1.0, 1.0, 1.0)) -> None:
-    """One uniform, well-lit environment (the paper's setting): no directional shadows."""
+    """A constant environment ('uniform'): every surface gets the same irradiance, no shading."""
     scene = bpy.context.scene
     world = bpy.data.worlds.new("synth_uniform")
     world.use_nodes = True
@@ -140,11 +140,7 @@ def studio_environment(env: dict, strength: float = 1.0, color=(1.0, 1.0, 1.0)) 
     (synth.appearance.lighting): an equirectangular float image made in memory (no file)."""
     from synth.appearance.lighting import Studio, studio_map
 
-    s = Studio(key_deg=tuple(env["key_deg"]), key_size_deg=float(env["key_size_deg"]),
-               key_share=float(env["key_share"]), fill_deg=tuple(env["fill_deg"]),
-               fill_size_deg=float(env["fill_size_deg"]), fill_share=float(env["fill_share"]),
-               rotation_deg=float(env.get("rotation_deg", 0.0)))
-    L = studio_map(s)
+    L = studio_map(Studio.from_record(env))
     H, W = L.shape[:2]
     rgba = np.ones((H, W, 4), np.float32)
     rgba[..., :3] = L * np.asarray(color, np.float32)

@@ -57,6 +57,14 @@ class Studio:
         if not (self.key_size_deg > 0.0 and self.fill_size_deg > 0.0):
             raise ValueError("studio lobe sizes must be > 0 degrees")
 
+    @classmethod
+    def from_record(cls, env: dict) -> Studio:
+        """The environment of a plan's lighting record (synth.plan.assets.sample_lighting)."""
+        return cls(key_deg=tuple(env["key_deg"]), key_size_deg=float(env["key_size_deg"]),
+                   key_share=float(env["key_share"]), fill_deg=tuple(env["fill_deg"]),
+                   fill_size_deg=float(env["fill_size_deg"]), fill_share=float(env["fill_share"]),
+                   rotation_deg=float(env.get("rotation_deg", 0.0)))
+
 
 def map_directions(width: int = MAP_WIDTH) -> tuple[np.ndarray, np.ndarray]:
     """(H, W, 3) unit directions of the pixel centres of a ``width`` x ``width / 2``

@@ -70,6 +70,7 @@ def test_planned_studio_record_and_rotation_from_the_seed():
 
     rec = sample_lighting(3, 5, Config().lighting)
     assert rec["environment"] == "studio" and rec["rotation_deg"] == 0.0 and rec["key_deg"] == [-35.0, 30.0]
+    assert Studio.from_record(rec) == Studio()  # the config defaults are the environment's defaults
     lit = load_config(overrides=["lighting.studio_rotation_deg=[-90,90]"]).lighting
     a, b = (sample_lighting(3, i, lit)["rotation_deg"] for i in (5, 6))
     assert a == sample_lighting(3, 5, lit)["rotation_deg"] and a != b and -90 <= a <= 90
@@ -117,9 +118,7 @@ def test_a_diffuse_sphere_shows_the_predicted_irradiance(tmp_path):
     scene.configure_render({"samples": 64, "denoise": False, "device": "cpu", "max_bounces": 4}, 48, 48)
     env = sample_lighting(0, 0, load_config(overrides=["lighting.studio_rotation_deg=[40,40]"]).lighting)
     scene.studio_environment(env)
-    L = studio_map(Studio(key_deg=tuple(env["key_deg"]), key_size_deg=env["key_size_deg"], key_share=env["key_share"],
-                          fill_deg=tuple(env["fill_deg"]), fill_size_deg=env["fill_size_deg"],
-                          fill_share=env["fill_share"], rotation_deg=env["rotation_deg"]))
+    L = studio_map(Studio.from_record(env))
     cam = camera.make_camera()
     for az, el in ((0.0, 0.0), (120.0, 30.0)):
         camera.set_camera(cam, intrinsics(48, 48, 20.0), invert_rigid(orbit_camera_to_world(az, el, 0.8, np.zeros(3))),
