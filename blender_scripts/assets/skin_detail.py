@@ -5,6 +5,9 @@ G T-zone, B wrinkle zones, A beard area):
 
 * freckles (small Voronoi spots on cheeks and nose, density/strength ~ ``freckles``),
 * age spots / moles (sparse larger Voronoi spots on the face, ``age_spots``),
+  both, and the stubble shadow's noise, built only as far as the identity's finest view resolves
+  them (:func:`synth.appearance.skin_optics.spot_weight`): below the pixel a layer is its mean,
+  a flat tint over its mask (sub-pixel spots at preview samples denoise into blotches),
 * redness (cheeks and nose, from ``haemoglobin``),
 * oiliness -> lower roughness and a stronger sharp specular lobe (coat) in the T-zone,
 * wrinkles (forehead bands, crow's feet, nasolabial folds) as a bump, ``wrinkle_depth``, faded
@@ -13,8 +16,9 @@ G T-zone, B wrinkle zones, A beard area):
   material's: ``blender_scripts.materials.skin_material``),
 * the tear meniscus: coat and low roughness on the lower lids' margin (``tear_line`` attribute,
   :func:`synth.assets.fit.eyes.lid_margin`),
-* stubble shadow over the beard area when the identity has no beard (drawn with
-  probability 0.5 and a light strength) or has the ``stubble`` beard.
+* stubble shadow over the beard area (feathered at its edge) when the identity has no beard
+  (drawn with probability 0.5 and a light strength) or has the ``stubble`` beard, as dark as
+  the beard's (else the scalp hair's) colour is (:func:`synth.appearance.pigment.shaft_darkness`).
 
 The base albedo (melanin/haemoglobin) is set by the worker through ``head_materials``.
 """
@@ -25,10 +29,19 @@ import numpy as np
 
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
+from synth.appearance import skin_optics as so
 from synth.appearance.skin_optics import WRINKLES, detail_weight, sharp_lobe
+from synth.appearance.pigment import pigment, shaft_darkness
 from synth.assets.fit.eyes import lid_margin
+from synth.assets.fit.groom import colour_of
 from synth.assets.fit.masks import skin_detail_mask
 from synth.dataset.segmentation import CLASSES
+
+
+#: stubble shadow of the ``stubble`` beard for black hair (0.55 before: with the strands on top,
+#: light skin read as a dirty brown patch); identities without a beard draw 0.1-0.3 with
+#: probability 0.5; both scaled by the hair's :func:`shaft_darkness`
+STUBBLE_SHADOW = 0.3
 
 
 def _tex_node(mat, kind, scale, seed, vec=None):
@@ -44,6 +57,41 @@ def _tex_node(mat, kind, scale, seed, vec=None):
     coord = nt.nodes.new("ShaderNodeTexCoord")
     nt.links.new(vec if vec is not None else coord.outputs["Object"], t.inputs["Vector"])
     return t
+
+
+def _blend_mean(mat, tex, w: float, mean: float, mask):
+    """``mask * (w * tex + (1 - w) * mean)``: a detail layer faded to its mean below the pixel
+    (``tex`` is not used, and need not exist, at w = 0)."""
+    if w <= 0.0:
+        return bmat.math_node(mat, "MULTIPLY", mask, mean)
+    if w < 1.0:
+        tex = bmat.math_node(mat, "ADD", bmat.math_node(mat, "MULTIPLY", tex, w), (1.0 - w) * mean)
+    return bmat.math_node(mat, "MULTIPLY", tex, mask)
+
+
+def spot_factor(mat, layer: tuple[float, float], seed: float, threshold: float, mask, w: float):
+    """Factor of a Voronoi spot layer (``layer`` = (cell_m, radius) of skin_optics): 1 in the
+    cells whose random colour is below ``threshold``, within ``radius`` cells of their feature
+    point; faded to its mean coverage by ``w``; times ``mask``."""
+    cell, radius = layer
+    tex = None
+    if w > 0.0:
+        v = _tex_node(mat, "ShaderNodeTexVoronoi", 1.0 / cell, seed)
+        sepc = mat.node_tree.nodes.new("ShaderNodeSeparateColor")
+        mat.node_tree.links.new(v.outputs["Color"], sepc.inputs["Color"])
+        spot = bmat.math_node(mat, "LESS_THAN", sepc.outputs[0], threshold)
+        small = bmat.math_node(mat, "LESS_THAN", v.outputs["Distance"], radius)
+        tex = bmat.math_node(mat, "MULTIPLY", spot, small)
+    return _blend_mean(mat, tex, w, so.spot_coverage(threshold, radius), mask)
+
+
+def stubble_factor(mat, seed: float, strength: float, mask, w: float):
+    """Factor of the stubble shadow: ``strength`` x a fine noise over ``mask``, faded to the
+    noise's mean by ``w`` (its period is far below the pixel in every preset)."""
+    tex = None
+    if w > 0.0:
+        tex = _tex_node(mat, "ShaderNodeTexNoise", 1.0 / so.STUBBLE_PERIOD_M, seed).outputs["Fac"]
+    return _blend_mean(mat, tex, w, so.NOISE_FAC_MEAN, bmat.math_node(mat, "MULTIPLY", mask, strength))
 
 
 def build(ctx, entry: dict) -> Rig:
@@ -67,24 +115,14 @@ def build(ctx, entry: dict) -> Rig:
                     blend="MULTIPLY")
     # freckles: small cells, random per cell, thresholded by the amount
     fr = float(p.get("freckles", 0.0))
+    w_fr = so.spot_weight(ctx.pixel_m, so.FRECKLES)
     if fr > 0.01:
-        v = _tex_node(mat, "ShaderNodeTexVoronoi", 450.0, seed)
-        sepc = nt.nodes.new("ShaderNodeSeparateColor")
-        nt.links.new(v.outputs["Color"], sepc.inputs["Color"])
-        spot = bmat.math_node(mat, "LESS_THAN", sepc.outputs[0], 0.6 * fr)
-        small = bmat.math_node(mat, "LESS_THAN", v.outputs["Distance"], 0.35)
-        f = bmat.math_node(mat, "MULTIPLY", bmat.math_node(mat, "MULTIPLY", spot, small), cheeks)
-        bmat.layer_over(mat, "Base Color", (0.55, 0.35, 0.22), bmat.math_node(mat, "MULTIPLY", f, 0.8),
-                        blend="MULTIPLY")
+        f = spot_factor(mat, so.FRECKLES, seed, 0.6 * fr, bmat.math_node(mat, "MULTIPLY", cheeks, 0.8), w_fr)
+        bmat.layer_over(mat, "Base Color", (0.55, 0.35, 0.22), f, blend="MULTIPLY")
     ag = float(p.get("age_spots", 0.0))
+    w_ag = so.spot_weight(ctx.pixel_m, so.AGE_SPOTS)
     if ag > 0.01:
-        v = _tex_node(mat, "ShaderNodeTexVoronoi", 60.0, seed + 3)
-        sepc = nt.nodes.new("ShaderNodeSeparateColor")
-        nt.links.new(v.outputs["Color"], sepc.inputs["Color"])
-        spot = bmat.math_node(mat, "LESS_THAN", sepc.outputs[0], 0.25 * ag)
-        small = bmat.math_node(mat, "LESS_THAN", v.outputs["Distance"], 0.25)
-        face = bmat.math_node(mat, "MAXIMUM", cheeks, wzone)
-        f = bmat.math_node(mat, "MULTIPLY", bmat.math_node(mat, "MULTIPLY", spot, small), face)
+        f = spot_factor(mat, so.AGE_SPOTS, seed + 3, 0.25 * ag, bmat.math_node(mat, "MAXIMUM", cheeks, wzone), w_ag)
         bmat.layer_over(mat, "Base Color", (0.45, 0.3, 0.2), f, blend="MULTIPLY")
     oil = float(p.get("oiliness", 0.0))
     if oil > 0.0:  # an oilier T-zone: both lobes sharper, the sharp one stronger
@@ -109,19 +147,22 @@ def build(ctx, entry: dict) -> Rig:
         bmat.chain_bump(mat, h, 0.35 * wd * w_wr, 0.0006)
     beard_entry = (ctx.assets or {}).get("beard")
     beard_id = (beard_entry or {}).get("id")
+    # the shadow of shaved or short beard hair shows as far as the hair is darker than the skin
+    dark = shaft_darkness(pigment(colour_of(beard_entry or {}, ctx)))
     stubble = 0.0
     if beard_id == "stubble":
-        stubble = 0.55
+        stubble = STUBBLE_SHADOW * dark
     elif not beard_entry and stub_draw < 0.5:
-        stubble = stub_level
+        stubble = stub_level * dark
+    w_st = 1.0 if ctx.pixel_m is None else detail_weight(ctx.pixel_m, so.STUBBLE_PERIOD_M)
     if stubble > 0:
-        nz = _tex_node(mat, "ShaderNodeTexNoise", 2500.0, seed + 5)
-        f = bmat.math_node(mat, "MULTIPLY", bmat.math_node(mat, "MULTIPLY", beard, nz.outputs["Fac"]), 1.6 * stubble)
+        f = stubble_factor(mat, seed + 5, 1.6 * stubble, beard, w_st)
         bmat.layer_over(mat, "Base Color", (0.35, 0.33, 0.34), bmat.math_node(mat, "MINIMUM", f, 1.0),
                         blend="MULTIPLY")
     rec.update(freckles=fr, age_spots=ag, redness=round(red, 4), oiliness=oil, wrinkle_depth=wd,
                pore_scale=pore, stubble_shadow=round(stubble, 4),
                detail={"pixel_m": None if ctx.pixel_m is None else round(ctx.pixel_m, 7),
                        "pores": round(float(mat.get("detail_pores", 1.0)), 4),
-                       "fine_lines": round(float(mat.get("detail_fine_lines", 1.0)), 4), "wrinkles": round(w_wr, 4)})
+                       "fine_lines": round(float(mat.get("detail_fine_lines", 1.0)), 4), "wrinkles": round(w_wr, 4),
+                       "freckles": round(w_fr, 4), "age_spots": round(w_ag, 4), "stubble": round(w_st, 4)})
     return Rig("skin", [], rec)

@@ -147,5 +147,13 @@ def sample(name: str, rng: np.random.Generator, spread: float = 0.12) -> HairPig
     return replace(p, eumelanin=float(p.eumelanin * f[0]), pheomelanin=float(p.pheomelanin * f[1]), white_fraction=wf)
 
 
+def shaft_darkness(p: HairPigment) -> float:
+    """How dark a sparse cover of these hairs (stubble, its shadow under the skin) reads over
+    skin, 0..1: ``1 - exp(-(eumelanin + 0.3 pheomelanin))`` of the pigmented share. Black and
+    dark brown about 0.95-1, brown 0.75, light brown 0.54, red 0.53, blonde 0.23, grey 0.36,
+    white 0.03: fair stubble barely shows, dark stubble shows as a grey shadow."""
+    return float((1.0 - p.white_fraction) * (1.0 - np.exp(-(p.eumelanin + 0.3 * p.pheomelanin))))
+
+
 def darker(name: str) -> str:
     return DARKER.get(name, name)

@@ -25,7 +25,12 @@ strength is multiplied by it, and at 0 its nodes are not built at all. What a sk
 faded) layer would have done below the pixel, spreading the reflected light, is kept by
 widening the broad lobe: ``roughness' = sqrt(roughness^2 + (1 - w) slope_variance)``
 (Toksvig 2005: the variance of unresolved normals adds to the microfacet slope variance).
-The pixel footprint is that of the identity's finest view, ``distance / f_x``
+The same rule fades the rig's albedo layers (freckles, age spots, the stubble shadow): a
+spot pattern whose spots span at most one pixel is replaced by its mean, the area fraction it
+darkens (:data:`VORONOI_F1_BELOW`, :data:`NOISE_FAC_MEAN`), a flat tint over the layer's mask.
+Left to the sampler at ``preview`` sample counts, sub-pixel spots are per-pixel noise that
+the denoiser smears into centimetre blotches (measured: camouflage-like patches over the beard
+area of stubble identities). The pixel footprint is that of the identity's finest view, ``distance / f_x``
 (:func:`pixel_footprint_m`), so all views of one identity share one material (views are camera
 moves of one scene).
 """
@@ -47,6 +52,19 @@ COAT_WEIGHT, COAT_OIL = 0.12, 0.35
 PORES = (0.0007, 0.02)  # pore spacing ~0.5-1 mm on the cheeks and nose
 FINE_LINES = (0.0022, 0.015)  # the micro-relief's grooves (the skin's furrow network)
 WRINKLES = (0.011, 0.0)  # forehead bands, crow's feet, nasolabial folds
+
+#: albedo layers of the skin-detail rig (blender_scripts/assets/skin_detail.py): Voronoi cell
+#: size in metres and the spot radius in cells (spots are cells whose random colour is below a
+#: threshold, within that radius of the cell's feature point), and the stubble noise's period
+FRECKLES = (1.0 / 450.0, 0.35)
+AGE_SPOTS = (1.0 / 60.0, 0.25)
+STUBBLE_PERIOD_M = 1.0 / 2500.0
+#: area fraction of a 3D slice of Blender's 4D Voronoi (randomness 1) whose distance to the
+#: nearest feature point is below r cells (numpy Monte Carlo over 400,000 points, 3^4
+#: neighbour cells; checked against Cycles in tests/blender/test_shaders.py)
+VORONOI_F1_BELOW = {0.25: 0.0194, 0.35: 0.0723}
+#: mean of Blender's Noise texture ``Fac`` (normalised fBm around 0.5)
+NOISE_FAC_MEAN = 0.5
 
 #: footprint assumed without cameras (unit tests): a 0.2 m face over 60 % of the image
 FACE_WIDTH_M, FACE_FILL = 0.2, 0.6
@@ -77,6 +95,19 @@ def detail_weight(pixel_m: float, period_m: float) -> float:
     if pixel_m <= 0:
         return 1.0
     return float(np.clip(period_m / pixel_m - 1.0, 0.0, 1.0))
+
+
+def spot_weight(pixel_m: float | None, layer: tuple[float, float]) -> float:
+    """:func:`detail_weight` of a Voronoi spot layer (``(cell_m, radius)``): its spots'
+    diameter against the pixel (None: full detail)."""
+    cell, radius = layer
+    return 1.0 if pixel_m is None else detail_weight(pixel_m, 2.0 * radius * cell)
+
+
+def spot_coverage(threshold: float, radius: float) -> float:
+    """Mean of a spot layer's factor: the fraction of cells drawn (``threshold`` of the cell's
+    uniform random colour, clipped to [0, 1]) times the fraction of a cell within ``radius``."""
+    return float(np.clip(threshold, 0.0, 1.0)) * VORONOI_F1_BELOW[radius]
 
 
 def subpixel_roughness(roughness: float, unresolved: list[tuple[float, float]]) -> float:

@@ -9,8 +9,8 @@ import pytest
 from scipy.spatial.distance import cdist
 
 from synth.assets.fit.eyes import eye_coordinates
-from synth.assets.fit.masks import (distance_to, feather, makeup_masks, region_mask, segment_distance,
-                                    skin_detail_mask, skin_only)
+from synth.assets.fit.masks import (BEARD_FEATHER_M, distance_to, feather, makeup_masks, region_mask,
+                                    segment_distance, skin_detail_mask, skin_only, soft_region)
 from synth.model.meshutil import fit_sphere
 
 
@@ -79,10 +79,35 @@ def test_skin_detail_mask(head):
     assert m.shape == (len(V), 4) and m.min() >= 0 and m.max() <= 1
     skin = skin_only(data, len(V))
     assert not m[~skin].any()
-    np.testing.assert_array_equal(m[:, 3], region_mask(data.regions, ["beard"], len(V)) & skin)
+    beard = region_mask(data.regions, ["beard"], len(V))
+    assert np.all(m[~beard, 3][distance_to(V[~beard], V[beard]) > 2.5 * BEARD_FEATHER_M] == 0)
+    assert np.all(m[region_mask(data.regions, ["lips"], len(V)), 3] == 0)
     assert m[np.argmin(np.linalg.norm(V - lm[30], axis=1)), 0] == 1.0  # the nose tip is in the cheeks+nose zone
     forehead = m[:, 2] > 0.5
     assert forehead.any() and np.all(V[forehead, 2] > lm[36:48, 2].mean() - 0.01)
+
+
+def test_beard_area_fades_over_rows_of_vertices(head):
+    """The beard area (stubble shadow, and the roots of the whole-region beards) fades over a
+    few rows of the region's 7-11 mm triangles: a 0/1 mask ended in their staircase."""
+    data, V, lm = head
+    inside = region_mask(data.regions, ["beard"], len(V))
+    a = soft_region(V, inside, BEARD_FEATHER_M)
+    T = np.asarray(data.triangles)
+    E = np.concatenate([T[:, [0, 1]], T[:, [1, 2]], T[:, [2, 0]]])
+    cross = E[inside[E[:, 0]] != inside[E[:, 1]]]
+    rim_in = np.unique(np.where(inside[cross[:, 0]], cross[:, 0], cross[:, 1]))
+    rim_out = np.unique(np.where(inside[cross[:, 0]], cross[:, 1], cross[:, 0]))
+    assert len(rim_in) > 50
+    assert np.mean((a[rim_in] > 0.1) & (a[rim_in] < 0.9)) > 0.6  # the last row in is partly faded
+    assert np.mean(a[rim_out] > 0.05) > 0.4  # and the first row out partly covered
+    assert np.median(a[rim_in]) > np.median(a[rim_out]) + 0.3  # the fall is centred on the edge
+    deep = inside & (distance_to(V, V[~inside]) > 2 * BEARD_FEATHER_M)
+    assert np.percentile(a[deep], 5) > 0.95 and a.max() == 1.0
+    assert np.all(a[distance_to(V, V[inside]) > 2.5 * BEARD_FEATHER_M] == 0)
+    # degenerate inputs: an empty region, no smoothing
+    assert not soft_region(V, np.zeros(len(V), bool), BEARD_FEATHER_M).any()
+    np.testing.assert_array_equal(soft_region(V, inside, 0.0), inside.astype(float))
 
 
 # --------------------------------------------------------------------------- eye coordinates

@@ -150,3 +150,26 @@ def test_grooms_are_deterministic_and_attached(default_head, cls, sid, params):
     pts, att = attach(a)
     assert np.isfinite(pts).all()
     assert np.array_equal(att.positions(ctx)[:, 0], pts[:, 0])  # roots stay on their triangles
+
+
+@pytest.mark.parametrize("sid", ["stubble", "short_full"])
+def test_whole_region_beards_fade_at_the_region_edge(default_head, sid):
+    """Roots of the beards that cover the whole region thin out over its last rows of vertices
+    (the smoothed region of synth.assets.fit.masks) instead of ending on its triangles."""
+    from synth.assets.fit.masks import BEARD_FEATHER_M, distance_to, region_mask
+
+    ctx, g = _groom(default_head, "beard", sid, {"density": 1.2}, resolution=512)
+    V, T = np.asarray(ctx.vertices), np.asarray(ctx.data.triangles)
+    inside = region_mask(ctx.data.regions, ["beard"], len(V))
+    roots = np.einsum("nk,nkd->nd", g.bary, V[T[g.tri]])
+    # signed distance of each root to the region's edge (+ inside), from the vertex sets
+    s = np.where(inside[T[g.tri]].all(1), distance_to(roots, V[~inside]), -distance_to(roots, V[inside]))
+    area = 0.5 * np.linalg.norm(np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]]), axis=1)
+    assert (s < 0).sum() > 0.005 * len(s)  # some roots in triangles that only touch the region
+    assert (s < -2.5 * BEARD_FEATHER_M).sum() == 0
+    # roots per area: the triangles with all vertices well inside against those on the edge
+    deep = inside[T].all(1) & (distance_to(V[T].mean(1), V[~inside]) > 2 * BEARD_FEATHER_M)
+    rim = inside[T].any(1) & ~inside[T].all(1)
+    per = np.bincount(g.tri, minlength=len(T))
+    d_deep, d_rim = per[deep].sum() / area[deep].sum(), per[rim].sum() / area[rim].sum()
+    assert 0.15 * d_deep < d_rim < 0.7 * d_deep, (d_rim / d_deep)

@@ -136,7 +136,12 @@ def test_every_shader_layer_id_builds(tmp_path):
     assert np.isfinite(r["rgba"]).all() and (r["segmentation"] == 1).sum() > 100
     # stubble shadow chosen by the beard asset
     ctx2, _ = asset_scene.head_context("neutral")
-    ctx2.assets = {"beard": {"id": "stubble"}}
-    rec = importlib.import_module("blender_scripts.assets.skin_detail").build(ctx2, {"id": "procedural_skin",
-                                                                                     "params": {}}).record()
-    assert rec["stubble_shadow"] > 0.5
+    sd = importlib.import_module("blender_scripts.assets.skin_detail")
+    from synth.appearance.pigment import pigment, shaft_darkness
+
+    shadow = {}
+    for colour in ("black", "blonde"):
+        ctx2.assets = {"beard": {"id": "stubble", "params": {"colour": colour}}}
+        shadow[colour] = sd.build(ctx2, {"id": "procedural_skin", "params": {}}).record()["stubble_shadow"]
+        assert shadow[colour] == pytest.approx(sd.STUBBLE_SHADOW * shaft_darkness(pigment(colour)), abs=1e-4)
+    assert shadow["black"] > 3 * shadow["blonde"] > 0  # fair stubble barely shows

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from synth.assets.fit.groom import Groom, Styling, setup
+from synth.assets.fit.masks import BEARD_FEATHER_M, soft_region
 from synth.assets.fit.strands import DOWN, LEFT, UP, add_curl, arc_length, grow, push_out_strands, scale_count
 from synth.geometry.normals import normalize
 
@@ -31,7 +32,11 @@ def groom(ctx, entry) -> Groom:
     st = setup(ctx, entry, "beard", "short_full")
     rng, sid, prm, surface, hf, colour, pg = st.rng, st.sid, st.prm, st.surface, st.hf, st.colour, st.pg
     lm = hf["lm"]
-    tris = surface.region_triangles("beard", "all", exclude=("lips", "mouth_interior", "teeth", "nose"))
+    # the styles that cover the whole region fade out over BEARD_FEATHER_M at its edge (roots kept
+    # with the smoothed region's probability) instead of ending on the region's 7-11 mm triangles
+    whole = sid in ("stubble", "short_full", "full_long")
+    tris = surface.region_triangles("beard", "any" if whole else "all",
+                                    exclude=("lips", "mouth_interior", "teeth", "nose"))
     corner_r, corner_l = lm[48], lm[54]
     x_c = 0.5 * (corner_l[0] + corner_r[0])
     half_w = 0.5 * abs(corner_l[0] - corner_r[0])
@@ -70,6 +75,9 @@ def groom(ctx, entry) -> Groom:
     n = counts(ctx.resolution, float(prm.get("density", 1.0)))
     t, b = surface.sample(tris, 6 * n + 64, rng)
     ok = mask(surface.points(t, b))
+    if whole:
+        soft = soft_region(surface.V, surface.mask("beard"), BEARD_FEATHER_M)
+        ok &= rng.random(len(t)) < np.einsum("nk,nk->n", b, soft[surface.T[t]])
     tri, bary = t[ok][:n], b[ok][:n]
     if len(tri) < 10:  # degenerate mask on an extreme identity: fall back to the whole region
         tri, bary = t[:n], b[:n]
