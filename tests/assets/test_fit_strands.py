@@ -173,3 +173,28 @@ def test_whole_region_beards_fade_at_the_region_edge(default_head, sid):
     per = np.bincount(g.tri, minlength=len(T))
     d_deep, d_rim = per[deep].sum() / area[deep].sum(), per[rim].sum() / area[rim].sum()
     assert 0.15 * d_deep < d_rim < 0.7 * d_deep, (d_rim / d_deep)
+
+
+def test_afro_ends_in_a_shell_not_in_radial_tips(default_head):
+    """The afro's strands leave the scalp outward and run along its envelope at the end, so the
+    volume has a surface of hair (radial tips read as a sea urchin's spines)."""
+    from synth.assets.fit.groom import head_frame
+    from synth.assets.fit.hair import AFRO_WRAP_M
+
+    R = 0.07
+    ctx, g = _groom(default_head, "hair", "afro", {"volume_radius_m": R, "curl_radius_m": 0.002}, resolution=128)
+    _, plain = _groom(default_head, "hair", "short_curly", {}, resolution=128)
+    assert len(g.pts) > 1.5 * len(plain.pts)  # a volume has more hair than a layer on the scalp
+    ce = head_frame(ctx)["centre"] + np.array([0.0, 0.01, 0.025])
+    env = 0.095 + R
+    rel = g.pts - ce
+    r = np.linalg.norm(rel, axis=2)
+    seg = np.diff(g.pts, axis=1)
+    radial = np.abs(np.einsum("nkd,nkd->nk", normalize(rel[:, 1:]), normalize(seg)))
+    K = seg.shape[1]
+    assert radial[:, : K // 2].mean() > 0.7  # outward first
+    assert radial[:, 3 * K // 4:].mean() < 0.55  # along the envelope at the end
+    tips = r[:, -1]
+    long = r[:, 0] < env - 0.05  # roots well inside the envelope
+    assert np.median(tips[long]) == pytest.approx(env, abs=0.02)
+    assert np.percentile(tips[long], 95) < env + AFRO_WRAP_M

@@ -58,7 +58,7 @@ def groom(ctx, entry) -> Groom:
     st = setup(ctx, entry, "hair", "short_straight")
     rng, sid, prm, surface, hf, colour, pg = st.rng, st.sid, st.prm, st.surface, st.hf, st.colour, st.pg
     c = hf["centre"]
-    density = float(prm.get("density", 1.0))
+    density = float(prm.get("density", 1.0)) * (AFRO_DENSITY if sid == "afro" else 1.0)
     n, g = counts(ctx.resolution, density)
     P = POINTS.get(sid, 20)
     tris = surface.region_triangles("scalp", "all")
@@ -105,6 +105,35 @@ def groom(ctx, entry) -> Groom:
 
 # --------------------------------------------------------------------------- free styles
 
+#: how far an afro's strands run along the envelope after reaching it (metres); its strand
+#: count relative to the other styles (a volume, not a layer over the scalp)
+AFRO_WRAP_M = 0.03
+AFRO_DENSITY = 2.0
+
+
+class _AfroField:
+    """The afro's direction field: the radial sweep, bent by a smooth random field (3 plane
+    waves, 2.5-4 cm wavelength: neighbouring strands wander together, as coily hair forms
+    clumps), and turned into the envelope's tangent plane over its outer 3 cm (a per-strand
+    random tangent), so that the volume ends in a shell of hair, not in radial tips."""
+
+    def __init__(self, centre, env: float, rng: np.random.Generator, n: int):
+        self.ce, self.env = np.asarray(centre, np.float64), float(env)
+        self.k = normalize(rng.normal(size=(3, 3))) * (2.0 * np.pi / rng.uniform(0.025, 0.04, 3))[:, None]
+        self.phase = rng.uniform(0.0, 2.0 * np.pi, 3)
+        self.amp = normalize(rng.normal(size=(3, 3)))
+        self.tangent = normalize(rng.normal(size=(n, 3)))
+
+    def __call__(self, p: np.ndarray, radial: np.ndarray) -> np.ndarray:
+        wave = np.sin(p @ self.k.T + self.phase) @ self.amp  # (N, 3), each component within +-sqrt(3)
+        d = normalize(radial) + 0.6 * wave
+        rel = p - self.ce
+        r = np.linalg.norm(rel, axis=1, keepdims=True)
+        u = rel / np.maximum(r, 1e-9)
+        t = self.tangent - np.einsum("nd,nd->n", self.tangent, u)[:, None] * u
+        shell = np.clip((r - (self.env - 0.03)) / 0.03, 0.0, 1.0)
+        return (1.0 - shell) * normalize(d) + shell * (normalize(t) - 0.3 * u)
+
 
 def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
     c = hf["centre"]
@@ -143,10 +172,14 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
         R = float(prm.get("volume_radius_m", 0.07))
         ce = c + np.array([0.0, 0.01, 0.025])
         env = 0.095 + R
-        L = np.clip(env - np.linalg.norm(gr - ce, axis=1), 0.02, None) * 1.15 * rng.uniform(0.9, 1.0, G)
-        sweep = normalize(normalize(gr - ce) + 0.25 * UP)
+        # out to the envelope, then AFRO_WRAP_M more along it: the tips lie in the outer shell
+        # (radial tips read as a sea urchin's spines); the path wanders in a coherent field
+        L = (np.clip(env - np.linalg.norm(gr - ce, axis=1), 0.02, None) * 1.15 + AFRO_WRAP_M) * rng.uniform(0.9, 1.0, G)
+        # up from the front hairline (forward over the forehead the face keep-out would lay it flat)
+        sweep = normalize(normalize(gr - ce) + (0.25 + 1.0 * front)[:, None] * UP)
         grav, lift, layer, bend = 0.05, 0.03, rng.uniform(0.01, 0.03, G), 1.0
         sweep_w = 1.0
+        afro = _AfroField(ce, env, rng, G)
         extra["volume_radius_m"] = R
     else:
         Lm = float(prm.get("length_m", {"short_straight": 0.05, "short_curly": 0.04, "medium_wavy": 0.15, "bob": 0.16,
@@ -186,6 +219,8 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
         in_face = ((p[:, 1] < face_y) & (p[:, 2] > chin_z) & (p[:, 2] < hf["brow_z"] + 0.03)
                    & (np.abs(p[:, 0] - c[0]) < 0.08)) * guard
         fg = in_face[:, None] * (2.0 * g_side[:, None] * LEFT[None] + 1.0 * BACK[None])
+        if sid == "afro":
+            return afro(p, w * sweep + grav * DOWN[None] + vol) + fg
         return w * sweep + grav * DOWN[None] + vol + fg
 
     guides = grow(surface, gr, gn, L, P, field, lift, layer, bend=bend)
