@@ -272,7 +272,9 @@ def judge(args, png, categories) -> dict:
     back = np.asarray([unmirror(apply_mapping(to_synth_pixels(det[keys[i]]["mesh_mirrored"]), idx, w), meta[keys[i]][2])
                        for i in mir]).reshape(-1, 68, 2)
     mapped = apply_mapping(mesh[mir], idx, w)
-    self_nme = np.linalg.norm(back - mapped, axis=-1).mean(axis=1) / iod[mir]
+    self_pt = np.linalg.norm(back - mapped, axis=-1) / iod[mir][:, None]
+    self_nme = self_pt.mean(axis=1)
+    self_region = {r: self_pt[:, list(rg)].mean(axis=1) for r, rg in REGIONS.items()}
     both = summarise(face_errors(0.5 * (mapped + back), lm[mir]))
     fmt = lambda x: f"{np.median(x):.1%} / {np.mean(x):.1%}" if len(x) else "-"  # noqa: E731
     print(f"\n### mediapipe {json.dumps(args.dataset)} (|azimuth| <= {args.max_azimuth} deg), median / mean\n")
@@ -293,7 +295,7 @@ def judge(args, png, categories) -> dict:
     print("| NME68 without jaw | " + " | ".join(fmt(s["nme68_no_jaw"][m]) for m in sel) + " |\n")
     print(f"mapping: RMS residual on the model samples median {np.median(rms):.2%}, max {rms.max():.2%} "
           f"of the inter-ocular distance; mediapipe against itself on the mirrored image ({len(mir)} frames): "
-          f"NME68 {fmt(self_nme)}\n")
+          f"NME68 {fmt(self_nme)}; by region: " + ", ".join(f"{r} {fmt(v)}" for r, v in self_region.items()) + "\n")
     front = az < 15
     sk = shrink(err[front], lm[front]) if front.sum() >= 3 else None
     if sk is not None:
@@ -308,6 +310,7 @@ def judge(args, png, categories) -> dict:
     print("| NME68 median | " + " | ".join(f"{np.median(b):.1%}" if len(b) else "-" for b in by) + " |\n")
     return {"frames": n, "detected": n_det, "mesh": len(keys), **{k: v.tolist() for k, v in s.items()},
             "mirror_self_nme68": self_nme.tolist(), "keys": keys,
+            "mirror_self_region": {r: v.tolist() for r, v in self_region.items()},
             "mirror_averaged": {"keys": [keys[i] for i in mir], **{k: v.tolist() for k, v in both.items()}},
             "per_frame_error": np.round(err, 5).tolist(), "shrink_frontal": sk,
             "mapping": {"mediapipe": idx.tolist(), "weights": np.round(w, 4).tolist(), "rms_iod": rms.tolist()}}

@@ -9,6 +9,7 @@ import pytest
 
 from synth.appearance.lighting import FRONT, Studio, front_normals, irradiance, map_directions, studio_map
 from synth.conventions import spherical_offset
+from tests.support import asset_scene
 
 
 def _argmax_direction(L: np.ndarray) -> np.ndarray:
@@ -84,8 +85,6 @@ def test_a_diffuse_sphere_shows_the_predicted_irradiance(tmp_path):
     normal. Checks the map's orientation in Blender (rows, azimuth sign), its colour space and
     normalisation; a flipped or mirrored map fails by far more than the noise."""
     pytest.importorskip("bpy")
-    import bpy
-
     from blender_scripts import camera, passes, scene
     from blender_scripts.mesh import link_object, new_triangle_mesh
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
@@ -104,14 +103,8 @@ def test_a_diffuse_sphere_shows_the_predicted_irradiance(tmp_path):
     F = np.concatenate([np.stack([a, b, d], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3),
                         np.stack([np.full(C, R * C), idx[0, (np.arange(C) + 1) % C], idx[0]], -1),
                         np.stack([np.full(C, R * C + 1), idx[-1], idx[-1, (np.arange(C) + 1) % C]], -1)])
-    mat = bpy.data.materials.new("white")
-    mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.remove(nt.nodes["Principled BSDF"])
-    diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
-    diffuse.inputs["Color"].default_value = (0.8, 0.8, 0.8, 1.0)
-    diffuse.inputs["Roughness"].default_value = 0.0
-    nt.links.new(diffuse.outputs["BSDF"], nt.nodes["Material Output"].inputs["Surface"])
+    mat, _ = asset_scene.single_shader_material("white", "ShaderNodeBsdfDiffuse",
+                                                {"Color": (0.8, 0.8, 0.8, 1.0), "Roughness": 0.0})
     me = new_triangle_mesh("sphere", V, F)
     me.shade_smooth()
     link_object("sphere", me, [mat])

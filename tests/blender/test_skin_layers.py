@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from synth.appearance import skin_optics as so
+from tests.support import asset_scene
 
 N = 128  # pixels across; 16 samples each: 262,144 point samples of the pattern
 
@@ -24,16 +25,10 @@ def _plane_mean(tmp_path, size_m: float, build_factor) -> tuple[float, float]:
                             "filter_width": 0.01}, N, N)
     bpy.ops.mesh.primitive_plane_add(size=size_m)  # object coordinates = metres, as on the head
     plane = bpy.context.active_object
-    mat = bpy.data.materials.new("layer")
-    mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.remove(nt.nodes["Principled BSDF"])
-    em = nt.nodes.new("ShaderNodeEmission")
-    em.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
-    nt.links.new(em.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    mat, em = asset_scene.single_shader_material("layer", "ShaderNodeEmission", {"Color": (1.0, 1.0, 1.0, 1.0)})
     fac = build_factor(mat)
     if hasattr(fac, "node"):
-        nt.links.new(fac, em.inputs["Strength"])
+        mat.node_tree.links.new(fac, em.inputs["Strength"])
     else:
         em.inputs["Strength"].default_value = float(fac)
     plane.data.materials.append(mat)

@@ -135,3 +135,19 @@ def head_trimesh(ctx):
     import trimesh
 
     return trimesh.Trimesh(ctx.vertices, ctx.data.triangles.astype(np.int64), process=False)
+
+
+def single_shader_material(name: str, shader: str, inputs: dict):
+    """A node material whose surface is one shader node (``shader``, e.g. ShaderNodeEmission)
+    with these input values; returns (material, that node)."""
+    import bpy
+
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.remove(nt.nodes["Principled BSDF"])
+    node = nt.nodes.new(shader)
+    for k, v in inputs.items():
+        node.inputs[k].default_value = v
+    nt.links.new(node.outputs[0], nt.nodes["Material Output"].inputs["Surface"])
+    return mat, node
