@@ -6,6 +6,7 @@
     .venv/bin/python benchmarks/realism.py judge DATASET --mp-python MPENV/bin/python [--max-azimuth 45]
         [--detections MP.json]
     .venv/bin/python benchmarks/realism.py timing DATASET [DATASET ...]
+    .venv/bin/python benchmarks/realism.py fringe REFERENCE DATASET [DATASET ...]
 
 skin: the ITA histogram (six categories) and the CIELAB range of the skin albedo of the planned
   identities (``synth.appearance.skin.skin_albedo``, what the worker gives the shader); with
@@ -26,6 +27,9 @@ judge: mediapipe 0.10.21 (its own environment; benchmarks/mediapipe_judge.py) on
   error (eye corners, nose tip, mouth corners) and mediapipe against itself on the mirrored
   image. --detections caches mediapipe's output.
 timing: Cycles seconds per frame (the worker's frame events).
+fringe: datasets against a reference of the same plan rendered with more samples: RMS error of
+  the composite over grey and of the alpha on the reference's fringe pixels (0.02 < alpha <
+  0.98), and of the whole composite (median over frames).
 plot-skin OUT --inputs A.json B.json --labels before after: ITA histogram and L*-b* plot.
 sheet OUT DATASET ...: the most frontal frame of the first identities, one row per dataset.
 """
@@ -206,6 +210,38 @@ def _png(fr, path: Path) -> None:
     Image.fromarray(_srgb8(fr)).save(path)
 
 
+def fringe(args) -> dict:
+    """Datasets against a reference dataset of the same plan (more samples): RMS errors over
+    the reference's fringe pixels (0.02 < alpha < 0.98) of the composite over mid grey and of
+    the alpha, and of the whole composite; median over the frames both have."""
+    from synth.dataset.reader import iter_frames
+
+    def comp(fr):
+        return fr.rgb_premultiplied.astype(np.float64) + (1.0 - fr.alpha[..., None]) * 0.5
+
+    ref = {fr.meta["frame_id"]: fr for fr in iter_frames(args.reference)}
+    out = {}
+    print("\n| dataset | frames | fringe pixels | composite, fringe | alpha, fringe | composite, whole image |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for src in args.datasets:
+        rows = []
+        for fr in iter_frames(src):
+            r = ref.get(fr.meta["frame_id"])
+            if r is None:
+                continue
+            m = (r.alpha > 0.02) & (r.alpha < 0.98)
+            e, ea = comp(fr) - comp(r), fr.alpha.astype(np.float64) - r.alpha
+            rows.append((int(m.sum()), float(np.sqrt((e[m] ** 2).mean())) if m.any() else 0.0,
+                         float(np.sqrt((ea[m] ** 2).mean())) if m.any() else 0.0, float(np.sqrt((e ** 2).mean()))))
+        a = np.asarray(rows).reshape(-1, 4)
+        out[src] = {"frames": len(rows), "fringe_pixels": int(a[:, 0].sum()), "composite_fringe": float(np.median(a[:, 1])),
+                    "alpha_fringe": float(np.median(a[:, 2])), "composite": float(np.median(a[:, 3]))}
+        o = out[src]
+        print(f"| {src} | {o['frames']} | {o['fringe_pixels']} | {o['composite_fringe']:.4f} | {o['alpha_fringe']:.4f} | "
+              f"{o['composite']:.4f} |")
+    return out
+
+
 def timing(args) -> dict:
     out = {}
     print("\n| dataset | frames | Cycles s/frame (median) | Cycles s/frame (mean) |\n|---|---:|---:|---:|")
@@ -294,6 +330,9 @@ def main(argv=None) -> None:
     p.add_argument("--detections", help="mediapipe's JSON: read it if it exists (no mediapipe run), else write it")
     p = sub.add_parser("timing")
     p.add_argument("datasets", nargs="+")
+    p = sub.add_parser("fringe")
+    p.add_argument("reference")
+    p.add_argument("datasets", nargs="+")
     p = sub.add_parser("plot-skin")
     p.add_argument("out")
     p.add_argument("--inputs", nargs="+", required=True, help="JSON files written by 'skin --json'")
@@ -308,7 +347,7 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     from realism_judge import judge
 
-    res = {"skin": skin, "framing": framing, "hair": hair, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "plot-skin": plot_skin,
+    res = {"skin": skin, "framing": framing, "hair": hair, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
            "sheet": sheet}[args.cmd](args)
     if args.json:
         Path(args.json).write_text(json.dumps(res))

@@ -10,6 +10,7 @@ import bpy
 import numpy as np
 
 from blender_scripts.scene import VIEW_LAYER
+from synth.dataset.alpha import merge_denoised_alpha
 
 BACKGROUND_DEPTH = np.inf  # depth stored for background pixels (alpha == 0): see docs/frame-format.md
 
@@ -34,8 +35,10 @@ def render_view(tmp_dir: Path, seed: int) -> dict:
     depth = ch[p + "Depth.Z"].pixels.astype(np.float32)
     normals = np.stack([ch[p + "Normal." + c].pixels for c in "XYZ"], -1).astype(np.float32)
     seg = np.rint(ch[p + "IndexMA.X"].pixels).astype(np.uint32)
-    alpha = rgba[..., 3]
-    background = alpha <= 0.0
+    alpha = rgba[..., 3].copy()
+    background = alpha <= 0.0  # no surface hit by any sample: the geometry passes' background
+    if "Composite.Combined.R" in ch:  # the compositor's denoised alpha (scene._alpha_denoiser)
+        rgba[..., 3] = merge_denoised_alpha(alpha, ch["Composite.Combined.R"].pixels)
     depth = np.where(background | (depth >= 1e9), BACKGROUND_DEPTH, depth).astype(np.float32)
     seg[background] = 0
     normals[background] = 0.0
