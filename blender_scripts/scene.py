@@ -115,8 +115,9 @@ def configure_render(settings: dict[str, Any], width: int, height: int) -> dict[
 
 
 def _alpha_denoiser(scene, vl, on: bool) -> None:
-    """With denoising on, the compositor denoises the film's alpha too, with the same denoiser
-    and the colour's albedo and normal guides: its result is the render's ``Composite`` layer,
+    """With denoising on, the compositor denoises the film's alpha too, with OpenImageDenoise
+    (the compositor's denoiser, whatever denoised the colour) and the colour's albedo and
+    normal guides: its result is the render's ``Composite`` layer,
     which blender_scripts/passes.py merges at the coverage edges (synth.dataset.alpha: Cycles
     denoises the colour, not the alpha, so a fringe's composite was salt-and-pepper noise).
     The guides are prefiltered with OIDN's fast mode: as good on hair fringes as the accurate

@@ -7,7 +7,7 @@ G T-zone, B wrinkle zones, A beard area):
 * age spots / moles (sparse larger Voronoi spots on the face, ``age_spots``),
   both, and the stubble shadow's noise, built only as far as the identity's finest view resolves
   them (:func:`synth.appearance.skin_optics.spot_weight`): below the pixel a layer is its mean,
-  a flat tint over its mask (sub-pixel spots at preview samples denoise into blotches),
+  a flat tint over its mask (there the pattern is only sampling noise),
 * redness (cheeks and nose, from ``haemoglobin``),
 * oiliness -> lower roughness and a stronger sharp specular lobe (coat) in the T-zone,
 * wrinkles (forehead bands, crow's feet, nasolabial folds) as a bump, ``wrinkle_depth``, faded

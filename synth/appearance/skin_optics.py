@@ -28,9 +28,11 @@ widening the broad lobe: ``roughness' = sqrt(roughness^2 + (1 - w) slope_varianc
 The same rule fades the rig's albedo layers (freckles, age spots, the stubble shadow): a
 spot pattern whose spots span at most one pixel is replaced by its mean, the area fraction it
 darkens (:data:`VORONOI_F1_BELOW`, :data:`NOISE_FAC_MEAN`), a flat tint over the layer's mask.
-Left to the sampler at ``preview`` sample counts, sub-pixel spots are per-pixel noise that
-the denoiser smears into centimetre blotches (measured: camouflage-like patches over the beard
-area of stubble identities). The pixel footprint is that of the identity's finest view, ``distance / f_x``
+Left to the sampler, sub-pixel spots are only per-pixel sampling noise at ``preview``'s 16
+samples, and their nodes cost shading time for nothing. (The camouflage-like patches seen over
+the beard area of stubble identities were not this: they came from the stubble shadow's
+strength and the beard region's hard edge, blender_scripts/assets/skin_detail.py.) The pixel
+footprint is that of the identity's finest view, ``distance / f_x``
 (:func:`pixel_footprint_m`), so all views of one identity share one material (views are camera
 moves of one scene).
 """
@@ -61,7 +63,7 @@ AGE_SPOTS = (1.0 / 60.0, 0.25)
 STUBBLE_PERIOD_M = 1.0 / 2500.0
 #: area fraction of a 3D slice of Blender's 4D Voronoi (randomness 1) whose distance to the
 #: nearest feature point is below r cells (numpy Monte Carlo over 400,000 points, 3^4
-#: neighbour cells; checked against Cycles in tests/blender/test_shaders.py)
+#: neighbour cells; checked against Cycles in tests/blender/test_skin_layers.py)
 VORONOI_F1_BELOW = {0.25: 0.0194, 0.35: 0.0723}
 #: mean of Blender's Noise texture ``Fac`` (normalised fBm around 0.5)
 NOISE_FAC_MEAN = 0.5

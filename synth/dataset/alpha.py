@@ -5,8 +5,9 @@ transparent film the stored colour is premultiplied and denoised while the alpha
 Monte Carlo estimate of the pixel's coverage: at 16 samples a hair fringe's coverage has a
 standard deviation up to 0.125 per pixel, so composited over any background the fringe is
 salt-and-pepper noise (the colour says one coverage, the alpha another). The render therefore
-also denoises the alpha, with the same denoiser and the same albedo and normal guides (a
-compositor Denoise node on the alpha, blender_scripts/scene.py), and :func:`merge_denoised_alpha`
+also denoises the alpha, with OpenImageDenoise (the colour's denoiser on the CPU; a GPU render
+may denoise its colour with OptiX) and the colour's albedo and normal guides (a compositor
+Denoise node on the alpha, blender_scripts/scene.py), and :func:`merge_denoised_alpha`
 takes it where the coverage changes: on and next to pixels whose raw alpha is neither 0 nor
 1 or whose 3 x 3 neighbourhood is not constant. Elsewhere (the solid interior, the empty
 background) the raw alpha is exact and kept.
