@@ -16,16 +16,15 @@ background) the raw alpha is exact and kept.
 from __future__ import annotations
 
 import numpy as np
+from scipy import ndimage
 
 
 def coverage_edges(alpha: np.ndarray) -> np.ndarray:
     """(H, W) bool: pixels whose alpha is fractional or differs anywhere in their 3 x 3
     neighbourhood (the image border counts as a copy of the edge pixel)."""
     a = np.asarray(alpha, np.float64)
-    p = np.pad(a, 1, mode="edge")
-    H, W = a.shape
-    win = np.stack([p[i:i + H, j:j + W] for i in range(3) for j in range(3)])
-    return (win.max(0) > win.min(0)) | ((a > 0.0) & (a < 1.0))
+    changes = ndimage.maximum_filter(a, 3, mode="nearest") > ndimage.minimum_filter(a, 3, mode="nearest")
+    return changes | ((a > 0.0) & (a < 1.0))
 
 
 def merge_denoised_alpha(raw: np.ndarray, denoised: np.ndarray) -> np.ndarray:
