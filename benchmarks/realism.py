@@ -5,6 +5,7 @@
     .venv/bin/python benchmarks/realism.py hair [--identities 12 --seed 0]
     .venv/bin/python benchmarks/realism.py judge DATASET --mp-python MPENV/bin/python [--max-azimuth 45]
         [--detections MP.json]
+    .venv/bin/python benchmarks/realism.py mapping [--relax convex 1e-2 1e-3 ...] [--dataset D --detections MP.json]
     .venv/bin/python benchmarks/realism.py timing DATASET [DATASET ...]
     .venv/bin/python benchmarks/realism.py fringe REFERENCE DATASET [DATASET ...]
 
@@ -26,6 +27,8 @@ judge: mediapipe 0.10.21 (its own environment; benchmarks/mediapipe_judge.py) on
   azimuth (its mesh mapped to ibug68, benchmarks/realism_judge.py), the issue's direct 7-point
   error (eye corners, nose tip, mouth corners) and mediapipe against itself on the mirrored
   image. --detections caches mediapipe's output.
+mapping: the judge's mediapipe -> ibug68 mapping for each ridge --relax (or convex): its error on
+  held-out model samples and, given a dataset and the judge's cached detections, on those frames.
 timing: Cycles seconds per frame (the worker's frame events).
 fringe: datasets against a reference of the same plan rendered with more samples: RMS error of
   the composite over grey and of the alpha on the reference's fringe pixels (0.02 < alpha <
@@ -328,6 +331,10 @@ def main(argv=None) -> None:
     p.add_argument("--mp-python", required=True)
     p.add_argument("--max-azimuth", type=float, default=45.0)
     p.add_argument("--detections", help="mediapipe's JSON: read it if it exists (no mediapipe run), else write it")
+    p = sub.add_parser("mapping")
+    p.add_argument("--relax", nargs="+", default=["convex", "1e-2", "3e-3", "1e-3", "3e-4", "1e-4"])
+    p.add_argument("--dataset")
+    p.add_argument("--detections")
     p = sub.add_parser("timing")
     p.add_argument("datasets", nargs="+")
     p = sub.add_parser("fringe")
@@ -345,9 +352,9 @@ def main(argv=None) -> None:
     for q in sub.choices.values():
         q.add_argument("--json", help="also write the figures to this JSON file")
     args = ap.parse_args(argv)
-    from realism_judge import judge
+    from realism_judge import judge, mapping_table
 
-    res = {"skin": skin, "framing": framing, "hair": hair, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
+    res = {"mapping": mapping_table, "skin": skin, "framing": framing, "hair": hair, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
            "sheet": sheet}[args.cmd](args)
     if args.json:
         Path(args.json).write_text(json.dumps(res))
