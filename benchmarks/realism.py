@@ -3,6 +3,7 @@
     .venv/bin/python benchmarks/realism.py skin [--identities 200 --seed 0] [--frames DATASET ...]
     .venv/bin/python benchmarks/realism.py framing DATASET [DATASET ...]
     .venv/bin/python benchmarks/realism.py hair [--identities 12 --seed 0]
+    .venv/bin/python benchmarks/realism.py hats [--identities 3 --seed 0 --resolution 256]
     .venv/bin/python benchmarks/realism.py judge DATASET --mp-python MPENV/bin/python [--max-azimuth 45]
         [--detections MP.json]
     .venv/bin/python benchmarks/realism.py mapping [--relax convex 1e-2 1e-3 ...] [--dataset D --detections MP.json]
@@ -19,6 +20,8 @@ framing: the fraction of frames in which head classes touch the left, right or t
   below it is neck and bust).
 hair: strands in front of the inner face (synth.assets.fit.occlusion) for the planned hair of
   identities that have hair, seen from cameras at azimuth 0, +-30, +-45 (elevation 0).
+hats: hair under a beanie or cap, groomed without and with the hat: strands, share of hair points
+  beyond the hat's cut plane (through its crown), groom seconds.
 judge: mediapipe 0.10.21 (its own environment; benchmarks/mediapipe_judge.py) on the frames
   whose camera azimuth is within --max-azimuth, composited over mid grey: face-detection
   rate, face-mesh rate, and the error of its points (shifted by +0.5 px to synth's pixel
@@ -147,6 +150,56 @@ def framing(args) -> dict:
         out[src] = {"frames": len(flags), "touching": int(sum(flags)), "touching_any_skin": int(sum(loose))}
         print(f"| {src} | {len(flags)} | {sum(flags)} | {np.mean(flags):.1%} | {np.mean(loose):.1%} |")
     return out
+
+
+def hats(args) -> dict:
+    """Hair under headwear: for planned identities, each hair style a hat may go with and each
+    hat, the groom without the hat (as before 2026-12-01) and with it: strands, the share of
+    hair points beyond the hat's cut plane (through the crown), groom seconds."""
+    import time
+
+    from blender_scripts.assets import HeadContext
+    from synth.assets.fit.hair import groom
+    from synth.assets.fit.headwear import CUT_RAISE_M, headwear_cut
+    from synth.config import load_config
+    from synth.model.default import load_default_model
+    from synth.model.head import HeadModel
+    from synth.plan import identities
+
+    model = load_default_model()
+    hm = HeadModel(model, np.float64)
+    cfg = load_config()
+    ids = np.arange(args.identities)
+    codes = identities.sample_identities(args.seed, ids, identities.prior_of(model),
+                                         identities.truncation_radius(model.identity_dims, cfg.identity))
+    styles = ("buzz_cut", "short_straight", "short_curly", "undercut", "medium_wavy", "bob")
+    print(f"\n### Hair under headwear ({len(ids)} identities of seed {args.seed}, {args.resolution} px strand density)\n")
+    print("| hat | style | strands without / with the hat | hair points beyond the cut plane without / with | "
+          "groom s without / with |\n|---|---|---:|---:|---:|")
+    rows = []
+    for hat in CUT_RAISE_M:
+        for sid in styles:
+            acc = np.zeros(6)
+            for n, i in enumerate(ids.tolist()):
+                ev = hm.evaluate(codes[n], np.zeros(model.expression_dims), np.zeros((hm.J, 3)))
+                verts = ev.vertices[0]
+                lm = {k: v[0] for k, v in ev.landmarks.items()}
+                o, nrm = headwear_cut(verts, model.regions, lm["ibug68"], {"id": hat})
+                for k, with_hat in enumerate((False, True)):
+                    ctx = HeadContext(data=model, head=None, materials={}, rest_vertices=verts, vertices=verts,
+                                      joint_transforms=ev.joint_transforms[0], joint_index=dict(hm.joint_index),
+                                      landmarks=lm, resolution=args.resolution, identity_index=i, run_seed=args.seed,
+                                      assets={"headwear": {"id": hat}} if with_hat else {})
+                    t = time.perf_counter()
+                    g = groom(ctx, {"id": sid, "params": {}})
+                    acc[4 + k] += time.perf_counter() - t
+                    acc[k] += len(g.pts)
+                    acc[2 + k] += float(np.mean((g.pts - o) @ nrm > 0.0)) / len(ids)
+            rows.append({"hat": hat, "style": sid, "strands": acc[:2].tolist(), "beyond": acc[2:4].tolist(),
+                         "seconds": acc[4:].tolist()})
+            print(f"| {hat} | {sid} | {acc[0]:.0f} / {acc[1]:.0f} | {acc[2]:.1%} / {acc[3]:.1%} | "
+                  f"{acc[4]:.2f} / {acc[5]:.2f} |")
+    return {"rows": rows}
 
 
 def hair(args) -> dict:
@@ -323,6 +376,10 @@ def main(argv=None) -> None:
     p.add_argument("--frames", nargs="*", default=[])
     p = sub.add_parser("framing")
     p.add_argument("datasets", nargs="+")
+    p = sub.add_parser("hats")
+    p.add_argument("--identities", type=int, default=3)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--resolution", type=int, default=256)
     p = sub.add_parser("hair")
     p.add_argument("--identities", type=int, default=12)
     p.add_argument("--seed", type=int, default=0)
@@ -354,7 +411,7 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     from realism_judge import judge, mapping_table
 
-    res = {"mapping": mapping_table, "skin": skin, "framing": framing, "hair": hair, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
+    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "hair": hair, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
            "sheet": sheet}[args.cmd](args)
     if args.json:
         Path(args.json).write_text(json.dumps(res))

@@ -198,3 +198,36 @@ def test_afro_ends_in_a_shell_not_in_radial_tips(default_head):
     long = r[:, 0] < env - 0.05  # roots well inside the envelope
     assert np.median(tips[long]) == pytest.approx(env, abs=0.02)
     assert np.percentile(tips[long], 95) < env + AFRO_WRAP_M
+
+
+@pytest.mark.parametrize("hat", ["beanie", "baseball_cap"])
+def test_hair_under_headwear_is_left_out_and_cut_under_the_rim(default_head, hat):
+    """Hair a beanie or cap covers is not built (it would pierce the crown); strands rooted
+    below the headwear's cut plane end HAT_MARGIN_M short of it, cut where they cross it."""
+    from synth.assets.fit.hair import HAT_MARGIN_M, groom
+    from synth.assets.fit.headwear import headwear_cut
+    from tests.support import asset_scene
+
+    out = {}
+    for with_hat in (False, True):
+        ctx = asset_scene.head_arrays(default_head, "neutral", 128, 0, 0)
+        ctx.assets = {"headwear": {"id": hat}} if with_hat else {}
+        out[with_hat] = (ctx, groom(ctx, {"id": "short_straight", "params": {"length_m": 0.06}}))
+    ctx, bare = out[False]
+    _, g = out[True]
+    o, n = headwear_cut(ctx.vertices, ctx.data.regions, ctx.landmarks["ibug68"], {"id": hat})
+    h_bare = (bare.pts - o) @ n
+    h = (g.pts - o) @ n
+    assert (h_bare > 0).mean() > 0.3  # without the hat, most of this hair is where the crown goes
+    assert h.max() <= -HAT_MARGIN_M + 1e-9
+    assert np.sum(np.abs(h.max(axis=1) + HAT_MARGIN_M) < 1e-6) >= 5  # cut on the plane, not at a point
+    # the roots are the bare groom's that lie below the plane (the same draws), less the few
+    # strands that would be shorter than 5 mm after the cut
+    below = (bare.pts[:, 0] - o) @ n <= -HAT_MARGIN_M
+    bare_roots = {tuple(np.round(p, 9)) for p in bare.pts[below, 0]}
+    roots = {tuple(np.round(p, 9)) for p in g.pts[:, 0]}
+    assert roots <= bare_roots
+    info = g.info["under_headwear"]
+    assert len(roots) == len(bare_roots) - info["strands_left_out"] and info["strands_left_out"] < 0.05 * len(roots)
+    assert info["roots_left_out"] == len(bare.pts) - int(below.sum())
+    assert len(g.tri) == len(g.pts) == len(g.clearance)

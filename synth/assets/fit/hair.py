@@ -11,9 +11,11 @@ from __future__ import annotations
 import numpy as np
 
 from synth.assets.fit.groom import Groom, Styling, setup
+from synth.assets.fit.headwear import headwear_cut
 from synth.assets.fit.keepout import face_keep_out, keep_out
 from synth.assets.fit.strands import (BACK, DOWN, FORWARD, LEFT, UP, add_curl, arc_length, grow, interpolate,
-                                      push_out_strands, resample_fast, scale_count, transport_frames, trim_below)
+                                      push_out_strands, resample_fast, scale_count, transport_frames, trim_at_plane,
+                                      trim_below)
 from synth.geometry.normals import normalize
 
 POINTS = {"buzz_cut": 4, "short_straight": 10, "short_curly": 14, "undercut": 14, "medium_wavy": 22, "bob": 20,
@@ -84,6 +86,16 @@ def groom(ctx, entry) -> Groom:
                         frizz=0.0008, frizz_shape=0.6, seed=int(rng.integers(0, 2 ** 31)))
     info = {"style": sid, "colour": colour, "pigment": pg.as_dict()}
 
+    # ---- under headwear: the hair it covers is not built (hidden, and it would pierce the
+    # crown); the rest is cut HAT_MARGIN_M short of its cut plane, under the rim
+    hat = None
+    if "lm" in hf:
+        hat = headwear_cut(ctx.vertices, ctx.data.regions, hf["lm"], (getattr(ctx, "assets", None) or {}).get("headwear"))
+    if hat is not None:
+        hat = (hat[0] - HAT_MARGIN_M * hat[1], hat[1])
+        under = (surface.points(c_tri, c_bary) - hat[0]) @ hat[1] > 0.0
+        c_tri, c_bary = c_tri[~under], c_bary[~under]
+
     if sid in ("bun", "ponytail", "braids"):
         pts, clr, g_used = _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng)
         info["guides"] = g_used
@@ -91,6 +103,9 @@ def groom(ctx, entry) -> Groom:
             styling.frizz = 0.0004
     else:
         g_tri, g_bary = roots(g)
+        if hat is not None:
+            ok = (surface.points(g_tri, g_bary) - hat[0]) @ hat[1] <= 0.0
+            g_tri, g_bary = g_tri[ok], g_bary[ok]
         pts, clr, extra = _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng)
         info["guides"] = int(len(g_tri))
         info.update(extra)
@@ -100,7 +115,19 @@ def groom(ctx, entry) -> Groom:
             styling.clump_distance = 0.006
         if sid == "buzz_cut":
             styling.frizz = 0.0
+    if hat is not None:
+        roots_under = n - len(c_tri)
+        pts, kept = trim_at_plane(pts, *hat)
+        pts, c_tri, c_bary = pts[kept], c_tri[kept], c_bary[kept]
+        clr = np.minimum(np.asarray(clr)[kept].max(axis=1, keepdims=True), 0.6 * arc_length(pts))
+        info["under_headwear"] = {"roots_left_out": int(roots_under), "strands_left_out": int((~kept).sum()),
+                                  "margin_m": HAT_MARGIN_M}
     return Groom("hair", f"hair_{sid}", surface, pts, c_tri, c_bary, clr, styling, info, pg, roughness=0.28)
+
+
+#: hair under headwear ends this far short of the headwear's cut plane (under its rim tube,
+#: 2.5-5 mm in radius: synth.assets.fit.headwear)
+HAT_MARGIN_M = 0.003
 
 
 # --------------------------------------------------------------------------- free styles

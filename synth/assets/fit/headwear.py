@@ -30,22 +30,43 @@ CLEARANCE = 0.0015
 from synth.geometry.normals import normalize
 
 
-def _plane(body: Body, front_up: float, ear_up: float):
-    lm = body.lm
+#: cut plane of each headwear (metres): the brow centre raised by the first, the top of each
+#: ear by the second (module doc)
+CUT_RAISE_M = {"beanie": (0.025, 0.008), "baseball_cap": (0.035, 0.012)}
+
+
+def cut_plane(V: np.ndarray, regions: dict, ibug68: np.ndarray, front_up: float, ear_up: float):
+    """(origin, unit normal pointing up) of the plane through the brow centre raised by
+    ``front_up`` and the top of each ear raised by ``ear_up`` (head vertices ``V``)."""
+    lm = np.asarray(ibug68, np.float64)
+    V = np.asarray(V, np.float64)
     Fp = 0.5 * (lm[19] + lm[24]) + np.array([0.0, 0.0, front_up])
     pts = []
     for r in ("ear_l", "ear_r"):
-        idx = np.asarray(body.regions[r], np.int64) if r in body.regions else None
+        idx = np.asarray(regions[r], np.int64) if r in regions else None
         if idx is None or len(idx) == 0:
             side = 16 if r == "ear_l" else 0
             pts.append(lm[side] + np.array([0.0, 0.0, 0.05]))
             continue
-        e = body.V[idx]
+        e = V[idx]
         pts.append(e[np.argmax(e[:, 2])] + np.array([0.0, 0.0, ear_up]))
     n = normalize(np.cross(pts[0] - Fp, pts[1] - Fp))
     if n[2] < 0:
         n = -n
     return Fp, n
+
+
+def headwear_cut(V: np.ndarray, regions: dict, ibug68: np.ndarray, entry: dict | None):
+    """The cut plane (origin, normal) of a plan's headwear entry on this head, or None without
+    headwear: what the headwear covers lies on the normal's side (the hair rig leaves it out)."""
+    if not entry:
+        return None
+    raise_m = CUT_RAISE_M.get(str(entry.get("id", "beanie")))
+    return None if raise_m is None else cut_plane(V, regions, ibug68, *raise_m)
+
+
+def _plane(body: Body, front_up: float, ear_up: float):
+    return cut_plane(body.V, body.regions, body.lm, front_up, ear_up)
 
 
 def _crown(body: Body, front_up, ear_up, off_fn, smooth=3):
@@ -75,7 +96,7 @@ def headwear_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
             slack = 0.006 * smoothstep(0.03, 0.12, h)
             cuff = 0.004 * (1.0 - smoothstep(fold - 0.003, fold, h)) if fold > 0.002 else 0.0
             return 0.005 + slack + cuff + 0.001 * (0.5 + 0.5 * noise(P))
-        P, F, cut, o, n = _crown(body, 0.025, 0.008, off)
+        P, F, cut, o, n = _crown(body, *CUT_RAISE_M["beanie"], off)
         parts.add(P, F, 0)
         loops = [lp for lp in boundary_loops(F) if cut[lp].mean() > 0.5 and len(lp) > 8]
         for lp in loops:
@@ -96,7 +117,7 @@ def headwear_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
 
         def off(P, N, h):
             return 0.003 + 0.006 * smoothstep(0.0, 0.08, h)
-        P, F, cut, o, n = _crown(body, 0.035, 0.012, off)
+        P, F, cut, o, n = _crown(body, *CUT_RAISE_M["baseball_cap"], off)
         parts.add(P, F, 0)
         loops = [lp for lp in boundary_loops(F) if cut[lp].mean() > 0.5 and len(lp) > 8]
         for lp in loops:

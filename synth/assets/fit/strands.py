@@ -291,6 +291,31 @@ def trim_below(P: np.ndarray, z_cut: np.ndarray, min_len: float = 0.005) -> np.n
     return resample_fast(P, np.maximum(L, min_len))
 
 
+def trim_at_plane(P: np.ndarray, origin: np.ndarray, normal: np.ndarray, min_len: float = 0.005):
+    """Cut strands (N, K, 3) where they first cross to the ``normal`` side of the plane through
+    ``origin`` (the crossing found on the segment, not at a point) and resample them over what
+    is left. Returns (strands, keep): ``keep`` is False for strands whose root lies on that side
+    or that would be shorter than ``min_len``; their rows are returned unchanged (drop them)."""
+    P = np.asarray(P, np.float64)
+    g = (P - np.asarray(origin, np.float64)) @ np.asarray(normal, np.float64)  # (N, K) signed height
+    s = arc_length(P)
+    over = g > 0.0
+    over[:, 0] = False
+    crosses = over.any(1)
+    k = np.where(crosses, over.argmax(1), P.shape[1] - 1)
+    rows = np.arange(len(P))
+    k0 = np.maximum(k - 1, 0)
+    g0, g1 = g[rows, k0], g[rows, k]
+    t = np.where(crosses, np.clip(-g0 / np.maximum(g1 - g0, 1e-12), 0.0, 1.0), 1.0)
+    L = np.where(crosses, s[rows, k0] + t * (s[rows, k] - s[rows, k0]), s[:, -1])
+    keep = (g[:, 0] <= 0.0) & (L >= min_len)
+    out = P.copy()
+    cut = keep & crosses
+    if cut.any():
+        out[cut] = resample_fast(P[cut], L[cut])
+    return out, keep
+
+
 def interpolate(surface: Surface, g_tri, g_bary, g_pts, c_tri, c_bary, k: int = 3, rng=None,
                 jitter: float = 0.0):
     """Children from guides: the guides' root offsets, each turned by the minimal rotation from
