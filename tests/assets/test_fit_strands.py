@@ -231,3 +231,25 @@ def test_hair_under_headwear_is_left_out_and_cut_under_the_rim(default_head, hat
     assert len(roots) == len(bare_roots) - info["strands_left_out"] and info["strands_left_out"] < 0.05 * len(roots)
     assert info["roots_left_out"] == len(bare.pts) - int(below.sum())
     assert len(g.tri) == len(g.pts) == len(g.clearance)
+
+
+@pytest.mark.parametrize("sid", ["goatee", "moustache", "chin_strap", "mutton_chops"])
+def test_partial_beards_keep_the_density_of_a_full_beard(default_head, sid):
+    """A goatee, moustache, chin strap or mutton chops has a full beard's strands per area (times
+    PARTIAL_DENSITY; its mask over the same draws), not a full beard's strand count packed into its
+    mask (which made a goatee an opaque block): the roots' nearest-neighbour distances show it."""
+    from scipy.spatial import cKDTree
+
+    def nn(g):
+        r = g.pts[:, 0]
+        return float(np.median(cKDTree(r).query(r, k=2)[0][:, 1]))
+
+    from synth.assets.fit.beard import PARTIAL_DENSITY
+
+    _, full = _groom(default_head, "beard", "short_full", {}, resolution=256)
+    _, part = _groom(default_head, "beard", sid, {"moustache": False, "style": "chevron"}, resolution=256)
+    assert len(part.pts) < 0.5 * len(full.pts)
+    assert part.styling.root_radius == full.styling.root_radius  # set by the region's density
+    # nearest-neighbour distances scale as density ** -1/2
+    ratio = nn(part) / nn(full) * np.sqrt(PARTIAL_DENSITY.get(sid, 1.0))
+    assert 0.8 < ratio < 1.25, (nn(part), nn(full))

@@ -16,6 +16,13 @@ from synth.assets.fit.strands import DOWN, LEFT, UP, add_curl, arc_length, grow,
 from synth.geometry.normals import normalize
 
 
+#: fewest strands of a partial style (goatee, moustache, chin strap, mutton chops) at low resolution
+MIN_PARTIAL_STRANDS = 24
+#: strands per area of a partial style relative to a full beard's mean over the region: the
+#: chin and the upper lip carry a beard's densest hair (chosen by eye at 256 px; docs/realism.md)
+PARTIAL_DENSITY = {"goatee": 2.0, "moustache": 2.0}
+
+
 def counts(resolution: int, density: float = 1.0) -> int:
     return max(60, int(scale_count(resolution, 14.0, 700, 25000) * float(density)))
 
@@ -72,13 +79,23 @@ def groom(ctx, entry) -> Groom:
             return (np.abs(x) > half_w + 0.012) & (p[:, 2] > chin[2] + 0.015)
         return np.ones(len(p), bool)
 
-    n = counts(ctx.resolution, float(prm.get("density", 1.0)))
+    n = counts(ctx.resolution, float(prm.get("density", 1.0)))  # over the whole beard region
     t, b = surface.sample(tris, 6 * n + 64, rng)
     ok = mask(surface.points(t, b))
     if whole:
         soft = soft_region(surface.V, surface.mask("beard"), BEARD_FEATHER_M)
         ok &= rng.random(len(t)) < np.einsum("nk,nk->n", b, soft[surface.T[t]])
-    tri, bary = t[ok][:n], b[ok][:n]
+        keep = np.nonzero(ok)[0][:n]
+    else:
+        # a partial style keeps the region's density (times PARTIAL_DENSITY): of the first n draws
+        # (n per region area), those in its mask; taking n from the mask packed a goatee or a
+        # moustache with a whole beard's strands (2.3-7.6 times denser: an opaque block). At
+        # least MIN_PARTIAL_STRANDS.
+        hits = np.nonzero(ok)[0]
+        keep = hits[hits < PARTIAL_DENSITY.get(sid, 1.0) * n]
+        if len(keep) < MIN_PARTIAL_STRANDS:
+            keep = hits[:MIN_PARTIAL_STRANDS]
+    tri, bary = t[keep], b[keep]
     if len(tri) < 10:  # degenerate mask on an extreme identity: fall back to the whole region
         tri, bary = t[:n], b[:n]
     N = len(tri)
@@ -117,7 +134,7 @@ def groom(ctx, entry) -> Groom:
                          start=0.01)
     pts = push_out_strands(surface, pts, layer, exact=True)
     clr = np.minimum(layer[:, None], 0.6 * arc_length(pts))
-    radius = float(np.clip(6e-5 * np.sqrt(20000.0 / N), 6e-5, 2.5e-4))
+    radius = float(np.clip(6e-5 * np.sqrt(20000.0 / n), 6e-5, 2.5e-4))  # from the region's density
     styling = Styling(root_radius=radius, tip_shape=0.45, frizz=0.0006 if long else 0.0,
                         seed=int(rng.integers(0, 2 ** 31)))
     info = {"style": sid, "colour": colour, "pigment": pg.as_dict(), "guides": N, "length_m": length}
