@@ -9,8 +9,9 @@ what that comparison is made of, all plain numpy (tested in tests/benchmarks/tes
   +0.5 px before any comparison (measured: resampling the judge's frames by 2 and 3 moves
   mediapipe's points as ``s * u - 0.5``, offset -0.50 / -0.59 px +- 0.06).
 - :func:`fit_mapping`: each ibug68 point as an affine combination of mediapipe points (near the
-  convex one), with weights fitted over posed and projected samples of the head model (:func:`model_samples`, the mediapipe
-  -> model correspondence of prior/fit/data), not on the template alone.
+  convex one), with weights fitted over posed and projected samples of the head model
+  (:func:`model_samples`, the mediapipe -> model correspondence of prior/fit/data), not on the
+  template alone.
 - :func:`face_errors`: per-point errors in a face-aligned frame (x along the outer eye corners
   36 -> 45, y perpendicular, image down for an upright face), in units of their distance.
 """

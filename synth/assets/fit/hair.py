@@ -90,7 +90,7 @@ def groom(ctx, entry) -> Groom:
     # crown); the rest is cut HAT_MARGIN_M short of its cut plane, under the rim
     hat = None
     if "lm" in hf:
-        hat = headwear_cut(ctx.vertices, ctx.data.regions, hf["lm"], (getattr(ctx, "assets", None) or {}).get("headwear"))
+        hat = headwear_cut(ctx.vertices, ctx.data.regions, hf["lm"], (ctx.assets or {}).get("headwear"))
     if hat is not None:
         hat = (hat[0] - HAT_MARGIN_M * hat[1], hat[1])
         under = (surface.points(c_tri, c_bary) - hat[0]) @ hat[1] > 0.0
