@@ -152,26 +152,44 @@ def framing(args) -> dict:
     return out
 
 
-def hats(args) -> dict:
-    """Hair under headwear: for planned identities, each hair style a hat may go with and each
-    hat, the groom without the hat (as before 2026-12-01) and with it: strands, the share of
-    hair points beyond the hat's cut plane (through the crown), groom seconds."""
-    import time
-
-    from blender_scripts.assets import HeadContext
-    from synth.assets.fit.hair import groom
-    from synth.assets.fit.headwear import CUT_RAISE_M, headwear_cut
+def _planned_heads(seed: int, n: int):
+    """(model, HeadModel, identity indices, identity codes) of the first n planned identities."""
     from synth.config import load_config
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
     from synth.plan import identities
 
     model = load_default_model()
-    hm = HeadModel(model, np.float64)
     cfg = load_config()
-    ids = np.arange(args.identities)
-    codes = identities.sample_identities(args.seed, ids, identities.prior_of(model),
+    ids = np.arange(n)
+    codes = identities.sample_identities(seed, ids, identities.prior_of(model),
                                          identities.truncation_radius(model.identity_dims, cfg.identity))
+    return model, HeadModel(model, np.float64), ids, codes
+
+
+def _neutral_context(model, hm, code, identity: int, seed: int, resolution: int, assets: dict):
+    """(the rigs' HeadContext of an identity's neutral head, its evaluation)."""
+    from blender_scripts.assets import HeadContext
+
+    ev = hm.evaluate(code, np.zeros(model.expression_dims), np.zeros((hm.J, 3)))
+    verts = ev.vertices[0]
+    ctx = HeadContext(data=model, head=None, materials={}, rest_vertices=verts, vertices=verts,
+                      joint_transforms=ev.joint_transforms[0], joint_index=dict(hm.joint_index),
+                      landmarks={k: v[0] for k, v in ev.landmarks.items()}, resolution=resolution,
+                      identity_index=identity, run_seed=seed, assets=assets)
+    return ctx, ev
+
+
+def hats(args) -> dict:
+    """Hair under headwear: for planned identities, each hair style a hat may go with and each
+    hat, the groom without the hat (as before 2026-12-01) and with it: strands, the share of
+    hair points beyond the hat's cut plane (through the crown), groom seconds."""
+    import time
+
+    from synth.assets.fit.hair import groom
+    from synth.assets.fit.headwear import CUT_RAISE_M, headwear_cut
+
+    model, hm, ids, codes = _planned_heads(args.seed, args.identities)
     styles = ("buzz_cut", "short_straight", "short_curly", "undercut", "medium_wavy", "bob")
     print(f"\n### Hair under headwear ({len(ids)} identities of seed {args.seed}, {args.resolution} px strand density)\n")
     print("| hat | style | strands without / with the hat | hair points beyond the cut plane without / with | "
@@ -181,15 +199,10 @@ def hats(args) -> dict:
         for sid in styles:
             acc = np.zeros(6)
             for n, i in enumerate(ids.tolist()):
-                ev = hm.evaluate(codes[n], np.zeros(model.expression_dims), np.zeros((hm.J, 3)))
-                verts = ev.vertices[0]
-                lm = {k: v[0] for k, v in ev.landmarks.items()}
-                o, nrm = headwear_cut(verts, model.regions, lm["ibug68"], {"id": hat})
                 for k, with_hat in enumerate((False, True)):
-                    ctx = HeadContext(data=model, head=None, materials={}, rest_vertices=verts, vertices=verts,
-                                      joint_transforms=ev.joint_transforms[0], joint_index=dict(hm.joint_index),
-                                      landmarks=lm, resolution=args.resolution, identity_index=i, run_seed=args.seed,
-                                      assets={"headwear": {"id": hat}} if with_hat else {})
+                    ctx, _ = _neutral_context(model, hm, codes[n], i, args.seed, args.resolution,
+                                              {"headwear": {"id": hat}} if with_hat else {})
+                    o, nrm = headwear_cut(ctx.vertices, model.regions, ctx.landmarks["ibug68"], {"id": hat})
                     t = time.perf_counter()
                     g = groom(ctx, {"id": sid, "params": {}})
                     acc[4 + k] += time.perf_counter() - t
@@ -205,22 +218,12 @@ def hats(args) -> dict:
 def hair(args) -> dict:
     import importlib
 
-    from blender_scripts.assets import HeadContext
     from synth.assets.catalogue import load_catalogue
     from synth.assets.fit.occlusion import inner_face_triangles, strands_in_front_of_face
-    from synth.config import load_config
     from synth.conventions import spherical_offset
-    from synth.model.default import load_default_model
-    from synth.model.head import HeadModel
-    from synth.plan import identities
     from synth.plan.assets import sample_assets_batch
 
-    model = load_default_model()
-    hm = HeadModel(model, np.float64)
-    cfg = load_config()
-    ids = np.arange(args.identities)
-    codes = identities.sample_identities(args.seed, ids, identities.prior_of(model),
-                                         identities.truncation_radius(model.identity_dims, cfg.identity))
+    model, hm, ids, codes = _planned_heads(args.seed, args.identities)
     assets = sample_assets_batch(args.seed, ids, load_catalogue(None))
     az = np.array([0.0, -30.0, 30.0, -45.0, 45.0])
     print(f"\n### Hair strands in front of the inner face (seed {args.seed}, 64 px strand density)\n")
@@ -231,12 +234,8 @@ def hair(args) -> dict:
         entry = assets[n].get("hair")
         if entry is None:
             continue
-        ev = hm.evaluate(codes[n], np.zeros(model.expression_dims), np.zeros((hm.J, 3)))
+        ctx, ev = _neutral_context(model, hm, codes[n], i, args.seed, 64, assets[n])
         verts = ev.vertices[0]
-        ctx = HeadContext(data=model, head=None, materials={}, rest_vertices=verts, vertices=verts,
-                          joint_transforms=ev.joint_transforms[0], joint_index=dict(hm.joint_index),
-                          landmarks={k: v[0] for k, v in ev.landmarks.items()}, resolution=64, identity_index=i,
-                          run_seed=args.seed, assets=assets[n])
         g = importlib.import_module("synth.assets.fit.hair").groom(ctx, entry)
         lm = ev.landmarks["ibug68"][0]
         cams = 0.5 * (lm[36] + lm[45]) + 1.0 * spherical_offset(az, np.zeros_like(az))

@@ -64,14 +64,20 @@ def test_fit_mapping_recovers_exact_convex_weights(J):
     assert rms.max() < 1e-5
 
 
+def _outside_hull(seed: int, samples: int):
+    """Random mesh points (samples, 6, 2) and ibug68 targets mostly outside the hull of the first
+    5 (candidates of every target), the outer eye corners 35 px apart."""
+    g = np.random.default_rng(seed)
+    mesh = g.normal(0, 30, (samples, 6, 2))
+    truth = g.normal(0, 30, (samples, 68, 2))
+    truth[:, 45] = truth[:, 36] + (35.0, 5.0)
+    return mesh, truth, np.tile(np.arange(5), (68, 1))
+
+
 def test_fit_mapping_outside_the_hull_matches_a_constrained_solver(J):
     from scipy.optimize import minimize
 
-    g = np.random.default_rng(5)
-    mesh = g.normal(0, 30, (12, 6, 2))
-    truth = g.normal(0, 30, (12, 68, 2))
-    truth[:, 45] = truth[:, 36] + (35.0, 5.0)
-    cand = np.tile(np.arange(5), (68, 1))
+    mesh, truth, cand = _outside_hull(5, 12)
     w, rms = J.fit_mapping(mesh, truth, cand)
     assert np.all(w >= 0) and np.allclose(w.sum(1), 1, atol=1e-6)
     iod = np.linalg.norm(truth[:, 45] - truth[:, 36], axis=-1)
@@ -116,11 +122,7 @@ def test_mediapipe_pixels_shift_to_synth_convention(J):
 def test_relaxed_fit_spans_convex_to_affine_least_squares(J):
     """relax -> infinity keeps the convex weights; relax -> 0 gives the least squares over
     weights summing to one (checked against the KKT system); in between the fit lies between."""
-    g = np.random.default_rng(8)
-    mesh = g.normal(0, 30, (20, 6, 2))
-    truth = g.normal(0, 30, (20, 68, 2))
-    truth[:, 45] = truth[:, 36] + (35.0, 5.0)
-    cand = np.tile(np.arange(5), (68, 1))
+    mesh, truth, cand = _outside_hull(8, 20)
     wc, rc = J.fit_mapping(mesh, truth, cand)
     wb, rb = J.fit_mapping(mesh, truth, cand, relax=1e6)
     np.testing.assert_allclose(wb, wc, atol=1e-4)
