@@ -200,8 +200,9 @@ def test_afro_ends_in_a_shell_not_in_radial_tips(default_head):
     assert np.percentile(tips[long], 95) < env + AFRO_WRAP_M
 
 
+@pytest.mark.parametrize("case", ["neutral", "id-3_jaw", "id+3_jaw"])
 @pytest.mark.parametrize("hat", ["beanie", "baseball_cap"])
-def test_hair_under_headwear_is_left_out_and_cut_under_the_rim(default_head, hat):
+def test_hair_under_headwear_is_left_out_and_cut_under_the_rim(default_head, hat, case):
     """Hair a beanie or cap covers is not built (it would pierce the crown); strands rooted
     below the headwear's cut plane end HAT_MARGIN_M short of it, cut where they cross it."""
     from synth.assets.fit.hair import HAT_MARGIN_M, groom
@@ -210,7 +211,7 @@ def test_hair_under_headwear_is_left_out_and_cut_under_the_rim(default_head, hat
 
     out = {}
     for with_hat in (False, True):
-        ctx = asset_scene.head_arrays(default_head, "neutral", 128, 0, 0)
+        ctx = asset_scene.head_arrays(default_head, case, 128, 0, 0)
         ctx.assets = {"headwear": {"id": hat}} if with_hat else {}
         out[with_hat] = (ctx, groom(ctx, {"id": "short_straight", "params": {"length_m": 0.06}}))
     ctx, bare = out[False]
@@ -220,7 +221,8 @@ def test_hair_under_headwear_is_left_out_and_cut_under_the_rim(default_head, hat
     h = (g.pts - o) @ n
     assert (h_bare > 0).mean() > 0.3  # without the hat, most of this hair is where the crown goes
     assert h.max() <= -HAT_MARGIN_M + 1e-9
-    assert np.sum(np.abs(h.max(axis=1) + HAT_MARGIN_M) < 1e-6) >= 5  # cut on the plane, not at a point
+    if case == "neutral":  # here some strands rise into the crown: they end on the plane, not at a point
+        assert np.sum(np.abs(h.max(axis=1) + HAT_MARGIN_M) < 1e-6) >= 5
     # the roots are the bare groom's that lie below the plane (the same draws), less the few
     # strands that would be shorter than 5 mm after the cut
     below = (bare.pts[:, 0] - o) @ n <= -HAT_MARGIN_M
