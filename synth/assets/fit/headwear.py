@@ -65,12 +65,8 @@ def headwear_cut(V: np.ndarray, regions: dict, ibug68: np.ndarray, entry: dict |
     return None if raise_m is None else cut_plane(V, regions, ibug68, *raise_m)
 
 
-def _plane(body: Body, front_up: float, ear_up: float):
-    return cut_plane(body.V, body.regions, body.lm, front_up, ear_up)
-
-
 def _crown(body: Body, front_up, ear_up, off_fn, smooth=3):
-    o, n = _plane(body, front_up, ear_up)
+    o, n = cut_plane(body.V, body.regions, body.lm, front_up, ear_up)
     h = (body.V - o) @ n
     P, F, cut = body.shell(body.head_tris, h, lambda p, nn: off_fn(p, nn, (p - o) @ n))
     P = laplacian_smooth(P, F, smooth, 0.5)
