@@ -24,7 +24,13 @@ points 234 and 454), is kept. That RMS ("sigma_face") becomes the point's sigma 
 ``detect`` also runs mediapipe on each image mirrored left-right. A point found there and
 mapped back (x -> W - x) is a second detection of its mirror partner (the partners come from
 the data, :func:`mirror_pairs`), so every point is derived from detections on both sides of
-the face: mediapipe's left-right bias does not leave the correspondence asymmetric.
+the face. With them, a point and its partner are chosen together: the candidates of both (the
+partner's mirrored onto this side, ``synth.model.meshutil.mesh_mirror``) are scored by the sum
+of the point's mean squared residual and the partner's for the candidate's mirror image, so the
+two land on mirror-image surface points of the (symmetric) model; points that are their own
+partner are moved onto the model's midline first (``mesh_midline``). ``--independent`` chooses
+every point on its own (the correspondence before 2026-12-01, left-right asymmetric by up to
+8.8 mm on the face contour).
 """
 
 from __future__ import annotations
@@ -143,12 +149,13 @@ def mirror_pairs(det: np.ndarray, unmirrored: np.ndarray) -> np.ndarray:
     return pair
 
 
-def derive(work: Path, train: int, out_dir: Path | None) -> Path:
+def derive(work: Path, train: int, out_dir: Path | None, independent: bool = False) -> Path:
     _setup_path()
     from prior.fit.landmark_sources import CORRESPONDENCE_DIR, model_key
     from synth.conventions import project
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
+    from synth.model.meshutil import mesh_midline, mesh_mirror
 
     model = load_default_model()
     hm = HeadModel(model, np.float64)
@@ -179,26 +186,61 @@ def derive(work: Path, train: int, out_dir: Path | None) -> Path:
     hits_b = np.zeros((N, N_POINTS, 3))
     for n in range(N):
         hits_t[n], hits_b[n] = cast(obs[n], posed[frame_of[n]], tris, *cams[frame_of[n]])
-    points = []
-    for j in range(N_POINTS):
-        ok = np.nonzero(hits_t[:, j] >= 0)[0]
-        if len(ok) < max(2, 0.5 * N):
-            continue
-        cand_t, cand_b = hits_t[ok, j], hits_b[ok, j]  # one candidate surface point per detection that hit
-        # each candidate's 2D residual against every detection, in units of that detection's face width
-        res = np.empty((len(ok), N))
+
+    def residuals(cand_t, cand_b, j):
+        """(C, N): each candidate's 2D distance to every detection of point j, in face widths."""
+        res = np.empty((len(cand_t), N))
         for f in range(F):
             X = np.einsum("ck,ckd->cd", cand_b, posed[f][tris[cand_t]])
             uv, _ = project(*cams[f], X)
             for n in np.nonzero(frame_of == f)[0]:
                 res[:, n] = np.linalg.norm(uv - obs[n, j], axis=-1) / face_px[n]
-        rms = np.sqrt(np.mean(res ** 2, axis=1))
-        c = int(np.argmin(rms))
-        points.append({"mediapipe": j, "triangle": int(cand_t[c]), "bary": [round(float(x), 6) for x in cand_b[c]],
-                       "sigma_face": round(float(rms[c]), 6), "frames": int(len(ok))})
+        return res
+
+    def hits(j):
+        ok = np.nonzero(hits_t[:, j] >= 0)[0]
+        return hits_t[ok, j], hits_b[ok, j]  # one candidate surface point per detection that hit
+
+    def entry(j, t, b, res):
+        return {"mediapipe": j, "triangle": int(t), "bary": [round(float(x), 6) for x in b],
+                "sigma_face": round(float(np.sqrt(np.mean(res ** 2))), 6), "frames": int((hits_t[:, j] >= 0).sum())}
+
+    enough = [(hits_t[:, j] >= 0).sum() >= max(2, 0.5 * N) for j in range(N_POINTS)]
+    chosen = {}
+    if pair is not None and not np.array_equal(pair[pair], np.arange(N_POINTS)):
+        raise SystemExit("the mirror pairs found from the detections are not symmetric; "
+                         "detect on more frames, or derive with --independent")
+    if pair is None or independent:  # each point on its own
+        for j in range(N_POINTS):
+            if enough[j]:
+                ct, cb = hits(j)
+                res = residuals(ct, cb, j)
+                c = int(np.argmin(np.mean(res ** 2, axis=1)))
+                chosen[j] = entry(j, ct[c], cb[c], res[c])
+    else:  # left-right pairs chosen together: a point and its partner's are mirror images on the model
+        mirror = mesh_mirror(tmpl, tris)  # x -> -x of surface points
+        midline = mesh_midline(tmpl, tris)
+        for j in range(N_POINTS):
+            p = int(pair[j])
+            if p < j or not (enough[j] and enough[p]):
+                continue
+            (tj, bj), (tp, bp) = hits(j), hits(p)
+            mtp, mbp = mirror(tp, bp)
+            ct, cb = np.concatenate([tj, mtp]), np.concatenate([bj, mbp])  # j's candidates and p's mirrored
+            if p == j:  # a point on the midline: its candidates moved onto the model's midline
+                ct, cb = midline(ct, cb)
+            mt, mb = mirror(ct, cb)  # their mirror images
+            rj = residuals(ct, cb, j)
+            rp = rj if p == j else residuals(mt, mb, p)
+            c = int(np.argmin(np.mean(rj ** 2, axis=1) + np.mean(rp ** 2, axis=1)))
+            chosen[j] = entry(j, ct[c], cb[c], rj[c])
+            if p != j:
+                chosen[p] = entry(p, mt[c], mb[c], rp[c])
+    points = [chosen[j] for j in sorted(chosen)]
     doc = {"format": "synth-mediapipe-correspondence", "format_version": 1, "model": model.name,
            "model_key": model_key(model), "mediapipe": det["mediapipe"],
            "derivation": {"frames": len(keys), "mirrored_frames": len(mkeys), "identities": train,
+                          "mirror_symmetric": pair is not None and not independent,
                           "script": "scripts/mediapipe_correspondence.py"},
            "points": points}
     if pair is not None:  # mediapipe's left-right partners (found from the data, mirror_pairs)
@@ -257,13 +299,15 @@ def main() -> None:
         s.add_argument("--train", type=int, default=4, help="identities below this index derive the mapping")
         if name == "derive":
             s.add_argument("--out", type=Path, default=None, help="directory (default: prior/fit/data)")
+            s.add_argument("--independent", action="store_true",
+                           help="choose each point on its own, not together with its mirror partner")
     a = ap.parse_args()
     if a.cmd == "export":
         export(a.dataset, a.work)
     elif a.cmd == "detect":
         detect(a.work)
     elif a.cmd == "derive":
-        derive(a.work, a.train, a.out)
+        derive(a.work, a.train, a.out, a.independent)
     else:
         evaluate(a.work, a.train)
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components as _cc
+from scipy.spatial import cKDTree
 
 
 # --------------------------------------------------------------------------- fitting
@@ -209,3 +210,94 @@ def smoothstep(x: np.ndarray) -> np.ndarray:
     """3x^2 - 2x^3 on [0, 1], clamped outside."""
     x = np.clip(x, 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
+
+
+def closest_point_on_triangle(x: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The point of the triangle ``tri`` (3, 3) nearest to ``x`` (3,) and its barycentric weights
+    (3,), by the region of the triangle's plane that x projects into (vertex, edge or face)."""
+    a, b, c = tri
+    ab, ac, ap = b - a, c - a, x - a
+    d1, d2 = ab @ ap, ac @ ap
+    if d1 <= 0 and d2 <= 0:
+        return a, np.array([1.0, 0.0, 0.0])
+    bp = x - b
+    d3, d4 = ab @ bp, ac @ bp
+    if d3 >= 0 and d4 <= d3:
+        return b, np.array([0.0, 1.0, 0.0])
+    cp = x - c
+    d5, d6 = ab @ cp, ac @ cp
+    if d6 >= 0 and d5 <= d6:
+        return c, np.array([0.0, 0.0, 1.0])
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0 and d1 >= 0 and d3 <= 0:
+        v = d1 / (d1 - d3)
+        return a + v * ab, np.array([1.0 - v, v, 0.0])
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0 and d2 >= 0 and d6 <= 0:
+        w = d2 / (d2 - d6)
+        return a + w * ac, np.array([1.0 - w, 0.0, w])
+    va = d3 * d6 - d5 * d4
+    if va <= 0 and (d4 - d3) >= 0 and (d5 - d6) >= 0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return b + w * (c - b), np.array([0.0, 1.0 - w, w])
+    den = va + vb + vc
+    v, w = vb / den, vc / den
+    return a + v * ab + w * ac, np.array([1.0 - v - w, v, w])
+
+
+def mesh_mirror(template: np.ndarray, tris: np.ndarray, tol: float = 1e-6):
+    """The left-right (x -> -x) mirror image of surface points (triangle, barycentric weights) of a
+    mirror-symmetric mesh, as a function ``mirror(t (C,), bary (C, 3)) -> (t, bary)``. A triangle
+    whose mirrored vertices form a triangle maps onto it exactly (the weights permuted); where a
+    quad was split along the other diagonal on the mirror side, the mirrored point is moved onto
+    the nearest triangle that shares a vertex with the mirrored ones (at most the quad's fold)."""
+    flip = np.array([-1.0, 1.0, 1.0])
+    d, vmap = cKDTree(template).query(template * flip)
+    if d.max() > tol:
+        raise ValueError(f"the mesh is not mirror-symmetric: a vertex lies {1000 * d.max():.3f} mm from the "
+                         f"mirror image of its nearest vertex")
+    index = {tuple(sorted(t)): i for i, t in enumerate(tris.tolist())}
+    mirrored = vmap[tris]
+    tmap = np.array([index.get(tuple(sorted(t)), -1) for t in mirrored.tolist()], np.int64)
+    perm = np.argmax(tris[np.maximum(tmap, 0)][:, :, None] == mirrored[:, None, :], axis=2)
+
+    def mirror(t: np.ndarray, bary: np.ndarray):
+        mt = tmap[t].copy()
+        mb = np.take_along_axis(bary, perm[t], axis=1)
+        for i in np.nonzero(mt < 0)[0]:
+            x = np.einsum("k,kd->d", bary[i], template[tris[t[i]]]) * flip
+            near = np.nonzero(np.isin(tris, mirrored[t[i]]).any(axis=1))[0]
+            best = min(((np.linalg.norm(q - x), k, w) for k in near
+                        for q, w in [closest_point_on_triangle(x, template[tris[k]])]), key=lambda r: r[0])
+            mt[i], mb[i] = best[1], best[2]
+        return mt, mb
+
+    return mirror
+
+
+def mesh_midline(template: np.ndarray, tris: np.ndarray, tol: float = 1e-9):
+    """Surface points moved onto the mesh's midline (its edges with both ends at x = 0), as a function
+    ``snap(t (C,), bary (C, 3)) -> (t, bary)``: each point's nearest point on the midline edges (in
+    the template), given in a triangle that holds the edge (the third weight zero)."""
+    on = np.abs(template[:, 0]) <= tol
+    half = triangle_edges(tris)
+    keep = np.nonzero(on[half].all(axis=1))[0]
+    if not len(keep):
+        raise ValueError("the mesh has no edges on its midline (x = 0)")
+    tri_of, slot = keep % len(tris), keep // len(tris)  # triangle_edges: corners (slot, slot + 1 mod 3)
+    a, b = template[half[keep, 0]], template[half[keep, 1]]
+    ab = b - a
+    ab2 = np.maximum(np.einsum("ed,ed->e", ab, ab), 1e-300)
+
+    def snap(t: np.ndarray, bary: np.ndarray):
+        x = np.einsum("ck,ckd->cd", bary, template[tris[t]])
+        s = np.clip(np.einsum("ced,ed->ce", x[:, None] - a[None], ab) / ab2, 0.0, 1.0)  # (C, E)
+        d = np.linalg.norm(x[:, None] - (a[None] + s[..., None] * ab[None]), axis=-1)
+        e = np.argmin(d, axis=1)
+        w = np.zeros((len(t), 3))
+        rows = np.arange(len(t))
+        w[rows, slot[e]] = 1.0 - s[rows, e]
+        w[rows, (slot[e] + 1) % 3] = s[rows, e]
+        return tri_of[e], w
+
+    return snap
