@@ -252,6 +252,42 @@ def hair(args) -> dict:
     return {"rows": rows, "views": views, "views_with_strands_in_front": bad, "views_centre": bad_c}
 
 
+def drape_table(args) -> dict:
+    """How loose styles hang (synth.assets.fit.hair.drape), with the loose styles' sweep floor
+    and volume as before 2026-12-01 and as now, on the neutral heads of planned identities."""
+    from synth.assets.fit import hair as H
+
+    model, hm, ids, codes = _planned_heads(args.seed, args.identities)
+    styles = ("short_straight", "short_curly", "medium_wavy", "bob", "long_straight", "long_curly")
+    settings = {"before": (-0.03, 0.15), "now": (H.LOOSE_SWEEP_FLOOR_M, H.LOOSE_VOLUME)}
+    print(f"\n### Drape of the loose styles ({len(ids)} identities of seed {args.seed}, neutral, "
+          f"{args.resolution} px strand density; mm, mean over identities; before / now)\n")
+    print("| style | beyond the head at eye level | half-width 5 cm below the chin | standoff, chin to eyes |\n"
+          "|---|---:|---:|---:|")
+    rows = []
+    saved = H.LOOSE_SWEEP_FLOOR_M, H.LOOSE_VOLUME
+    try:
+        for sid in styles:
+            got = {}
+            for name, (floor, volume) in settings.items():
+                H.LOOSE_SWEEP_FLOOR_M, H.LOOSE_VOLUME = floor, volume
+                m = []
+                for n, i in enumerate(ids.tolist()):
+                    ctx, ev = _neutral_context(model, hm, codes[n], i, args.seed, args.resolution, {})
+                    g = H.groom(ctx, {"id": sid, "params": {}})
+                    d = H.drape(ctx.vertices, ctx.landmarks["ibug68"], g.pts)
+                    m.append([d["beyond_head"], d["half_width_below_chin"], d["standoff"]])
+                m = np.asarray(m, np.float64)
+                got[name] = 1000.0 * np.array([np.mean(c[np.isfinite(c)]) if np.isfinite(c).any() else np.nan
+                                               for c in m.T])
+            rows.append({"style": sid, **{k: v.tolist() for k, v in got.items()}})
+            b, a = got["before"], got["now"]
+            print(f"| {sid} | " + " | ".join(f"{b[k]:.0f} / {a[k]:.0f}" for k in range(3)) + " |")
+    finally:
+        H.LOOSE_SWEEP_FLOOR_M, H.LOOSE_VOLUME = saved
+    return {"rows": rows}
+
+
 def _srgb8(fr) -> np.ndarray:
     """(H, W, 3) uint8 sRGB of a frame composited over mid grey."""
     rgb = fr.rgb_premultiplied + (1.0 - fr.alpha[..., None]) * 0.5  # linear
@@ -382,6 +418,10 @@ def main(argv=None) -> None:
     p = sub.add_parser("hair")
     p.add_argument("--identities", type=int, default=12)
     p.add_argument("--seed", type=int, default=0)
+    p = sub.add_parser("drape")
+    p.add_argument("--identities", type=int, default=4)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--resolution", type=int, default=256)
     p = sub.add_parser("judge")
     p.add_argument("dataset")
     p.add_argument("--mp-python", required=True)
@@ -410,7 +450,7 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     from realism_judge import judge, mapping_table
 
-    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "hair": hair, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
+    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "hair": hair, "drape": drape_table, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
            "sheet": sheet}[args.cmd](args)
     if args.json:
         Path(args.json).write_text(json.dumps(res))

@@ -255,3 +255,27 @@ def test_partial_beards_keep_the_density_of_a_full_beard(default_head, sid):
     # nearest-neighbour distances scale as density ** -1/2
     ratio = nn(part) / nn(full) * np.sqrt(PARTIAL_DENSITY.get(sid, 1.0))
     assert 0.8 < ratio < 1.25, (nn(part), nn(full))
+
+
+@pytest.mark.parametrize("case", ["neutral", "id-3_jaw", "id+3_jaw"])
+def test_loose_hair_hangs_close_to_the_head(default_head, case, monkeypatch):
+    """Long and medium hair follows the head down its sides instead of leaving it sideways at the
+    temples: at eye level it reaches 2.0-4.4 cm past the head (ears included) on these heads,
+    where the sweep held down to 3 cm below the head's centre and the volume pull of before
+    (2026-12-01) made it 5.6-9.6 cm: a tent. It also hangs nearer the head (standoff)."""
+    from synth.assets.fit import hair as H
+    from tests.support import asset_scene
+
+    def reach(sid, length):
+        ctx = asset_scene.head_arrays(default_head, case, 128, 0, 0)
+        g = H.groom(ctx, {"id": sid, "params": {"length_m": length, "parting": "centre"}})
+        return H.drape(ctx.vertices, ctx.landmarks["ibug68"], g.pts)
+
+    for sid, length in (("long_straight", 0.4), ("medium_wavy", 0.15)):
+        now = reach(sid, length)
+        with monkeypatch.context() as m:
+            m.setattr(H, "LOOSE_SWEEP_FLOOR_M", -0.03)
+            m.setattr(H, "LOOSE_VOLUME", 0.15)
+            before = reach(sid, length)
+        assert 0.0 < now["beyond_head"] < min(0.045, 0.6 * before["beyond_head"])
+        assert now["standoff"] < before["standoff"]

@@ -137,6 +137,17 @@ HAT_MARGIN_M = 0.003
 AFRO_WRAP_M = 0.03
 AFRO_DENSITY = 2.0
 
+#: loose styles (short, medium, bob, long): the sideways part of the style's sweep (away from the
+#: parting) acts above this height over the head's centre and fades over the 5 cm below it, and
+#: the outward "volume" pull on every step. Roots at the front hairline keep the sideways sweep
+#: down to 3 cm below the centre (it takes them round the face), as does the backward part of the
+#: sweep everywhere. Before 2026-12-01 the whole sweep held down to 3 cm below the centre and the
+#: volume was 0.15, as for the buzz cut, undercut and afro (unchanged): long hair left the head
+#: sideways at the temples and hung as a tent (`benchmarks/realism.py drape`: at eye level
+#: 85 mm past the head, now 35 mm).
+LOOSE_SWEEP_FLOOR_M = 0.03
+LOOSE_VOLUME = 0.05
+
 
 class _AfroField:
     """The afro's direction field: the radial sweep, bent by a smooth random field (3 plane
@@ -179,6 +190,7 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
     side_sign = np.where(gr[:, 0] >= (xp if xp is not None else c[0]), 1.0, -1.0)
 
     group = np.zeros(G, np.int64)  # interpolation groups (children never mix groups)
+    side_floor, volume = -0.03, 0.15  # buzz cut, undercut, afro; the loose styles set their own below
     if sid == "buzz_cut":
         L = rng.uniform(*sorted((float(prm.get("length_m", 0.006)) * 0.85, float(prm.get("length_m", 0.006)))), G)
         sweep = normalize(BACK[None] * 0.6 + DOWN[None] * 0.6 + 0.0 * gr)
@@ -229,6 +241,9 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
         layer = rng.uniform(0.002, 0.008 if short else 0.012, G)
         bend = 1.0
         sweep_w = 1.6 if short else 1.0
+        # roots at the front hairline keep the sideways sweep down to the face: it takes them round it
+        # (else they fall over the forehead and the face keep-out has to turn them at the hairline)
+        side_floor, volume = LOOSE_SWEEP_FLOOR_M + (-0.03 - LOOSE_SWEEP_FLOOR_M) * front, LOOSE_VOLUME
 
     zc = c[2]
     face_y = float(hf["scalp_lo"][1]) + 0.035
@@ -239,16 +254,19 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
     def field(p, s, k):
         # the sweep holds on the top of the head and fades below it; gravity takes over
         w = sweep_w * np.clip((p[:, 2] - (zc - 0.03)) / 0.05, 0.0, 1.0)[:, None]
+        w_side = sweep_w * np.clip((p[:, 2] - (zc + side_floor)) / 0.05, 0.0, 1.0)
         if sid in ("afro", "buzz_cut"):
-            w = np.ones_like(w)
-        vol = 0.15 * normalize(p - c)
+            w, w_side = np.ones_like(w), np.ones_like(w_side)
+        sw = w * sweep
+        sw[:, 0] = w_side * sweep[:, 0]  # the sideways part (away from the parting) may stop higher
+        vol = volume * normalize(p - c)
         # keep hair out of the face: in front of the face plane, push sideways and back
         in_face = ((p[:, 1] < face_y) & (p[:, 2] > chin_z) & (p[:, 2] < hf["brow_z"] + 0.03)
                    & (np.abs(p[:, 0] - c[0]) < 0.08)) * guard
         fg = in_face[:, None] * (2.0 * g_side[:, None] * LEFT[None] + 1.0 * BACK[None])
         if sid == "afro":
-            return afro(p, w * sweep + grav * DOWN[None] + vol) + fg
-        return w * sweep + grav * DOWN[None] + vol + fg
+            return afro(p, sw + grav * DOWN[None] + vol) + fg
+        return sw + grav * DOWN[None] + vol + fg
 
     guides = grow(surface, gr, gn, L, P, field, lift, layer, bend=bend)
 
@@ -401,3 +419,26 @@ def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
     clr = np.minimum(layer[:, None], 0.6 * arc_length(pts))
     pts[:, 1:] = surface.push_out(pts[:, 1:], clr[:, 1:], iterations=2)
     return pts, clr, g_used
+
+
+def drape(vertices: np.ndarray, ibug68: np.ndarray, pts: np.ndarray) -> dict:
+    """How a groom hangs, in metres (head frame: z up, x across): ``beyond_head`` how far the hair
+    reaches past the head at eye level (95th percentile of the hair points' distance from the
+    eyes' midline within 1 cm of eye height, less the head's own: 99th percentile of its
+    vertices, ears included); ``half_width_below_chin`` the same 95th percentile 5 cm and more
+    below the chin (NaN where no hair is); ``standoff`` the median distance of the hair points
+    between the chin and 2 cm above the eyes from the nearest head vertex."""
+    from scipy.spatial import cKDTree
+
+    V = np.asarray(vertices, np.float64)
+    P = np.asarray(pts, np.float64).reshape(-1, 3)
+    eye = np.asarray(ibug68, np.float64)[[36, 45]].mean(axis=0)
+    chin_z = float(ibug68[8][2])
+    head = np.abs(V[:, 2] - eye[2]) < 0.01
+    at_eyes = np.abs(P[:, 2] - eye[2]) < 0.01
+    below = P[:, 2] < chin_z - 0.05
+    band = (P[:, 2] < eye[2] + 0.02) & (P[:, 2] > chin_z)
+    pct = lambda sel, q: float(np.percentile(np.abs(P[sel, 0] - eye[0]), q)) if sel.any() else float("nan")  # noqa: E731
+    return {"beyond_head": pct(at_eyes, 95) - float(np.percentile(np.abs(V[head, 0] - eye[0]), 99)),
+            "half_width_below_chin": pct(below, 95),
+            "standoff": float(np.median(cKDTree(V).query(P[band])[0])) if band.any() else float("nan")}
