@@ -14,6 +14,8 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components as _cc
 from scipy.spatial import cKDTree
 
+from synth.geometry.closest import nearest_on_candidates
+
 
 # --------------------------------------------------------------------------- fitting
 
@@ -212,39 +214,6 @@ def smoothstep(x: np.ndarray) -> np.ndarray:
     return x * x * (3.0 - 2.0 * x)
 
 
-def closest_point_on_triangle(x: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The point of the triangle ``tri`` (3, 3) nearest to ``x`` (3,) and its barycentric weights
-    (3,), by the region of the triangle's plane that x projects into (vertex, edge or face)."""
-    a, b, c = tri
-    ab, ac, ap = b - a, c - a, x - a
-    d1, d2 = ab @ ap, ac @ ap
-    if d1 <= 0 and d2 <= 0:
-        return a, np.array([1.0, 0.0, 0.0])
-    bp = x - b
-    d3, d4 = ab @ bp, ac @ bp
-    if d3 >= 0 and d4 <= d3:
-        return b, np.array([0.0, 1.0, 0.0])
-    cp = x - c
-    d5, d6 = ab @ cp, ac @ cp
-    if d6 >= 0 and d5 <= d6:
-        return c, np.array([0.0, 0.0, 1.0])
-    vc = d1 * d4 - d3 * d2
-    if vc <= 0 and d1 >= 0 and d3 <= 0:
-        v = d1 / (d1 - d3)
-        return a + v * ab, np.array([1.0 - v, v, 0.0])
-    vb = d5 * d2 - d1 * d6
-    if vb <= 0 and d2 >= 0 and d6 <= 0:
-        w = d2 / (d2 - d6)
-        return a + w * ac, np.array([1.0 - w, 0.0, w])
-    va = d3 * d6 - d5 * d4
-    if va <= 0 and (d4 - d3) >= 0 and (d5 - d6) >= 0:
-        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        return b + w * (c - b), np.array([0.0, 1.0 - w, w])
-    den = va + vb + vc
-    v, w = vb / den, vc / den
-    return a + v * ab + w * ac, np.array([1.0 - v - w, v, w])
-
-
 def mesh_mirror(template: np.ndarray, tris: np.ndarray, tol: float = 1e-6):
     """The left-right (x -> -x) mirror image of surface points (triangle, barycentric weights) of a
     mirror-symmetric mesh, as a function ``mirror(t (C,), bary (C, 3)) -> (t, bary)``. A triangle
@@ -267,9 +236,8 @@ def mesh_mirror(template: np.ndarray, tris: np.ndarray, tol: float = 1e-6):
         for i in np.nonzero(mt < 0)[0]:
             x = np.einsum("k,kd->d", bary[i], template[tris[t[i]]]) * flip
             near = np.nonzero(np.isin(tris, mirrored[t[i]]).any(axis=1))[0]
-            best = min(((np.linalg.norm(q - x), k, w) for k in near
-                        for q, w in [closest_point_on_triangle(x, template[tris[k]])]), key=lambda r: r[0])
-            mt[i], mb[i] = best[1], best[2]
+            hit = nearest_on_candidates(x[None], template, tris, near[None])
+            mt[i], mb[i] = hit.face[0], hit.bary[0]
         return mt, mb
 
     return mirror

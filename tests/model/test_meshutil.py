@@ -1,30 +1,11 @@
-"""Closest points on triangles and the mirror image of surface points."""
+"""The mirror image of surface points and the midline of a symmetric mesh."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from synth.model.meshutil import closest_point_on_triangle, mesh_mirror
-
-
-def test_closest_point_on_triangle_against_dense_samples():
-    rng = np.random.default_rng(3)
-    regions = set()
-    for _ in range(300):
-        tri = rng.normal(size=(3, 3))
-        x = 2.0 * rng.normal(size=3)
-        q, w = closest_point_on_triangle(x, tri)
-        assert abs(w.sum() - 1.0) < 1e-12 and np.all(w >= -1e-12)
-        np.testing.assert_allclose(w @ tri, q, atol=1e-12)
-        dense = rng.dirichlet([1.0, 1.0, 1.0], 20000) @ tri
-        assert np.linalg.norm(q - x) <= np.linalg.norm(dense - x, axis=1).min() + 1e-9
-        regions.add(int((w > 1e-12).sum()))  # 1: a vertex, 2: an edge, 3: the face
-    assert regions == {1, 2, 3}
-    # degenerate: a point on the triangle is its own closest point
-    tri = np.eye(3)
-    q, w = closest_point_on_triangle(np.full(3, 1 / 3), tri)
-    np.testing.assert_allclose(w, 1 / 3)
+from synth.model.meshutil import mesh_mirror
 
 
 def test_mesh_mirror_of_the_default_model(default_model):
