@@ -102,7 +102,8 @@ def build(ctx, entry: dict) -> Rig:
     mat = ctx.materials[CLASSES["skin"]]
     nt = mat.node_tree
     V, lm = np.asarray(ctx.vertices), np.asarray(ctx.landmarks["ibug68"])
-    bmat.write_point_colour(ctx.head.data, "skin_mask", skin_detail_mask(ctx.data, V, lm))
+    reach = ((((ctx.assets or {}).get("beard") or {}).get("params")) or {}).get("reach")  # the beard's cheek line
+    bmat.write_point_colour(ctx.head.data, "skin_mask", skin_detail_mask(ctx.data, V, lm, reach))
     attr = bmat.attribute(mat, "skin_mask")
     sep = nt.nodes.new("ShaderNodeSeparateColor")
     nt.links.new(attr.outputs["Color"], sep.inputs["Color"])

@@ -87,6 +87,26 @@ def test_skin_detail_mask(head):
     assert forehead.any() and np.all(V[forehead, 2] > lm[36:48, 2].mean() - 0.01)
 
 
+@pytest.mark.parametrize("reach", [0.0, 0.3, 1.0])
+def test_stubble_shadow_follows_the_cheek_line_and_reaches_the_lips(head, reach):
+    """The skin-detail beard area (the stubble shadow) ends at the beard's cheek line, the same
+    line as the strands (within its fade), and covers the upper lip and the skin under the lower
+    lip fully: the 8 mm fade of the region's open edges no longer applies at the lips and nose."""
+    from synth.assets.fit.masks import CHEEK_FADE_M, cheek_line
+
+    data, V, lm = head
+    a = skin_detail_mask(data, V, lm, reach)[:, 3]
+    xs, zs = cheek_line(lm, reach)
+    xc = 0.5 * (lm[0, 0] + lm[16, 0])
+    above = V[:, 2] - np.interp(np.abs(V[:, 0] - xc), xs, zs)
+    assert a[above >= CHEEK_FADE_M].max() == 0.0 and a[above < -0.01].max() == 1.0
+    hw = 0.5 * abs(lm[54, 0] - lm[48, 0])
+    lip_skin = region_mask(data.regions, ["beard"], len(V)) & (np.abs(V[:, 0] - xc) < 0.8 * hw) & (
+        V[:, 1] < lm[51, 1] + 0.02) & (((V[:, 2] > lm[51, 2]) & (V[:, 2] < lm[33, 2])) | (
+            (V[:, 2] < lm[57, 2]) & (V[:, 2] > lm[57, 2] - 0.01)))
+    assert lip_skin.sum() >= 4 and a[lip_skin].min() > 0.9, a[lip_skin]
+
+
 def test_beard_area_fades_over_rows_of_vertices(head):
     """The beard area (stubble shadow, and the roots of the whole-region beards) fades over a
     few rows of the region's 7-11 mm triangles: a 0/1 mask ended in their staircase."""

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from synth.assets.fit.groom import Groom, Styling, setup
-from synth.assets.fit.masks import BEARD_FEATHER_M, soft_region
+from synth.assets.fit.masks import DEFAULT_REACH, beard_area, below_cheek_line
 from synth.assets.fit.strands import DOWN, LEFT, UP, add_curl, arc_length, grow, push_out_strands, scale_count
 from synth.geometry.normals import normalize
 
@@ -21,6 +21,13 @@ MIN_PARTIAL_STRANDS = 24
 #: strands per area of a partial style relative to a full beard's mean over the region: the
 #: chin and the upper lip carry a beard's densest hair (chosen by eye at 256 px; docs/realism.md)
 PARTIAL_DENSITY = {"goatee": 2.0, "moustache": 2.0}
+
+
+#: a long beard's strands leave the skin along its normal over this arc length (m); at 1 cm
+#: they stood off the chin toward the camera and left it bare between their roots
+LONG_LIFT_M = 0.004
+#: how strongly a long beard's hair gathers toward the middle below the jaw (per 6 cm off it)
+LONG_GATHER = 0.5
 
 
 def counts(resolution: int, density: float = 1.0) -> int:
@@ -81,12 +88,21 @@ def groom(ctx, entry) -> Groom:
 
     n = counts(ctx.resolution, float(prm.get("density", 1.0)))  # over the whole beard region
     t, b = surface.sample(tris, 6 * n + 64, rng)
-    ok = mask(surface.points(t, b))
+    P0 = surface.points(t, b)
+    ok = mask(P0)
+    # the cheek line: how far up the cheek the hair grows (masks.cheek_line); the same line bounds
+    # the stubble shadow of the skin-detail rig
+    cheek = below_cheek_line(P0, lm, float(prm.get("reach", DEFAULT_REACH)))
     if whole:
-        soft = soft_region(surface.V, surface.mask("beard"), BEARD_FEATHER_M)
-        ok &= rng.random(len(t)) < np.einsum("nk,nk->n", b, soft[surface.T[t]])
-        keep = np.nonzero(ok)[0][:n]
+        soft = beard_area(surface.data, surface.V)
+        feathered = np.einsum("nk,nk->n", b, soft[surface.T[t]])
+        ok &= rng.random(len(t)) < feathered * cheek
+        # n strands over the feathered region's area: the draws that many need, whatever the
+        # cheek line leaves of it (taking the first n hits packed a low line's beard denser)
+        keep = np.nonzero(ok[:int(np.ceil(n / max(float(feathered.mean()), 0.2)))])[0]
     else:
+        if sid == "mutton_chops":
+            ok &= cheek > 0.5
         # a partial style keeps the region's density (times PARTIAL_DENSITY): of the first n draws
         # (n per region area), those in its mask; taking n from the mask packed a goatee or a
         # moustache with a whole beard's strands (2.3-7.6 times denser: an opaque block). At
@@ -113,8 +129,8 @@ def groom(ctx, entry) -> Groom:
     curl = float(prm.get("curl", 0.0))
     long = sid == "full_long"
     npts = 3 if sid == "stubble" else (16 if long else 6)
-    lift = 0.0015 if not long else 0.01
-    layer = rng.uniform(0.0005, 0.002 if not long else 0.01, N)
+    lift = 0.0015 if not long else LONG_LIFT_M
+    layer = rng.uniform(0.0005, 0.002 if not long else 0.008, N)
 
     def field(p, s, k):
         tdown = DOWN[None] - np.einsum("nd,d->n", nrm, DOWN)[:, None] * nrm
@@ -125,7 +141,14 @@ def groom(ctx, entry) -> Groom:
             out = np.clip((np.abs(p[:, 0] - x_c) - half_w) / 0.01, 0.0, 1.0)[:, None]
             mo = mo * 1.5 + out * 1.8 * UP[None]
         if long:
-            d = d + 0.8 * DOWN[None] * np.clip(s / 0.02, 0, 1)[:, None]
+            # straight down from the start, not only along the skin: under the chin the skin's
+            # downward tangent turns back toward the neck, and the chin's hair followed it there
+            # (the chin bare from the front, the beard's middle a dark gap over the neck)
+            d = 0.5 * normalize(tdown + 1e-9) + 0.25 * nrm + (0.5 + 0.8 * np.clip(s / 0.02, 0, 1))[:, None] * DOWN[None]
+            # below the jaw the hair gathers toward the middle: a long beard narrows to its end
+            # (without this the cheeks' strands hung as two curtains as wide as the face)
+            under = np.clip((chin[2] + 0.015 - p[:, 2]) / 0.04, 0.0, 1.0)
+            d = d - (LONG_GATHER * under * (p[:, 0] - x_c) / 0.06)[:, None] * LEFT[None]
         return d + mo
 
     pts = grow(surface, R, nrm, L, npts, field, lift, layer)

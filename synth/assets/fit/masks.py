@@ -96,9 +96,10 @@ def makeup_masks(data, V: np.ndarray, lm: np.ndarray, extent: float = 0.6, liner
     return np.clip(m1, 0, 1), np.clip(m2, 0, 1)
 
 
-def skin_detail_mask(data, V, lm) -> np.ndarray:
+def skin_detail_mask(data, V, lm, reach: float | None = None) -> np.ndarray:
     """The skin-detail rig's point-colour attribute (V, 4): R cheeks and nose, G T-zone,
-    B wrinkle zones (forehead, crow's feet), A beard area; zero off the skin."""
+    B wrinkle zones (forehead, crow's feet), A beard area (the beard region under the cheek
+    line of ``reach``, :func:`cheek_line`; default :data:`DEFAULT_REACH`); zero off the skin."""
     n = len(V)
     skin = skin_only(data, n).astype(float)
     nose_tip, c_l, c_r = lm[30], lm[42:48].mean(0), lm[36:42].mean(0)
@@ -112,8 +113,7 @@ def skin_detail_mask(data, V, lm) -> np.ndarray:
     crows = np.maximum(feather(np.linalg.norm(V - (lm[45] + [0.01, 0.004, 0]), axis=1), 0.002, 0.012),
                        feather(np.linalg.norm(V - (lm[36] + [-0.01, 0.004, 0]), axis=1), 0.002, 0.012))
     wr = np.maximum(forehead, crows)
-    beard = soft_region(V, region_mask(data.regions, ("beard",), n), BEARD_FEATHER_M)
-    beard = beard * ~region_mask(data.regions, ("lips",), n)  # the stubble stops at the lips' edge
+    beard = beard_area(data, V) * below_cheek_line(V, lm, DEFAULT_REACH if reach is None else reach)
     m = np.stack([cheeks, tz, wr, beard], 1) * skin[:, None]
     return np.clip(m, 0, 1)
 
@@ -122,6 +122,22 @@ def skin_detail_mask(data, V, lm) -> np.ndarray:
 #: set of vertices 7-11 mm apart, and as a hard 0/1 mask the stubble shadow ended in the
 #: triangles' staircase
 BEARD_FEATHER_M = 0.008
+
+
+#: the regions a beard meets without fading: hair grows up to the lips' and the nostrils' edge
+#: (faded there too, the 8 mm feather left the upper lip and the skin under the lower lip bare)
+BEARD_HARD_EDGES = ("lips", "mouth_interior", "teeth", "nose")
+
+
+def beard_area(data, V: np.ndarray) -> np.ndarray:
+    """(V,) the beard region smoothed (:func:`soft_region`, :data:`BEARD_FEATHER_M`) where it
+    meets the rest of the skin, not where it meets :data:`BEARD_HARD_EDGES`; 0 on those."""
+    n = len(V)
+    inside = region_mask(data.regions, ("beard",), n)
+    hard = region_mask(data.regions, BEARD_HARD_EDGES, n)
+    a = soft_region(V, inside | hard, BEARD_FEATHER_M)
+    near = distance_to(V, V[inside]) < 2.5 * BEARD_FEATHER_M if inside.any() else np.zeros(n, bool)
+    return a * near * ~hard
 
 
 def soft_region(V: np.ndarray, inside: np.ndarray, sigma: float) -> np.ndarray:
@@ -143,3 +159,48 @@ def soft_region(V: np.ndarray, inside: np.ndarray, sigma: float) -> np.ndarray:
     # rescaled so that the interior (its 5th percentile has 0.8 at 8 mm) keeps 1: on the beard
     # the value then runs 0, ~0.2, ~0.55, 1 over the last rows of vertices out and in
     return np.clip((out - 0.05) / 0.75, 0.0, 1.0)
+
+
+#: the cheek line of a shaved beard's shadow when the identity has no beard (no ``reach`` drawn)
+DEFAULT_REACH = 0.3
+#: how far above a beard's cheek line its roots fade out (metres)
+CHEEK_FADE_M = 0.005
+#: the sideburn's width: the cheek line meets the sideburn this far inside jaw point 0 (metres)
+SIDEBURN_WIDTH_M = 0.012
+
+
+def cheek_line(lm: np.ndarray, reach: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """The upper edge of beard growth in (|x - face centre|, z), from the ibug68 points ``lm``:
+    the upper lip up to the subnasale, the moustache's outer end beside the mouth corner, the
+    cheek, and the sideburn's front edge up to jaw point 0 at the ear.
+
+    ``reach`` (0..1) is how high the line runs over the cheek: at 1 it is the model's beard
+    region edge (from the nostril's wing straight to jaw point 0, across the cheekbone); at 0
+    it rises from 6 mm above the mouth corner to jaw point 2 below the sideburn, where most
+    men's cheek line runs. Returns the polyline's |x| (increasing) and z."""
+    lm = np.asarray(lm, np.float64)
+    r = float(np.clip(reach, 0.0, 1.0))
+    x31 = 0.5 * abs(lm[35, 0] - lm[31, 0])
+    x0, z0 = 0.5 * abs(lm[16, 0] - lm[0, 0]), 0.5 * (lm[0, 2] + lm[16, 2])
+    z33, z31 = lm[33, 2], 0.5 * (lm[31, 2] + lm[35, 2])
+    high = lambda x: np.interp(x, [0.0, x31, x0], [z33, z31, z0])  # noqa: E731 (the region's own line)
+    half_w = 0.5 * abs(lm[54, 0] - lm[48, 0])
+    xa = max(half_w + 0.006, x31 + 0.003)
+    xb = max(x0 - SIDEBURN_WIDTH_M, xa + 0.005)
+    za_low = min(0.5 * (lm[48, 2] + lm[54, 2]) + 0.006, z31)
+    zb_low = min(0.5 * (lm[2, 2] + lm[14, 2]), float(high(xb)))
+    za = (1 - r) * za_low + r * float(high(xa))
+    zb = (1 - r) * zb_low + r * float(high(xb))
+    return np.array([0.0, x31, xa, xb, max(x0, xb + 0.005)]), np.array([z33, z31, za, zb, z0])
+
+
+def below_cheek_line(P: np.ndarray, lm: np.ndarray, reach: float = 1.0, fade: float = CHEEK_FADE_M) -> np.ndarray:
+    """(N,) weight of the points ``P`` under the cheek line (:func:`cheek_line`): 1 below it,
+    falling smoothly to 0 at ``fade`` metres above it; beyond jaw point 0 it stays at point
+    0's height."""
+    P = np.asarray(P, np.float64)
+    lm = np.asarray(lm, np.float64)
+    xs, zs = cheek_line(lm, reach)
+    xc = 0.5 * (lm[0, 0] + lm[16, 0])
+    z_line = np.interp(np.abs(P[:, 0] - xc), xs, zs)
+    return feather(P[:, 2] - z_line, 0.0, max(fade, 1e-6))
