@@ -288,6 +288,52 @@ def drape_table(args) -> dict:
     return {"rows": rows}
 
 
+def beard_table(args) -> dict:
+    """Where beards grow and how long beards hang (synth.assets.fit.beard.shape) on the neutral
+    heads of planned identities: as before 2026-12-01 (the region's own cheek line, the 8 mm fade
+    at the lips and nose too, long beards along the skin and ungathered) and now (cheek line
+    ``--reach``)."""
+    from synth.assets.fit import beard as B
+    from synth.assets.fit import masks as M
+
+    model, hm, ids, codes = _planned_heads(args.seed, args.identities)
+
+    def old_area(data, V):
+        return M.soft_region(V, M.region_mask(data.regions, ("beard",), len(V)), M.BEARD_FEATHER_M)
+
+    settings = {"before": (1.0, old_area, 0.0, 0.0, 0.01, 0.01),
+                "now": (args.reach, B.beard_area, B.LONG_FALL, B.LONG_GATHER, B.LONG_LIFT_M, B.LONG_LAYER_M)}
+    names = ("beard_area", "LONG_FALL", "LONG_GATHER", "LONG_LIFT_M", "LONG_LAYER_M")
+    saved = tuple(getattr(B, k) for k in names)
+    got = {}
+    try:
+        for name, (reach, *consts) in settings.items():
+            for k, v in zip(names, consts):
+                setattr(B, k, v)
+            rows = []
+            for n, i in enumerate(ids.tolist()):
+                ctx, ev = _neutral_context(model, hm, codes[n], i, args.seed, args.resolution, {})
+                lm = ctx.landmarks["ibug68"]
+                full = B.groom(ctx, {"id": "short_full", "params": {"reach": reach, "moustache": True}})
+                long = B.groom(ctx, {"id": "full_long", "params": {"reach": reach, "length_m": 0.12}})
+                a, b = B.shape(model, ctx.vertices, lm, full), B.shape(model, ctx.vertices, lm, long)
+                rows.append([a["cheek_roots"], len(full.pts), a["upper_lip"], a["under_lip"],
+                             b["spread_below_chin"]])
+            got[name] = np.asarray(rows, np.float64)
+    finally:
+        for k, v in zip(names, saved):
+            setattr(B, k, v)
+    print(f"\n### Beards ({len(ids)} identities of seed {args.seed}, neutral, {args.resolution} px strand "
+          f"density; now with reach {args.reach}; mean over identities, before / now)\n")
+    print("| short_full: roots on the cheek above the nostrils' wing | strands | upper-lip roots per area "
+          "(region = 1) | under the lower lip | full_long (12 cm): spread 3 cm below the chin (jaw half "
+          "widths, 95th pct.) |\n|---:|---:|---:|---:|---:|")
+    b, a = np.nanmean(got["before"], 0), np.nanmean(got["now"], 0)
+    fmt = ("{:.0f}", "{:.0f}", "{:.2f}", "{:.2f}", "{:.2f}")
+    print("| " + " | ".join(f"{f.format(x)} / {f.format(y)}" for f, x, y in zip(fmt, b, a)) + " |")
+    return {k: v.tolist() for k, v in got.items()}
+
+
 def _srgb8(fr) -> np.ndarray:
     """(H, W, 3) uint8 sRGB of a frame composited over mid grey."""
     rgb = fr.rgb_premultiplied + (1.0 - fr.alpha[..., None]) * 0.5  # linear
@@ -422,6 +468,11 @@ def main(argv=None) -> None:
     p.add_argument("--identities", type=int, default=4)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--resolution", type=int, default=256)
+    p = sub.add_parser("beard")
+    p.add_argument("--identities", type=int, default=8)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--resolution", type=int, default=256)
+    p.add_argument("--reach", type=float, default=0.3)
     p = sub.add_parser("judge")
     p.add_argument("dataset")
     p.add_argument("--mp-python", required=True)
@@ -450,7 +501,7 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     from realism_judge import judge, mapping_table
 
-    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "hair": hair, "drape": drape_table, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
+    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "hair": hair, "drape": drape_table, "beard": beard_table, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
            "sheet": sheet}[args.cmd](args)
     if args.json:
         Path(args.json).write_text(json.dumps(res))

@@ -301,9 +301,9 @@ def test_whole_beards_grow_below_their_cheek_line(default_head, case):
         roots[reach] = r
     xs0, zs0 = cheek_line(lm, 0.0)
     xs1, zs1 = cheek_line(lm, 1.0)
-    assert np.all(zs0 <= zs1 + 1e-12) and zs0[2] < zs1[2] - 0.005  # the low line runs lower over the cheek
+    assert np.all(zs0 <= zs1 + 1e-12) and zs0[3] < zs1[3] - 0.005  # the low line runs lower over the cheek
     z_wing = 0.5 * (lm[31, 2] + lm[35, 2])
-    cheek = lambda r: (np.abs(r[:, 0] - xc) > xs0[2]) & (np.abs(r[:, 0] - xc) < xs0[3]) & (r[:, 2] > z_wing)  # noqa: E731
+    cheek = lambda r: (np.abs(r[:, 0] - xc) > xs0[3]) & (np.abs(r[:, 0] - xc) < xs0[4]) & (r[:, 2] > z_wing)  # noqa: E731
     assert cheek(roots[0.0]).sum() == 0 and cheek(roots[1.0]).sum() > 20
     deep = lambda r: r[r[:, 2] < np.interp(np.abs(r[:, 0] - xc), xs0, zs0) - 2 * CHEEK_FADE_M]  # noqa: E731
     assert len(deep(roots[0.0])) > 500 and np.array_equal(deep(roots[0.0]), deep(roots[1.0]))
@@ -312,46 +312,36 @@ def test_whole_beards_grow_below_their_cheek_line(default_head, case):
 @pytest.mark.parametrize("case", ["neutral", "id+3_jaw"])
 def test_beards_grow_up_to_the_lips(default_head, case, monkeypatch):
     """A beard meets the lips and the nostrils without fading (masks.BEARD_HARD_EDGES): the upper
-    lip between the mouth corners carries the region's strands per area. Faded there over 8 mm as
-    at the region's open edges, it had a fifth of them: a full beard's moustache was bare skin."""
+    lip between the mouth corners carries the region's strands per area (beard.shape). Faded
+    there over 8 mm as at the region's open edges, it had a fifth of them: a full beard's
+    moustache was bare skin."""
     from synth.assets.fit import beard as B
     from synth.assets.fit import masks as M
 
-    def upper_lip_density():
+    def lips():
         ctx, g = _groom(default_head, "beard", "short_full", {"reach": 1.0, "moustache": True}, resolution=256)
-        lm, V, T = ctx.landmarks["ibug68"], np.asarray(ctx.vertices), np.asarray(ctx.data.triangles)
-        C = V[T].mean(1)
-        area = 0.5 * np.linalg.norm(np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]]), axis=1)
-        region = M.region_mask(ctx.data.regions, ("beard",), len(V))[T].all(1)
-        xc, hw = 0.5 * (lm[48, 0] + lm[54, 0]), 0.5 * abs(lm[54, 0] - lm[48, 0])
-        strip = region & (np.abs(C[:, 0] - xc) < hw) & (C[:, 2] > lm[51, 2]) & (C[:, 2] < lm[33, 2]) & (
-            C[:, 1] < lm[51, 1] + 0.02)
-        per = np.bincount(g.tri, minlength=len(T))
-        assert strip.sum() >= 8
-        return (per[strip].sum() / area[strip].sum()) / (per[region].sum() / area[region].sum())
+        return B.shape(ctx.data, ctx.vertices, ctx.landmarks["ibug68"], g)
 
-    now = upper_lip_density()
+    now = lips()
     with monkeypatch.context() as m:
         m.setattr(B, "beard_area", lambda data, V: M.soft_region(
             V, M.region_mask(data.regions, ("beard",), len(V)), M.BEARD_FEATHER_M))
-        before = upper_lip_density()
-    assert 0.75 < now < 1.3 and before < 0.5, (now, before)
+        before = lips()
+    assert 0.75 < now["upper_lip"] < 1.3 and before["upper_lip"] < 0.5, (now, before)
+    assert 0.75 < now["under_lip"] < 1.5, now
 
 
 @pytest.mark.parametrize("case", ["neutral", "id+3_jaw", "id-3_brows"])
 def test_long_beard_narrows_below_the_jaw(default_head, case, monkeypatch):
     """A long beard gathers toward the middle below the jaw (beard.LONG_GATHER): its hair 3 cm
-    below the chin stays within 0.95 of the jaw's half width (95th percentile), where without the
-    gather it hung as two curtains as wide as the face or wider."""
+    below the chin stays within 0.95 of the jaw's half width (95th percentile, beard.shape), where
+    without the gather it hung as two curtains as wide as the face or wider."""
     from synth.assets.fit import beard as B
 
     def spread():
         ctx, g = _groom(default_head, "beard", "full_long", {"reach": 0.3, "length_m": 0.12}, resolution=128)
-        lm, P = ctx.landmarks["ibug68"], g.pts
-        xc, x0 = 0.5 * (lm[0, 0] + lm[16, 0]), 0.5 * abs(lm[16, 0] - lm[0, 0])
-        low = P[P[..., 2] < lm[8, 2] - 0.03]
-        assert len(low) > 1000
-        return np.percentile(np.abs(low[:, 0] - xc), 95) / x0
+        assert (g.pts[..., 2] < ctx.landmarks["ibug68"][8, 2] - 0.03).sum() > 1000
+        return B.shape(ctx.data, ctx.vertices, ctx.landmarks["ibug68"], g)["spread_below_chin"]
 
     now = spread()
     with monkeypatch.context() as m:

@@ -26,6 +26,11 @@ PARTIAL_DENSITY = {"goatee": 2.0, "moustache": 2.0}
 #: a long beard's strands leave the skin along its normal over this arc length (m); at 1 cm
 #: they stood off the chin toward the camera and left it bare between their roots
 LONG_LIFT_M = 0.004
+#: a long beard's largest clearance from the skin (m; 0.01 before 2026-12-01)
+LONG_LAYER_M = 0.008
+#: the share of a long beard's growth direction that is straight down from the root on (0 before
+#: 2026-12-01: along the skin only for the first 2 cm)
+LONG_FALL = 0.5
 #: how strongly a long beard's hair gathers toward the middle below the jaw (per 6 cm off it)
 LONG_GATHER = 0.5
 
@@ -130,7 +135,7 @@ def groom(ctx, entry) -> Groom:
     long = sid == "full_long"
     npts = 3 if sid == "stubble" else (16 if long else 6)
     lift = 0.0015 if not long else LONG_LIFT_M
-    layer = rng.uniform(0.0005, 0.002 if not long else 0.008, N)
+    layer = rng.uniform(0.0005, 0.002 if not long else LONG_LAYER_M, N)
 
     def field(p, s, k):
         tdown = DOWN[None] - np.einsum("nd,d->n", nrm, DOWN)[:, None] * nrm
@@ -144,7 +149,9 @@ def groom(ctx, entry) -> Groom:
             # straight down from the start, not only along the skin: under the chin the skin's
             # downward tangent turns back toward the neck, and the chin's hair followed it there
             # (the chin bare from the front, the beard's middle a dark gap over the neck)
-            d = 0.5 * normalize(tdown + 1e-9) + 0.25 * nrm + (0.5 + 0.8 * np.clip(s / 0.02, 0, 1))[:, None] * DOWN[None]
+            f = LONG_FALL
+            d = (1.0 - f) * normalize(tdown + 1e-9) + (0.35 - 0.2 * f) * nrm + (
+                f + 0.8 * np.clip(s / 0.02, 0, 1))[:, None] * DOWN[None]
             # below the jaw the hair gathers toward the middle: a long beard narrows to its end
             # (without this the cheeks' strands hung as two curtains as wide as the face)
             under = np.clip((chin[2] + 0.015 - p[:, 2]) / 0.04, 0.0, 1.0)
@@ -164,3 +171,42 @@ def groom(ctx, entry) -> Groom:
     if sid == "moustache":
         info["moustache_style"] = mstyle
     return Groom("beard", f"beard_{sid}", surface, pts, tri, bary, clr, styling, info, pg, roughness=0.32, exact=True)
+
+
+def shape(data, vertices, lm, g: Groom) -> dict:
+    """Where a beard grows and how it hangs (docs/realism.md, "Beards"), from its groom ``g`` on
+    the head ``vertices`` with ibug68 points ``lm``:
+
+    - ``cheek_roots``: roots on the cheek above the nostrils' wing height, between the moustache's
+      outer end and the sideburn (the low cheek line's span);
+    - ``upper_lip`` / ``under_lip``: roots per area on the skin between the mouth corners above
+      the upper lip (to the subnasale) and in the 12 mm under the lower lip, relative to the
+      whole region's;
+    - ``spread_below_chin``: the 95th percentile of the strand points' distance from the middle
+      3 cm or more below the chin, in jaw half widths (points 0-16); nan without such points."""
+    from synth.assets.fit.masks import cheek_line, region_mask
+
+    V, T = np.asarray(vertices, np.float64), np.asarray(data.triangles)
+    lm = np.asarray(lm, np.float64)
+    r = g.pts[:, 0]
+    xc, x0 = 0.5 * (lm[0, 0] + lm[16, 0]), 0.5 * abs(lm[16, 0] - lm[0, 0])
+    xs, _ = cheek_line(lm, 0.0)
+    z_wing = 0.5 * (lm[31, 2] + lm[35, 2])
+    ax = np.abs(r[:, 0] - xc)
+    cheek = int(((ax > xs[3]) & (ax < xs[4]) & (r[:, 2] > z_wing)).sum())
+    C = V[T].mean(1)
+    area = 0.5 * np.linalg.norm(np.cross(V[T[:, 1]] - V[T[:, 0]], V[T[:, 2]] - V[T[:, 0]]), axis=1)
+    region = region_mask(data.regions, ("beard",), len(V))[T].all(1)
+    per = np.bincount(g.tri, minlength=len(T))
+    mean = per[region].sum() / max(area[region].sum(), 1e-12)
+    mx, hw = 0.5 * (lm[48, 0] + lm[54, 0]), 0.5 * abs(lm[54, 0] - lm[48, 0])
+    between = region & (np.abs(C[:, 0] - mx) < hw)
+    upper = between & (C[:, 2] > lm[51, 2]) & (C[:, 2] < lm[33, 2]) & (C[:, 1] < lm[51, 1] + 0.02)
+    under = between & (C[:, 2] < lm[57, 2]) & (C[:, 2] > lm[57, 2] - 0.012) & (C[:, 1] < lm[57, 1] + 0.02)
+
+    def rel(sel):
+        return float(per[sel].sum() / area[sel].sum() / mean) if sel.any() and mean > 0 else float("nan")
+
+    low = g.pts[g.pts[..., 2] < lm[8, 2] - 0.03]
+    spread = float(np.percentile(np.abs(low[:, 0] - xc), 95) / x0) if len(low) else float("nan")
+    return {"cheek_roots": cheek, "upper_lip": rel(upper), "under_lip": rel(under), "spread_below_chin": spread}

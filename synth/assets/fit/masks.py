@@ -176,8 +176,9 @@ def cheek_line(lm: np.ndarray, reach: float = 1.0) -> tuple[np.ndarray, np.ndarr
 
     ``reach`` (0..1) is how high the line runs over the cheek: at 1 it is the model's beard
     region edge (from the nostril's wing straight to jaw point 0, across the cheekbone); at 0
-    it rises from 6 mm above the mouth corner to jaw point 2 below the sideburn, where most
-    men's cheek line runs. Returns the polyline's |x| (increasing) and z."""
+    the moustache keeps the nostrils' height out to the mouth corner, and the line rises from
+    6 mm above the corner, 6 mm further out, to jaw point 2 below the sideburn, where most men's
+    cheek line runs. Returns the polyline's |x| (increasing) and z."""
     lm = np.asarray(lm, np.float64)
     r = float(np.clip(reach, 0.0, 1.0))
     x31 = 0.5 * abs(lm[35, 0] - lm[31, 0])
@@ -185,13 +186,15 @@ def cheek_line(lm: np.ndarray, reach: float = 1.0) -> tuple[np.ndarray, np.ndarr
     z33, z31 = lm[33, 2], 0.5 * (lm[31, 2] + lm[35, 2])
     high = lambda x: np.interp(x, [0.0, x31, x0], [z33, z31, z0])  # noqa: E731 (the region's own line)
     half_w = 0.5 * abs(lm[54, 0] - lm[48, 0])
-    xa = max(half_w + 0.006, x31 + 0.003)
+    xm = max(half_w, x31 + 0.002)  # the moustache keeps its height out to the mouth corner
+    xa = xm + 0.006
     xb = max(x0 - SIDEBURN_WIDTH_M, xa + 0.005)
     za_low = min(0.5 * (lm[48, 2] + lm[54, 2]) + 0.006, z31)
     zb_low = min(0.5 * (lm[2, 2] + lm[14, 2]), float(high(xb)))
+    zm = (1 - r) * min(z31, float(high(xm))) + r * float(high(xm))
     za = (1 - r) * za_low + r * float(high(xa))
     zb = (1 - r) * zb_low + r * float(high(xb))
-    return np.array([0.0, x31, xa, xb, max(x0, xb + 0.005)]), np.array([z33, z31, za, zb, z0])
+    return np.array([0.0, x31, xm, xa, xb, max(x0, xb + 0.005)]), np.array([z33, z31, zm, za, zb, z0])
 
 
 def below_cheek_line(P: np.ndarray, lm: np.ndarray, reach: float = 1.0, fade: float = CHEEK_FADE_M) -> np.ndarray:
