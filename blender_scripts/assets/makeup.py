@@ -3,7 +3,8 @@
 Masks are computed per vertex with numpy from the head regions and ibug68 landmarks
 (:func:`synth.assets.fit.masks.makeup_masks`) and written to the head mesh as two point
 colour attributes (``makeup_mask``: lips, eyeshadow, eyeliner, blush; ``makeup_mask2``:
-foundation, eyeliner wing), read back in the skin material by Attribute nodes and mixed over the skin's base colour / roughness / coat.
+foundation, eyeliner wing envelope; the wing's line is drawn per shading point from two vector
+attributes ``makeup_wing_r`` / ``makeup_wing_l``), read back in the skin material by Attribute nodes and mixed over the skin's base colour / roughness / coat.
 Looks: ``light_foundation``, ``lipstick`` (with gloss), ``eyeliner`` (optional wing),
 ``eyeshadow`` (with shimmer), ``blush``, ``full_look`` (lips + shadow + liner + blush).
 """
@@ -14,7 +15,7 @@ import numpy as np
 
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
-from synth.assets.fit.masks import makeup_masks
+from synth.assets.fit.masks import WING_EDGE_M, WING_TIP_M, makeup_masks, wing_coordinates, wing_width
 from synth.dataset.segmentation import CLASSES
 
 LIP_COLOURS = {"red": (0.42, 0.02, 0.03), "nude": (0.42, 0.2, 0.15), "pink": (0.6, 0.16, 0.25),
@@ -30,6 +31,28 @@ def _choose(v, table, rng):
         return v
     keys = sorted(table)
     return keys[int(rng.integers(len(keys)))]
+
+
+def _wing_line(ctx, mat, envelope, liner: float):
+    """The eyeliner wings drawn per shading point (synth.assets.fit.masks.wing_line, the same
+    formula) from the affine wing coordinates written per vertex, inside their per-vertex
+    envelope: a line 1-2 mm wide is far thinner than the head's triangles there."""
+    m = bmat.math_node
+    L = float(np.linalg.norm(WING_TIP_M))
+    hw0 = wing_width(liner)
+    lines = []
+    for name, uv in zip(("makeup_wing_r", "makeup_wing_l"), wing_coordinates(ctx.vertices, ctx.landmarks["ibug68"])):
+        bmat.write_point_vector(ctx.head.data, name, uv)
+        sep = mat.node_tree.nodes.new("ShaderNodeSeparateXYZ")
+        mat.node_tree.links.new(bmat.attribute(mat, name).outputs["Vector"], sep.inputs[0])
+        u, v = sep.outputs["X"], sep.outputs["Y"]
+        along = m(mat, "MULTIPLY", m(mat, "MAXIMUM", m(mat, "MAXIMUM", m(mat, "MULTIPLY", u, -1.0),
+                                                      m(mat, "SUBTRACT", u, 1.0)), 0.0), L)
+        d = m(mat, "SQRT", m(mat, "ADD", m(mat, "MULTIPLY", along, along), m(mat, "MULTIPLY", v, v)))
+        hw = m(mat, "MULTIPLY", m(mat, "SUBTRACT", 1.0, m(mat, "MULTIPLY", m(mat, "MINIMUM", m(mat, "MAXIMUM", u, 0.0),
+                                                                               1.0), 0.75)), hw0)
+        lines.append(m(mat, "DIVIDE", m(mat, "SUBTRACT", m(mat, "ADD", hw, WING_EDGE_M), d), WING_EDGE_M, clamp=True))
+    return m(mat, "MULTIPLY", m(mat, "MAXIMUM", lines[0], lines[1]), envelope)
 
 
 def build(ctx, entry: dict) -> Rig:
@@ -99,6 +122,8 @@ def build(ctx, entry: dict) -> Rig:
         bmat.layer_over(mat, "Metallic", 0.35 * shimmer, f)
         rec.update(eyeshadow_colour=sh_col, extent=round(extent, 4), shimmer=round(shimmer, 4))
     if layers["liner"] > 0:
+        if wing:
+            liner_m = bmat.math_node(mat, "MAXIMUM", liner_m, _wing_line(ctx, mat, sep2.outputs[1], thick))
         bmat.layer_over(mat, "Base Color", LINER, bmat.math_node(mat, "MULTIPLY", liner_m, 0.95))
         rec.update(eyeliner_thickness=round(thick, 4), wing=wing)
     if layers["lips"] > 0:

@@ -189,3 +189,43 @@ def test_eye_coordinates_without_iris_regions():
     del data.regions["eye_r"]
     out, info = eye_coordinates(data, V)
     assert set(info) == {"l"}
+
+
+@pytest.mark.parametrize("liner", [0.3, 1.0])
+def test_eyeliner_wing_is_a_line_not_blobs(head, liner):
+    """The wing is drawn per shading point from affine coordinates (masks.wing_coordinates,
+    wing_line) inside a per-vertex envelope: on points sampled over the skin's triangles it is
+    a continuous band along its axis and nothing beside it. Drawn per vertex as before (the skin's
+    vertices are 2-6 mm apart there), the same wing had gaps along its axis and smudges
+    millimetres beside it: the dark dot at the tip of the production sheet's winged liner."""
+    from synth.assets.fit.masks import (WING_EDGE_M, WING_TIP_M, wing_coordinates, wing_line, wing_width)
+
+    data, V, lm = head
+    T = np.asarray(data.triangles)
+    _, m2 = makeup_masks(data, V, lm, liner=liner, wing=True)
+    rng = np.random.default_rng(0)
+    for uv, corner in zip(wing_coordinates(V, lm), (lm[36], lm[45])):
+        face = region_mask(data.regions, ["face"], len(V))
+        tris = T[(np.linalg.norm(V[T] - corner, axis=2) < 0.015).any(1) & face[T].all(1)]
+        b = rng.dirichlet(np.ones(3), size=(len(tris), 400))
+        interp = lambda f: np.einsum("tsk,tk...->ts...", b, f[tris]).reshape(-1, *f.shape[1:])  # noqa: E731
+        P, q, env = interp(V), interp(uv), interp(m2[:, 1])
+        u, v = q[:, 0], q[:, 1]
+        line = wing_line(u, v, liner) * env
+        tip = corner + np.array([np.sign(corner[0] - 0.5 * (lm[36, 0] + lm[45, 0])), 1, 1]) * WING_TIP_M
+        t = (tip - corner) / np.linalg.norm(tip - corner)
+        # seen along the wing's depth axis (toward the viewer), the frontmost skin on its axis: the
+        # lids' folds put other sheets of skin under the wing too, and the envelope keeps it off them
+        depth = (P - corner) @ np.cross(t, np.cross([0.0, -1.0, 0.0], t) / np.linalg.norm(np.cross([0.0, -1.0, 0.0], t)))
+        hw = wing_width(liner) * (1 - 0.75 * np.clip(u, 0, 1))
+        axis = np.abs(v) < 0.3 * hw
+        front = []
+        for k in range(10):
+            s = np.flatnonzero(axis & (u >= k / 10) & (u < (k + 1) / 10))
+            assert len(s) > 0, k  # samples all along the wing
+            front.append(s[np.argmax(depth[s])])
+        assert line[front].min() > 0.99, line[front]
+        assert line[np.abs(v) > hw + WING_EDGE_M].max() == 0.0
+        # the old per-vertex line, interpolated the same way: gaps on the axis or smudges beside it
+        old = interp(feather(segment_distance(V, corner, tip), 0.0005 * (1 + liner), 0.0015))
+        assert old[front].min() < 0.5 or old[np.abs(v) > 0.002].max() > 0.5

@@ -24,17 +24,18 @@ def _ids(cls):
 W = H = 64
 
 
-def _render(ctx, tmp):
+def _render(ctx, tmp, target=None, radius: float = 0.3, fov_deg: float = 30.0):
     from blender_scripts import camera, passes, scene
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
 
     scene.configure_render({"samples": 4, "denoise": False, "device": "cpu", "max_bounces": 4}, W, H)
     scene.uniform_environment(1.0)
     lm = ctx.landmarks["ibug68"]
-    target = 0.5 * (lm[39] + lm[42]) + np.array([0.0, 0.0, -0.025])
+    if target is None:
+        target = 0.5 * (lm[39] + lm[42]) + np.array([0.0, 0.0, -0.025])
     cam = camera.make_camera()
-    w2c = invert_rigid(orbit_camera_to_world(0.0, 0.0, 0.3, target))
-    K = intrinsics(W, H, 30.0, (0.0, 0.0))
+    w2c = invert_rigid(orbit_camera_to_world(0.0, 0.0, radius, target))
+    K = intrinsics(W, H, fov_deg, (0.0, 0.0))
     camera.set_camera(cam, K, w2c, W, H, 0.05, 10.0)
     r = passes.render_view(tmp, 3)
     return r, K, w2c
@@ -112,6 +113,41 @@ def test_glasses_render_with_segmentation_id(renders):
     assert (base["segmentation"] == 10).sum() == 0
     assert np.isfinite(gl["rgba"]).all()
     assert rigs["glasses"].record()["nose_gap_m"] < 0.002
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_eyeliner_wing_renders_as_a_thin_band(tmp_path):
+    """A close-up of the right eye's outer corner (0.33 mm a pixel) with a winged eyeliner: the
+    wing darkens a band along its segment, a few pixels wide and continuous, and nothing 3 mm or
+    more beside it (drawn per vertex, it was a row of blobs ending in a dot)."""
+    pytest.importorskip("bpy")
+    from blender_scripts import assets as basset
+    from synth.assets.fit.masks import WING_TIP_M, wing_width
+    from synth.conventions import project
+
+    ctx, hm = asset_scene.head_context("neutral")
+    corner = ctx.landmarks["ibug68"][36]
+    tip = corner + np.array([-1.0, 1.0, 1.0]) * WING_TIP_M
+    view = dict(target=0.5 * (corner + tip), radius=0.2, fov_deg=6.0)
+    base, K, w2c = _render(ctx, tmp_path, **view)
+    basset.dress(ctx, {"makeup": {"id": "eyeliner", "params": {"thickness": 1.0, "wing": True}}})
+    wing, _, _ = _render(ctx, tmp_path, **view)
+    dark = (base["rgba"][..., :3].mean(-1) - wing["rgba"][..., :3].mean(-1)) > 0.08
+    along = np.linspace(0.2, 0.9, 15)
+    uv, _ = project(K, w2c, corner + along[:, None] * (tip - corner))
+    px = (1.0 / (2 * 0.2 * np.tan(np.radians(3.0)) / W))  # pixels per metre at the target
+    on = dark[np.floor(uv[:, 1]).astype(int), np.floor(uv[:, 0]).astype(int)]
+    assert on.all(), on  # continuous along the wing
+    # nothing beyond the wing's half width + 3 mm, in the frame's half beyond the eye corner
+    yy, xx = np.mgrid[0:H, 0:W] + 0.5
+    a, b = uv[0], uv[-1]
+    d_axis = np.abs((xx - a[0]) * (b[1] - a[1]) - (yy - a[1]) * (b[0] - a[0])) / np.linalg.norm(b - a)
+    beyond = (xx - a[0]) * (b[0] - a[0]) + (yy - a[1]) * (b[1] - a[1]) > 0  # past the corner's perpendicular
+    far = beyond & (d_axis > (wing_width(1.0) + 0.003) * px)
+    assert far.sum() > 200 and not dark[far].any(), int(dark[far].sum())
+    near = dark & beyond & (d_axis <= (wing_width(1.0) + 0.003) * px)
+    assert 10 <= near.sum() <= 2.0 * np.linalg.norm(b - a) * 2 * wing_width(1.0) * px + 20, int(near.sum())
 
 
 @pytest.mark.blender

@@ -78,22 +78,72 @@ def makeup_masks(data, V: np.ndarray, lm: np.ndarray, extent: float = 0.6, liner
         dl = np.min([segment_distance(V, line[i], line[i + 1]) for i in range(3)], axis=0)
         eyeliner = np.maximum(eyeliner, feather(dl, 0.0004 + 0.0008 * liner, 0.0012 + 0.0012 * liner)
                               * (V[:, 2] > z_lid - 0.0025) * front)
-        if wing:
+        if wing:  # the envelope of the wing; the line itself is drawn in the shader (wing_coordinates)
             corner = lm[outer_i]
-            tip = corner + np.array([sign * 0.007, 0.002, 0.0035])
-            wingm = np.maximum(wingm, feather(segment_distance(V, corner, tip), 0.0005 * (1 + liner), 0.0015)
-                               * front)
+            tip = corner + np.array([sign, 1.0, 1.0]) * WING_TIP_M
+            wingm = np.maximum(wingm, feather(segment_distance(V, corner, tip), WING_ENVELOPE_M[0],
+                                              WING_ENVELOPE_M[1]) * front)
         # blush: on the cheek apple, below and outside the eye
         cheek = c + np.array([sign * 0.008, -0.002, -0.03])
         blush = np.maximum(blush, feather(np.linalg.norm(V - cheek, axis=1), 0.006, 0.022))
     shadow *= skin * (1 - lips)
-    eyeliner = np.maximum(eyeliner, wingm) * skin
+    eyeliner = eyeliner * skin
+    wingm = wingm * skin
     blush *= skin * (1 - lips)
     face = region_mask(data.regions, ("face",), n).astype(float)
     face = np.maximum(face, feather(distance_to(V, V[face > 0]), 0.0, 0.01)) if face.any() else np.ones(n)
     m1 = np.stack([lips, shadow, eyeliner, blush], 1)
     m2 = np.stack([face * skin, wingm, np.zeros(n), np.zeros(n)], 1)
     return np.clip(m1, 0, 1), np.clip(m2, 0, 1)
+
+
+#: an eyeliner wing runs from the outer eye corner this far out (x, away from the nose), back (y)
+#: and up (z), metres
+WING_TIP_M = np.array([0.007, 0.002, 0.0035])
+#: the wing's envelope (makeup_masks' second attribute, channel 1): 1 within the first distance of
+#: the wing's segment, 0 beyond the second (m). The line itself is drawn per shading point
+#: (:func:`wing_line`): drawn per vertex (2 mm apart at the eye corner, 6 mm further out), a
+#: 1-2 mm wide line came out as blobs, a dark dot at its tip.
+WING_ENVELOPE_M = (0.003, 0.005)
+
+
+def wing_coordinates(V: np.ndarray, lm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(V, 3) per eye (right: ibug 36, left: 45): (u, v, 0) with u the position along the wing
+    (0 at the eye corner, 1 at its tip) and v the signed distance from its axis across it (m,
+    perpendicular to the wing and to the view from the front). Both are affine in the position,
+    so their linear interpolation over a triangle is exact at every shading point."""
+    V = np.asarray(V, np.float64)
+    out = []
+    for outer_i, sign in ((36, -1.0), (45, 1.0)):
+        corner = np.asarray(lm[outer_i], np.float64)
+        t = np.array([sign, 1.0, 1.0]) * WING_TIP_M
+        L = float(np.linalg.norm(t))
+        t = t / L
+        b = np.cross(np.array([0.0, -1.0, 0.0]), t)
+        b /= np.linalg.norm(b)
+        rel = V - corner
+        out.append(np.stack([rel @ t / L, rel @ b, np.zeros(len(V))], 1))
+    return out[0], out[1]
+
+
+def wing_width(liner: float) -> float:
+    """Half width (m) of the wing at the eye corner; it tapers to a quarter at the tip."""
+    return 0.0004 + 0.0006 * float(liner)
+
+
+#: the wing's edge: its coverage falls from 1 to 0 over this distance (m)
+WING_EDGE_M = 0.0002
+
+
+def wing_line(u, v, liner: float):
+    """The wing's coverage from :func:`wing_coordinates` (numpy; the makeup rig builds the same
+    formula from shader nodes): 1 within the tapering half width of the segment, 0 beyond it
+    plus :data:`WING_EDGE_M`."""
+    L = float(np.linalg.norm(WING_TIP_M))
+    along = np.maximum(np.maximum(-u, u - 1.0), 0.0) * L
+    d = np.sqrt(along * along + v * v)
+    hw = wing_width(liner) * (1.0 - 0.75 * np.clip(u, 0.0, 1.0))
+    return np.clip((hw + WING_EDGE_M - d) / WING_EDGE_M, 0.0, 1.0)
 
 
 def skin_detail_mask(data, V, lm, reach: float | None = None) -> np.ndarray:
