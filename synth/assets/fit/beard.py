@@ -146,9 +146,8 @@ def groom(ctx, entry) -> Groom:
             out = np.clip((np.abs(p[:, 0] - x_c) - half_w) / 0.01, 0.0, 1.0)[:, None]
             mo = mo * 1.5 + out * 1.8 * UP[None]
         if long:
-            # straight down from the start, not only along the skin: under the chin the skin's
-            # downward tangent turns back toward the neck, and the chin's hair followed it there
-            # (the chin bare from the front, the beard's middle a dark gap over the neck)
+            # from the root on, part straight down and part along the skin (LONG_FALL; before
+            # 2026-12-01 along the skin only for the first 2 cm)
             f = LONG_FALL
             d = (1.0 - f) * normalize(tdown + 1e-9) + (0.35 - 0.2 * f) * nrm + (
                 f + 0.8 * np.clip(s / 0.02, 0, 1))[:, None] * DOWN[None]
