@@ -23,8 +23,8 @@ MIN_PARTIAL_STRANDS = 24
 PARTIAL_DENSITY = {"goatee": 2.0, "moustache": 2.0}
 
 
-#: a long beard's strands leave the skin along its normal over this arc length (m); at 1 cm
-#: they stood off the chin toward the camera and left it bare between their roots
+#: a long beard's strands leave the skin along its normal over this arc length (m; 0.01 before
+#: 2026-12-01, when the beard stood off the face as a curtain)
 LONG_LIFT_M = 0.004
 #: a long beard's largest clearance from the skin (m; 0.01 before 2026-12-01)
 LONG_LAYER_M = 0.008
