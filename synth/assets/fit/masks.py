@@ -224,7 +224,7 @@ def cheek_line(lm: np.ndarray, reach: float = 1.0) -> tuple[np.ndarray, np.ndarr
     the upper lip up to the subnasale, the moustache's outer end beside the mouth corner, the
     cheek, and the sideburn's front edge up to jaw point 0 at the ear.
 
-    ``reach`` (0..1) is how high the line runs over the cheek: at 1 it is the model's beard
+    ``reach`` (0..1) is how high the line runs over the cheek: at 1 it follows the model's beard
     region edge (from the nostril's wing straight to jaw point 0, across the cheekbone); at 0
     the moustache keeps the nostrils' height out to the mouth corner, and the line rises from
     6 mm above the corner, 6 mm further out, to jaw point 2 below the sideburn, where most men's
