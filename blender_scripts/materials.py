@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import bpy
 
+from synth.appearance.teeth import TOOTH_ALBEDO
 from synth.dataset.segmentation import CLASSES
 
 
@@ -128,11 +129,12 @@ def skin_material(albedo, params: dict | None = None, pixel_m: float | None = No
 
 
 #: the plain Principled materials of the head (name, class, inputs): a sclera-white eye under a
-#: glossy cornea-like coat (the iris rig paints the iris), teeth and the mouth cavity
+#: glossy cornea-like coat (the iris rig paints the iris), teeth (measured enamel colour,
+#: synth.appearance.teeth) and the mouth cavity
 PLAIN_MATERIALS = (
     ("eye", "eyes", {"Base Color": (0.8, 0.78, 0.75, 1.0), "Roughness": 0.25, "Coat Weight": 1.0,
                      "Coat Roughness": 0.02, "Coat IOR": 1.376}),
-    ("teeth", "teeth", {"Base Color": (0.85, 0.82, 0.72, 1.0), "Roughness": 0.3, "Subsurface Weight": 0.3,
+    ("teeth", "teeth", {"Base Color": (*TOOTH_ALBEDO, 1.0), "Roughness": 0.3, "Subsurface Weight": 0.3,
                         "Subsurface Scale": 0.002}),
     ("mouth_interior", "mouth_interior", {"Base Color": (0.35, 0.06, 0.07, 1.0), "Roughness": 0.35,
                                           "Subsurface Weight": 0.5, "Subsurface Scale": 0.003}),

@@ -137,6 +137,16 @@ def cielab(linear_srgb) -> np.ndarray:
                     axis=-1)
 
 
+def linear_srgb_from_cielab(lab) -> np.ndarray:
+    """(..., 3) linear sRGB of CIELAB (D65 white) colours (..., 3): the inverse of :func:`cielab`."""
+    lab = np.asarray(lab, np.float64)
+    fy = (lab[..., 0] + 16.0) / 116.0
+    f = np.stack([fy + lab[..., 1] / 500.0, fy, fy - lab[..., 2] / 200.0], axis=-1)
+    eps, kappa = 216.0 / 24389.0, 24389.0 / 27.0
+    xyz = np.where(f ** 3 > eps, f ** 3, (116.0 * f - 16.0) / kappa) * _D65_XYZ
+    return xyz @ np.linalg.inv(_SRGB_TO_XYZ).T
+
+
 def individual_typology_angle(linear_srgb) -> np.ndarray:
     """The Individual Typology Angle (degrees) of linear sRGB colours (..., 3):
     ``ITA = arctan((L* - 50) / b*)`` in CIELAB under D65 (the dermatology scale of Chardon et
