@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/realism.py skin [--identities 200 --seed 0] [--frames DATASET ...]
     .venv/bin/python benchmarks/realism.py framing DATASET [DATASET ...]
+    .venv/bin/python benchmarks/realism.py body-end DATASET [DATASET ...]
     .venv/bin/python benchmarks/realism.py hair [--identities 12 --seed 0]
     .venv/bin/python benchmarks/realism.py hats [--identities 3 --seed 0 --resolution 256]
     .venv/bin/python benchmarks/realism.py judge DATASET --mp-python MPENV/bin/python [--max-azimuth 45]
@@ -18,6 +19,10 @@ framing: the fraction of frames in which head classes touch the left, right or t
   border: eyes, mouth, teeth, hair, beard, brows, lashes, glasses, headwear anywhere on those
   borders, or skin on the top row or on the side columns above the chin (ibug68 point 8; skin
   below it is neck and bust).
+body-end: the fraction of frames in which the body ends inside the image: no skin or clothing
+  pixel on the bottom row while the frame shows skin or clothing (the bust's lower end floating
+  in the frame; a portrait's body leaves through the bottom border), overall and by camera
+  elevation.
 hair: strands in front of the inner face (synth.assets.fit.occlusion) for the planned hair of
   identities that have hair, seen from cameras at azimuth 0, +-30, +-45 (elevation 0).
 hats: hair under a beanie or cap, groomed without and with the hat: strands, share of hair points
@@ -134,6 +139,38 @@ def touches_border(seg: np.ndarray, chin_y: float) -> bool:
         return True
     above = slice(0, int(np.clip(np.floor(chin_y), 0, seg.shape[0])))
     return bool((left[above] == 1).any() or (right[above] == 1).any())
+
+
+BODY = (1, 9)  # skin (neck, bust) and clothing
+ELEVATION_BANDS = ((-90.0, -15.0), (-15.0, 15.0), (15.0, 45.0), (45.0, 90.0))
+
+
+def body_ends_in_frame(seg: np.ndarray) -> bool:
+    """The body (skin, clothing) is in the frame but does not reach its bottom row."""
+    body = np.isin(seg, BODY)
+    return bool(body.any() and not body[-1].any())
+
+
+def body_end(args) -> dict:
+    from synth.dataset.reader import iter_frames
+
+    out = {}
+    bands = " | ".join(f"elevation {a:+.0f} to {b:+.0f}" for a, b in ELEVATION_BANDS)
+    print(f"\n| dataset | frames | body ends in the frame | {bands} |")
+    print("|---|---:|---:|" + "---:|" * len(ELEVATION_BANDS))
+    for src in args.datasets:
+        rows = [(body_ends_in_frame(fr.segmentation), float(fr.meta["camera"]["elevation_deg"]))
+                for fr in iter_frames(src)]
+        flags = np.array([r[0] for r in rows], bool)
+        el = np.array([r[1] for r in rows])
+        cells, per = [], {}
+        for a, b in ELEVATION_BANDS:
+            m = (el >= a) & (el < b) if b < 90 else (el >= a)
+            per[f"{a:+.0f}..{b:+.0f}"] = [int(flags[m].sum()), int(m.sum())]
+            cells.append(f"{flags[m].sum()}/{m.sum()}")
+        out[src] = {"frames": len(flags), "ends_in_frame": int(flags.sum()), "by_elevation": per}
+        print(f"| {src} | {len(flags)} | {flags.sum()} ({flags.mean():.0%}) | " + " | ".join(cells) + " |")
+    return out
 
 
 def framing(args) -> dict:
@@ -457,6 +494,8 @@ def main(argv=None) -> None:
     p.add_argument("--frames", nargs="*", default=[])
     p = sub.add_parser("framing")
     p.add_argument("datasets", nargs="+")
+    p = sub.add_parser("body-end")
+    p.add_argument("datasets", nargs="+")
     p = sub.add_parser("hats")
     p.add_argument("--identities", type=int, default=3)
     p.add_argument("--seed", type=int, default=0)
@@ -501,7 +540,7 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     from realism_judge import judge, mapping_table
 
-    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "hair": hair, "drape": drape_table, "beard": beard_table, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
+    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "body-end": body_end, "hair": hair, "drape": drape_table, "beard": beard_table, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
            "sheet": sheet}[args.cmd](args)
     if args.json:
         Path(args.json).write_text(json.dumps(res))

@@ -15,6 +15,7 @@ from synth.assets.classes import CLASSES
 from synth.assets.fit.body import Body, Cloth, FittedShell, fit_shell
 from synth.assets.fit.garment import CLEARANCE, FABRICS, colour_rgb, garment_shell
 from synth.assets.fit.hem import hidden_polygons
+from synth.assets.fit import torso as torso_fit
 
 
 def cloth_material(cls: str, cloth: Cloth):
@@ -111,20 +112,50 @@ class FittedRig(Rig):
     def __init__(self, ob, fitted: FittedShell):
         super().__init__(fitted.cls, [ob], fitted.info)
         self.fitted = fitted
+        self.torso = None  # (rest vertices, hem band indices) of the body below the bust
 
     def update(self, ctx: HeadContext) -> None:
         from blender_scripts.mesh import set_positions
 
-        set_positions(self.objects[0], self.fitted.follow(ctx.vertices, ctx.data.triangles))
+        P = self.fitted.follow(ctx.vertices, ctx.data.triangles)
+        set_positions(self.objects[0], P)
+        if self.torso is not None:
+            Vt, band = self.torso
+            set_positions(self.objects[1], torso_fit.follow(Vt, self.fitted.P[band], P[band]))
 
 
-def shell_rig(fitted: FittedShell) -> FittedRig:
-    """The mesh object of a fitted shell, with one cloth material per slot."""
+def see_through_from_inside(mat):
+    """The material, transparent on back faces: a camera inside a closed mesh (the torso under
+    the bust, seen from far below with ``camera.elevation_deg`` under about -75 degrees) sees out
+    of it, and fully transparent hits stay out of the data passes."""
+    nt = mat.node_tree
+    out = nt.nodes["Material Output"]
+    link = out.inputs["Surface"].links[0]
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    nt.links.new(nt.nodes.new("ShaderNodeNewGeometry").outputs["Backfacing"], mix.inputs["Fac"])
+    nt.links.new(link.from_socket, mix.inputs[1])
+    nt.links.new(nt.nodes.new("ShaderNodeBsdfTransparent").outputs[0], mix.inputs[2])
+    nt.links.new(mix.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def shell_rig(fitted: FittedShell, torso: bool = False) -> FittedRig:
+    """The mesh object of a fitted shell, with one cloth material per slot; ``torso``: and the
+    body below the bust in the first cloth (:func:`synth.assets.fit.torso.torso_continuation`),
+    a second object that follows the garment's hem band."""
     from blender_scripts.mesh import link_object, new_triangle_mesh
 
     materials = [cloth_material(fitted.cls, c) for c in fitted.cloths]
     ob = link_object(fitted.name, new_triangle_mesh(fitted.name, fitted.P, fitted.F, fitted.M), materials)
-    return FittedRig(ob, fitted)
+    rig = FittedRig(ob, fitted)
+    if torso:
+        Vt, Ft = torso_fit.garment_torso(fitted)
+        name = f"{fitted.name}_torso"
+        mat = see_through_from_inside(cloth_material(fitted.cls, fitted.cloths[0]))
+        rig.objects.append(link_object(name, new_triangle_mesh(name, Vt, Ft), [mat]))
+        rig.torso = (Vt, torso_fit.hem_band(fitted))
+        rig.info["torso_vertices"] = int(len(Vt))
+    return rig
 
 
 def hide_bust_under_hem(head, body: Body) -> int:
@@ -161,6 +192,6 @@ def hide_bust_under_hem(head, body: Body) -> int:
 
 def build(ctx: HeadContext, entry: dict) -> Rig:
     body = Body.of(ctx)
-    rig = shell_rig(fit_shell(body, garment_shell(body, entry, ctx.rng("garment")), CLEARANCE))
+    rig = shell_rig(fit_shell(body, garment_shell(body, entry, ctx.rng("garment")), CLEARANCE), torso=True)
     rig.info["hidden_bust_polygons"] = hide_bust_under_hem(ctx.head, body)
     return rig

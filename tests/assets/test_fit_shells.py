@@ -343,3 +343,71 @@ def test_rims_cover_the_fitted_necklines(fitted_garments):
             worst[aid] = max(worst.get(aid, -1.0), gap)
             assert gap <= 0.0, (case, stage, aid, gap)
     print("\nworst neckline distance outside its rim (mm):", {k: round(1000 * g, 2) for k, g in worst.items()})
+
+
+@pytest.mark.slow
+def test_torso_continues_every_garment_below_its_hem(fitted_garments):
+    """The body below the bust (synth.assets.fit.torso): for every garment on the hard cases, a
+    closed, outward-facing prism that runs LENGTH below the garment's lowest point, starts inside
+    the garment (its top above the garment's lowest point at every angle, tucked in) and follows
+    its section (the wall within a few mm inside the garment's lowest vertices at most angles of
+    the torso, and no notch in its section).
+    The prism moves with the mean motion of the garment's hem band, which must move rigidly (to
+    less than the wall's inset) after an expression change."""
+    from synth.assets.fit import torso
+
+    builds = {}
+    for case, stage, aid, v, s in fitted_garments:
+        if stage == "build":
+            builds[(aid, id(s))] = v
+            V, F = torso.garment_torso(s)
+            assert np.isfinite(V).all()
+            tm = trimesh.Trimesh(V, F)  # merged: the caps' own rims join the wall
+            assert tm.is_watertight and tm.is_winding_consistent and tm.volume > 0, (case, aid)
+            Q = v[torso.torso_shell_vertices(s)]
+            assert V[:, 2].min() <= Q[:, 2].min() - torso.LENGTH + 1e-9, (case, aid)
+            c, r, zmin = torso.section(Q)
+            n = torso.ANGLES
+            m = len(F) and torso.RINGS + 1
+            top, wall = V[np.arange(n) * m], V[np.arange(n) * m + 1]
+            # its top above the garment's lowest point at that angle, its wall below it
+            assert (top[:, 2] > zmin + 0.5 * torso.OVERLAP).all() and (wall[:, 2] < zmin).all(), (case, aid)
+            # the wall's section: the garment's own (its lowest 5 mm per angle) less a few mm
+            d = Q[:, :2] - c
+            b = np.floor((np.arctan2(d[:, 1], d[:, 0]) + np.pi) / (2 * np.pi) * n).astype(int) % n
+            zl = np.full(n, np.inf)
+            np.minimum.at(zl, b, Q[:, 2])
+            near = Q[:, 2] <= zl[b] + 0.005
+            rg = np.full(n, -np.inf)
+            np.maximum.at(rg, b[near], np.linalg.norm(d[near], axis=1))
+            torso_bins = np.isfinite(rg) & (zmin <= Q[:, 2].min() + torso.STUMP_RISE)  # not the arm stumps
+            step = (rg - np.linalg.norm(wall[:, :2] - c, axis=1))[torso_bins]
+            assert np.median(step) == pytest.approx(torso.INSET, abs=0.0015), (case, aid, np.median(step))
+            assert np.mean(np.abs(step - torso.INSET) < 0.005) > 0.75, (case, aid, np.percentile(step, [5, 95]))
+            # nowhere a notch: no point of the wall's section lies more than 1.5 cm inside the
+            # chord between the points 4 bins (15 degrees) to either side
+            W2 = wall[:, :2] - c
+            A, B = np.roll(W2, 4, 0), np.roll(W2, -4, 0)
+            e = B - A
+            side = (e[:, 0] * (W2 - A)[:, 1] - e[:, 1] * (W2 - A)[:, 0]) / np.linalg.norm(e, axis=1)
+            ccw = np.sign(np.sum(W2[:, 0] * np.roll(W2, -1, 0)[:, 1] - W2[:, 1] * np.roll(W2, -1, 0)[:, 0]))
+            dent = ccw * side  # > 0: inside the chord
+            assert dent.max() < 0.015, (case, aid, dent.max())
+        else:
+            # the torso follows the hem band's mean motion; the band moves (nearly) rigidly
+            band = torso.hem_band(s)
+            V0, _ = torso.garment_torso(s)
+            moved = torso.follow(V0, s.P[band], v[band])
+            shift = (moved - V0)[0]
+            # what the mean leaves (2.3 mm: the +3 SD hoodie, bound to the head, with the jaw open)
+            # must stay under the wall's inset, or the hem would leave the torso's wall
+            assert np.abs(v[band] - s.P[band] - shift).max() < torso.INSET, (case, aid)
+
+
+def test_torso_rejects_bad_input():
+    from synth.assets.fit import torso
+
+    with pytest.raises(ValueError, match="not finite"):
+        torso.torso_continuation(np.full((10, 3), np.nan))
+    with pytest.raises(ValueError, match="positive"):
+        torso.torso_continuation(np.random.default_rng(0).normal(size=(50, 3)), length=0.0)

@@ -16,6 +16,7 @@ def test_rig_mesh_is_the_fitted_shell():
     from tests.support import asset_scene
     from blender_scripts.assets import garment, headwear
     from synth.assets.fit.body import Body, fit_shell
+    from synth.assets.fit import torso
     from synth.assets.fit.garment import CLEARANCE, garment_shell
 
     ctx, hm = asset_scene.head_context("id-3_brows", resolution=256, identity_index=2, run_seed=5)
@@ -25,13 +26,22 @@ def test_rig_mesh_is_the_fitted_shell():
     want = fit_shell(body, garment_shell(body, entry, ctx.rng("garment")), CLEARANCE)
     got, faces = asset_scene.evaluated_mesh(rig.objects[0])
     assert np.array_equal(got, want.P.astype(np.float32).astype(np.float64)) and np.array_equal(faces, want.F)
+    # the body below the bust (synth.assets.fit.torso): a second object, in the garment's cloth
+    Vt, Ft = torso.garment_torso(want)
+    got_t, faces_t = asset_scene.evaluated_mesh(rig.objects[1])
+    assert np.array_equal(got_t, Vt.astype(np.float32).astype(np.float64)) and np.array_equal(faces_t, Ft)
+    assert rig.objects[1].data.materials[0].pass_index == rig.objects[0].data.materials[0].pass_index
     rec = rig.record()
     assert rec.pop("hidden_bust_polygons") > 0  # the bust under the hem (synth.assets.fit.hem)
+    assert rec.pop("torso_vertices") == len(Vt)
     assert rec == want.info and rec["vertices"] == len(got)
     asset_scene.set_case(ctx, hm, "id-3_jaw")
     rig.update(ctx)
     moved = want.follow(ctx.vertices, ctx.data.triangles)
     assert np.array_equal(asset_scene.evaluated_mesh(rig.objects[0])[0], moved.astype(np.float32).astype(np.float64))
+    band = torso.hem_band(want)
+    moved_t = torso.follow(Vt, want.P[band], moved[band])
+    assert np.allclose(asset_scene.evaluated_mesh(rig.objects[1])[0], moved_t, atol=1e-6)
     h = headwear.build(ctx, {"id": "baseball_cap", "params": {"brim_yaw_deg": 90.0}})
     assert h.cls == "headwear" and len(h.objects) == 1 and h.record()["faces"] > 100
 
