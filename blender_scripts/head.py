@@ -6,6 +6,7 @@ import bpy
 import numpy as np
 
 from blender_scripts.mesh import link_object, new_mesh, set_positions
+from synth.appearance.teeth import arch_attribute
 from synth.dataset.segmentation import polygon_classes
 
 
@@ -25,6 +26,10 @@ def build_head_object(data, vertices: np.ndarray, materials: dict[int, "bpy.type
     slots = sorted(set(cls.tolist()))
     slot_of = {c: i for i, c in enumerate(slots)}
     me = new_mesh(name, vertices, off, idx, np.array([slot_of[c] for c in cls.tolist()], np.int32), corner_uv)
+    arch = arch_attribute(len(vertices), data.regions, vertices)
+    if arch is not None:  # where the teeth's gaps lie (synth.appearance.teeth; the teeth material)
+        attr = me.attributes.new("tooth_arch", "FLOAT", "POINT")
+        attr.data.foreach_set("value", np.ascontiguousarray(arch, np.float32))
     return link_object(name, me, [materials[c] for c in slots])
 
 

@@ -41,3 +41,46 @@ def test_teeth_material_uses_the_measured_colour():
 
     bsdf = bmat.principled(mats[CLASSES["teeth"]])
     np.testing.assert_allclose(tuple(bsdf.inputs["Base Color"].default_value)[:3], TOOTH_ALBEDO, atol=1e-6)
+
+
+@pytest.mark.parametrize("sd", [0.0, 3.0, -3.0])
+def test_arch_coordinate_puts_the_gaps_along_the_arch(default_head, sd):
+    """Per jaw: 0 on the midline, mirror vertices get opposite values, the value grows along the
+    arch from the midline to the last molar (7 teeth a side: its end at +-7), for the mean head
+    and +-3 SD identities."""
+    from synth.appearance.teeth import CROWN_WIDTHS_MM, arch_attribute, arch_coordinate
+
+    hm = default_head
+    d = hm.data
+    beta = sd * np.where(np.arange(d.identity_dims) % 2 == 0, 1.0, -1.0)
+    V = hm.evaluate(beta, np.zeros(d.expression_dims), np.zeros((hm.J, 3))).vertices[0].astype(np.float64)
+    for name, jaw in (("teeth_upper", "upper"), ("teeth_lower", "lower")):
+        idx = np.asarray(d.regions[name])
+        P = V[idx]
+        u = arch_coordinate(P, jaw)
+        assert np.isfinite(u).all()
+        n_teeth = len(CROWN_WIDTHS_MM[jaw])
+        assert np.abs(u).max() == pytest.approx(n_teeth, abs=1e-9) and np.abs(u).max() <= n_teeth
+        assert np.all(np.abs(u[np.abs(P[:, 0]) < 1e-6]) < 1e-6)  # the midline
+        # mirror partners (x -> -x) get opposite values
+        mirror = np.array([np.argmin(np.linalg.norm(P - p * [-1, 1, 1], axis=1)) for p in P])
+        close = np.linalg.norm(P[mirror] - P * [-1, 1, 1], axis=1) < 1e-5
+        assert close.mean() > 0.9
+        np.testing.assert_allclose(u[mirror[close]], -u[close], atol=0.05)
+        # along the arch: ordered by the angle around the arch's back midpoint, the value grows
+        c = np.array([0.5 * (P[:, 0].min() + P[:, 0].max()), P[:, 1].max()])
+        th = np.arctan2(P[:, 0] - c[0], -(P[:, 1] - c[1]))
+        assert np.all(np.diff(u[np.argsort(th, kind="stable")]) >= -1e-9)
+    arch = arch_attribute(len(V), d.regions, V)
+    assert arch.shape == (len(V),) and np.isfinite(arch).all()
+    assert np.all(arch[np.setdiff1d(np.arange(len(V)), d.regions["teeth"])] == 0.5)
+
+
+def test_arch_coordinate_rejects_bad_input():
+    from synth.appearance.teeth import arch_attribute, arch_coordinate
+
+    with pytest.raises(ValueError, match="8 finite"):
+        arch_coordinate(np.zeros((4, 3)))
+    with pytest.raises(ValueError, match="8 finite"):
+        arch_coordinate(np.full((20, 3), np.nan))
+    assert arch_attribute(10, {"teeth": np.arange(3)}, np.zeros((10, 3))) is None

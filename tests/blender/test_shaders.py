@@ -181,3 +181,41 @@ def test_every_shader_layer_id_builds(tmp_path):
         shadow[colour] = sd.build(ctx2, {"id": "procedural_skin", "params": {}}).record()["stubble_shadow"]
         assert shadow[colour] == pytest.approx(sd.STUBBLE_SHADOW * shaft_darkness(pigment(colour)), abs=1e-4)
     assert shadow["black"] > 3 * shadow["blonde"] > 0  # fair stubble barely shows
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_teeth_show_gaps_between_teeth(tmp_path):
+    """A close-up of the open mouth (+3 SD head, jaw open; 0.33 mm a pixel): against the same
+    render without the ``tooth_arch`` attribute (one flat band, as before), the teeth show dark
+    gaps where the arch coordinate crosses an integer (the midline and the gaps to either side),
+    thin columns, not a darkened band."""
+    pytest.importorskip("bpy")
+    from synth.appearance.teeth import ARCH_OFFSET
+    from synth.conventions import project
+    from synth.dataset.segmentation import CLASSES
+
+    ctx, hm = asset_scene.head_context("id+3_jaw")
+    me = ctx.head.data
+    arch = np.empty(len(me.vertices), np.float32)
+    me.attributes["tooth_arch"].data.foreach_get("value", arch)
+    lower = np.asarray(ctx.data.regions["teeth_lower"])
+    front = lower[np.abs(arch[lower] - ARCH_OFFSET) < 2.5]  # the incisors
+    view = dict(target=ctx.vertices[front].mean(0), radius=0.2, fov_deg=6.0)
+    gaps, K, w2c = _render(ctx, tmp_path, **view)
+    me.attributes.remove(me.attributes["tooth_arch"])
+    flat, _, _ = _render(ctx, tmp_path, **view)
+    teeth = (gaps["segmentation"] == CLASSES["teeth"]) & (flat["segmentation"] == CLASSES["teeth"])
+    assert teeth.sum() > 150
+    drop = flat["rgba"][..., :3].mean(-1) - gaps["rgba"][..., :3].mean(-1)
+    dark = teeth & (drop > 0.15 * flat["rgba"][..., :3].mean(-1))
+    assert 0.02 < dark.sum() / teeth.sum() < 0.3, dark.sum() / teeth.sum()
+    # the gaps are columns: separate runs of columns with dark pixels across the teeth's rows
+    rows = np.nonzero(teeth.sum(1) > 10)[0]
+    cols_dark = dark[rows].any(0).astype(int)
+    runs = np.count_nonzero(np.diff(np.concatenate([[0], cols_dark, [0]])) == 1)
+    assert runs >= 3, cols_dark
+    # the midline gap lies where the model's midline projects
+    uv, _ = project(K, w2c, ctx.vertices[front][np.argmin(np.abs(ctx.vertices[front][:, 0]))][None])
+    cols = np.nonzero(cols_dark)[0]
+    assert np.min(np.abs(cols + 0.5 - uv[0, 0])) < 2.0
