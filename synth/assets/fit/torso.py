@@ -3,7 +3,7 @@
 
 The default bust ends 17-20 cm below the chin, and every garment ends on a hem just above that
 cut (:mod:`synth.assets.fit.hem`) with a cap underneath. Framed to fit the head and its hair,
-about half of the default views then showed the bust's lower end floating in the frame: a
+a third of the default views then showed the bust's lower end floating in the frame: a
 tailor's dummy, not a person. Real portraits never show where the body ends.
 
 :func:`torso_continuation` builds a closed prism under the garment's hem, in the garment's cloth:
