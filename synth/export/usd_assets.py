@@ -62,10 +62,21 @@ def _shell(module: str, cls: str, data, rest: HeadPose, poses: list[HeadPose], r
         if k in built and built[k] != fitted.info.get(k):
             return None, f"rebuilt {k} {fitted.info.get(k)} differ from the render's {built[k]}"
     mesh = AssetMesh(cls, fitted.name, CLASSES[cls].segmentation_id)
+    meshes = [mesh]
+    if module == "garment":  # the body below the bust, the rig's second object (synth.assets.fit.torso)
+        from synth.assets.fit import torso
+
+        Vt, Ft = torso.garment_torso(fitted)
+        band = torso.hem_band(fitted)
+        meshes.append(AssetMesh(cls, f"{fitted.name}_torso", CLASSES[cls].segmentation_id))
     for p in poses:
-        mesh.points.append(fitted.follow(p.vertices, data.triangles))
+        P = fitted.follow(p.vertices, data.triangles)
+        mesh.points.append(P)
         mesh.faces.append(np.asarray(fitted.F, np.int64))
-    return [mesh], None
+        if len(meshes) > 1:
+            meshes[1].points.append(torso.follow(Vt, fitted.P[band], P[band]))
+            meshes[1].faces.append(np.asarray(Ft, np.int64))
+    return meshes, None
 
 
 def _close(a, b, atol: float = 1e-5) -> bool:

@@ -91,7 +91,8 @@ def test_usd_on_a_render(rendered, tmp_path):
     data = load_plan(rendered / "plan").model_data()
     assert check_stage(stage, frames, data) < 0.01  # measured: ~1e-5 px
     ident = s["identities"][0]
-    assert sorted(ident["assets"]) == ["garment_" + frames["id000000_ex00_v00"]["assets"]["garment"]["id"],
+    gid = frames["id000000_ex00_v00"]["assets"]["garment"]["id"]
+    assert sorted(ident["assets"]) == ["garment_" + gid, "garment_" + gid + "_torso",
                                        "glasses_frame", "glasses_lenses",
                                        "headwear_" + frames["id000000_ex00_v00"]["assets"]["headwear"]["id"]]
     rec = frames["id000000_ex00_v00"]["assets"]
@@ -100,4 +101,6 @@ def test_usd_on_a_render(rendered, tmp_path):
         for t in (0, 1):
             assert len(mesh.GetPointsAttr().Get(t)) == rec[cls]["build"]["vertices"]
             assert len(mesh.GetFaceVertexCountsAttr().Get(t)) == rec[cls]["build"]["faces"]
+    torso = UsdGeom.Mesh(stage.GetPrimAtPath(f"/World/id000000/assets/garment_{gid}_torso"))
+    assert len(torso.GetPointsAttr().Get(0)) == rec["garment"]["build"]["torso_vertices"]
     assert "eyebrows" in ident["skipped"] and "glasses" not in ident["skipped"]
