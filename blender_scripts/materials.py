@@ -158,19 +158,6 @@ def tooth_gaps(mat) -> None:
     from synth.appearance import teeth as tt
 
     nt = mat.node_tree
-    bsdf = principled(mat)
-
-    def math(op, a, b=None):
-        n = nt.nodes.new("ShaderNodeMath")
-        n.operation = op
-        for i, v in enumerate((a, b)):
-            if v is None:
-                continue
-            if isinstance(v, (int, float)):
-                n.inputs[i].default_value = float(v)
-            else:
-                nt.links.new(v, n.inputs[i])
-        return n.outputs[0]
 
     def ramp(x, lo, hi, out_lo, out_hi):
         n = nt.nodes.new("ShaderNodeMapRange")
@@ -181,29 +168,20 @@ def tooth_gaps(mat) -> None:
         n.inputs["To Min"].default_value, n.inputs["To Max"].default_value = out_lo, out_hi
         return n.outputs["Result"]
 
-    u = math("SUBTRACT", attribute(mat, "tooth_arch").outputs["Fac"], tt.ARCH_OFFSET)
-    f = math("ABSOLUTE", math("SUBTRACT", u, math("ROUND", u)))  # tooth units to the nearest gap
+    u = math_node(mat, "SUBTRACT", attribute(mat, "tooth_arch").outputs["Fac"], tt.ARCH_OFFSET)
+    f = math_node(mat, "ABSOLUTE", math_node(mat, "SUBTRACT", u, math_node(mat, "ROUND", u)))  # to the nearest gap
     shade = ramp(f, tt.GAP_HALF, tt.GAP_HALF + tt.GAP_SOFT, 1.0 - tt.GAP_DARK, 1.0)
     noise = nt.nodes.new("ShaderNodeTexWhiteNoise")
     noise.noise_dimensions = "1D"
-    nt.links.new(math("FLOOR", u), noise.inputs["W"])
-    vary = math("ADD", math("MULTIPLY", noise.outputs["Value"], tt.TOOTH_VARIATION), 1.0 - 0.5 * tt.TOOTH_VARIATION)
-    scale = math("MULTIPLY", shade, vary)
-    mul = nt.nodes.new("ShaderNodeMix")
-    mul.data_type = "RGBA"
-    mul.blend_type = "MULTIPLY"
-    mul.inputs["Factor"].default_value = 1.0
-    mul.inputs["A"].default_value = tuple(bsdf.inputs["Base Color"].default_value)
-    comb = nt.nodes.new("ShaderNodeCombineColor")
+    nt.links.new(math_node(mat, "FLOOR", u), noise.inputs["W"])
+    vary = math_node(mat, "ADD", math_node(mat, "MULTIPLY", noise.outputs["Value"], tt.TOOTH_VARIATION),
+                     1.0 - 0.5 * tt.TOOTH_VARIATION)
+    grey = nt.nodes.new("ShaderNodeCombineColor")
+    scale = math_node(mat, "MULTIPLY", shade, vary)
     for k in range(3):
-        nt.links.new(scale, comb.inputs[k])
-    nt.links.new(comb.outputs[0], mul.inputs["B"])
-    nt.links.new(mul.outputs["Result"], bsdf.inputs["Base Color"])
-    bump = nt.nodes.new("ShaderNodeBump")
-    bump.inputs["Strength"].default_value = 0.5
-    bump.inputs["Distance"].default_value = 0.0004
-    nt.links.new(ramp(f, 0.0, tt.ROUNDING, 0.0, 1.0), bump.inputs["Height"])
-    nt.links.new(bump.outputs["Normal"], bsdf.inputs["Normal"])
+        nt.links.new(scale, grey.inputs[k])
+    layer_over(mat, "Base Color", grey.outputs[0], 1.0, blend="MULTIPLY")
+    chain_bump(mat, ramp(f, 0.0, tt.ROUNDING, 0.0, 1.0), 0.5, 0.0004)
 
 
 def head_materials(skin_params: dict, albedo, pixel_m: float | None = None) -> dict[int, "bpy.types.Material"]:

@@ -63,10 +63,12 @@ def _shell(module: str, cls: str, data, rest: HeadPose, poses: list[HeadPose], r
             return None, f"rebuilt {k} {fitted.info.get(k)} differ from the render's {built[k]}"
     mesh = AssetMesh(cls, fitted.name, CLASSES[cls].segmentation_id)
     meshes = [mesh]
-    if module == "garment":  # the body below the bust, the rig's second object (synth.assets.fit.torso)
-        from synth.assets.fit import torso
+    if "torso_vertices" in built:  # the body below the bust, the garment rig's second object (renders since
+        from synth.assets.fit import torso  # 2026-12-01; synth.assets.fit.torso)
 
         Vt, Ft = torso.garment_torso(fitted)
+        if len(Vt) != built["torso_vertices"]:
+            return None, f"rebuilt torso vertices {len(Vt)} differ from the render's {built['torso_vertices']}"
         band = torso.hem_band(fitted)
         meshes.append(AssetMesh(cls, f"{fitted.name}_torso", CLASSES[cls].segmentation_id))
     for p in poses:
