@@ -368,7 +368,7 @@ def test_torso_continues_every_garment_below_its_hem(fitted_garments):
             assert V[:, 2].min() <= Q[:, 2].min() - torso.LENGTH + 1e-9, (case, aid)
             c, r, zmin = torso.section(Q)
             n = torso.ANGLES
-            m = len(F) and torso.RINGS + 1
+            m = torso.RINGS + 1  # rings per angle (top first)
             top, wall = V[np.arange(n) * m], V[np.arange(n) * m + 1]
             # its top above the garment's lowest point at that angle, its wall below it
             assert (top[:, 2] > zmin + 0.5 * torso.OVERLAP).all() and (wall[:, 2] < zmin).all(), (case, aid)
