@@ -3,6 +3,8 @@
     .venv/bin/python benchmarks/realism.py skin [--identities 200 --seed 0] [--frames DATASET ...]
     .venv/bin/python benchmarks/realism.py framing DATASET [DATASET ...]
     .venv/bin/python benchmarks/realism.py body-end DATASET [DATASET ...]
+    .venv/bin/python benchmarks/realism.py shoulders [--identities 40 --seed 0 --garments tshirt_crew ...]
+        [--hair long_straight ... --hair-identities 6]
     .venv/bin/python benchmarks/realism.py hair [--identities 12 --seed 0]
     .venv/bin/python benchmarks/realism.py hats [--identities 3 --seed 0 --resolution 256]
     .venv/bin/python benchmarks/realism.py judge DATASET --mp-python MPENV/bin/python [--max-azimuth 45]
@@ -23,6 +25,11 @@ body-end: the fraction of frames in which the body ends inside the image: no ski
   pixel on the bottom row while the frame shows skin or clothing (the bust's lower end floating
   in the frame; a portrait's body leaves through the bottom border), overall and by camera
   elevation.
+shoulders: the body's breadth over the head's for planned identities (neutral) and garments: the
+  widest extent side to side of the garment and the body below it, without and with the arms
+  (synth.assets.fit.torso.arms), over the breadth of the scalp; next to bideltoid over head
+  breadth of measured adults (Pheasant's tables); and hair (--hair styles, tshirt_crew) through
+  the arms as groomed and after synth.assets.fit.torso.keep_strands_out.
 hair: strands in front of the inner face (synth.assets.fit.occlusion) for the planned hair of
   identities that have hair, seen from cameras at azimuth 0, +-30, +-45 (elevation 0).
 hats: hair under a beanie or cap, groomed without and with the hat: strands, share of hair points
@@ -289,6 +296,99 @@ def hair(args) -> dict:
     return {"rows": rows, "views": views, "views_with_strands_in_front": bad, "views_centre": bad_c}
 
 
+#: bideltoid and head breadth (mm; mean, SD) of British adults 19-65 (Pheasant, "Bodyspace", the
+#: tables reproduced in the City University of Hong Kong's online anthropometry, items 17 and 27)
+BIDELTOID_MM = {"men": (465.0, 28.0), "women": (395.0, 24.0)}
+HEAD_BREADTH_MM = {"men": (155.0, 6.0), "women": (145.0, 6.0)}
+
+
+def shoulders(args) -> dict:
+    """The body's breadth against the head's (docs/realism.md, "Arms"): for planned identities
+    (neutral), each garment of ``--garments``, the widest extent side to side of the garment
+    and the body below it, without the arms (as before 2026-12-02) and with them
+    (synth.assets.fit.torso.arms), over the head's breadth (its scalp, above the ears), against
+    bideltoid over head breadth of measured adults."""
+    from synth.assets.fit import torso
+    from synth.assets.fit.body import Body, fit_shell
+    from synth.assets.fit.garment import CLEARANCE, garment_shell
+
+    model, hm, ids, codes = _planned_heads(args.seed, args.identities)
+    scalp = np.asarray(model.regions["scalp"])
+    print(f"\n### Body breadth over head breadth ({len(ids)} identities of seed {args.seed}, neutral)\n")
+    ref = {k: BIDELTOID_MM[k][0] / HEAD_BREADTH_MM[k][0] for k in BIDELTOID_MM}
+    print("measured adults (bideltoid / head breadth of the means): "
+          + ", ".join(f"{k} {v:.2f}" for k, v in ref.items()) + "\n")
+    print("| garment | head breadth mm (min / median / max) | body breadth mm without / with arms (median) | "
+          "ratio without arms (min / median / max) | ratio with arms (min / median / max) |\n|---|---:|---:|---:|---:|")
+    rows = []
+    for gid in args.garments:
+        m = []
+        for n, i in enumerate(ids.tolist()):
+            ctx, _ = _neutral_context(model, hm, codes[n], i, args.seed, 256, {})
+            body = Body.of(ctx)
+            s = fit_shell(body, garment_shell(body, {"id": gid, "params": {}}, ctx.rng("garment")), CLEARANCE)
+            head = ctx.vertices[scalp, 0].max() - ctx.vertices[scalp, 0].min()
+            Vt, _ = torso.garment_torso(s, with_arms=False)
+            Q = np.asarray(s.P)[torso.torso_shell_vertices(s)]
+            Va, _ = torso.arms(Q)
+            x = np.concatenate([np.asarray(s.P)[:, 0], Vt[:, 0]])
+            before = x.max() - x.min()
+            xa = np.concatenate([x, Va[:, 0]])
+            after = xa.max() - xa.min()
+            m.append([head, before, after])
+        m = 1000.0 * np.asarray(m)
+        r0, r1 = m[:, 1] / m[:, 0], m[:, 2] / m[:, 0]
+        rows.append({"garment": gid, "head_mm": m[:, 0].tolist(), "without_mm": m[:, 1].tolist(),
+                     "with_mm": m[:, 2].tolist()})
+        q = lambda v: f"{v.min():.2f} / {np.median(v):.2f} / {v.max():.2f}"  # noqa: E731
+        print(f"| {gid} | {m[:, 0].min():.0f} / {np.median(m[:, 0]):.0f} / {m[:, 0].max():.0f} | "
+              f"{np.median(m[:, 1]):.0f} / {np.median(m[:, 2]):.0f} | {q(r0)} | {q(r1)} |")
+    hair_rows = []
+    if args.hair:
+        from synth.assets.fit.hair import groom
+        from synth.geometry.raycast import ray_hit_counts
+
+        k = min(args.hair_identities, len(ids))
+        print(f"\nHair through the arms ({k} identities, tshirt_crew; strand points inside an arm by ray parity; "
+              "strands with such a point, their deepest point): groomed (the hair alone) / kept out "
+              "(synth.assets.fit.torso.keep_strands_out)\n")
+        print("| style | strands | strands through an arm | deepest mm | after keep-out: strands / points |\n|---|---:|---:|---:|---:|")
+        for sid in args.hair:
+            acc = np.zeros(4)
+            deep = 0.0
+            for n, i in enumerate(ids[:k].tolist()):
+                ctx, _ = _neutral_context(model, hm, codes[n], i, args.seed, 256, {})
+                body = Body.of(ctx)
+                s = fit_shell(body, garment_shell(body, {"id": "tshirt_crew", "params": {}}, ctx.rng("garment")), CLEARANCE)
+                arms = torso.arm_params(np.asarray(s.P)[torso.torso_shell_vertices(s)])
+                Va, Fa = torso.arms(np.asarray(s.P)[torso.torso_shell_vertices(s)])
+                pts = np.asarray(groom(ctx, {"id": sid, "params": {}}).pts)
+                kept, _ = torso.keep_strands_out(arms, pts)
+                for j, q in enumerate((pts, kept)):
+                    flat = q.reshape(-1, 3)
+                    near = np.zeros(len(flat), bool)
+                    for a in arms:
+                        dxy = np.linalg.norm(flat[:, :2] - a.axis, axis=1)
+                        near |= dxy < a.radius * 1.01
+                    inside = np.zeros(len(flat), bool)
+                    if near.any():
+                        up = np.tile([0.0, 0.0, 1.0], (int(near.sum()), 1))
+                        inside[near] = ray_hit_counts(flat[near], up, Va, Fa) % 2 == 1
+                    per = inside.reshape(q.shape[0], -1).any(1)
+                    acc[2 * j] += per.sum()
+                    acc[2 * j + 1] += inside.sum()
+                    if j == 0 and inside.any():
+                        for a in arms:
+                            m = inside & (np.linalg.norm(flat[:, :2] - a.axis, axis=1) < a.radius * 1.01)
+                            if m.any():
+                                moved, _ = a.push_out(flat[m], 0.0)
+                                deep = max(deep, float(np.linalg.norm(moved - flat[m], axis=1).max()))
+            hair_rows.append({"style": sid, "strands_through": acc[0], "points_through": acc[1],
+                              "after_strands": acc[2], "after_points": acc[3], "deepest_m": deep})
+            print(f"| {sid} | {k * pts.shape[0]} | {acc[0]:.0f} | {1000 * deep:.0f} | {acc[2]:.0f} / {acc[3]:.0f} |")
+    return {"reference": ref, "rows": rows, "hair": hair_rows}
+
+
 def drape_table(args) -> dict:
     """How loose styles hang (synth.assets.fit.hair.drape), with the loose styles' sweep floor
     and volume as before 2026-12-01 and as now, on the neutral heads of planned identities."""
@@ -500,6 +600,12 @@ def main(argv=None) -> None:
     p.add_argument("--identities", type=int, default=3)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--resolution", type=int, default=256)
+    p = sub.add_parser("shoulders")
+    p.add_argument("--identities", type=int, default=40)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--garments", nargs="+", default=["tshirt_crew", "tank_top", "jacket_blazer", "coat"])
+    p.add_argument("--hair", nargs="*", default=["long_straight", "long_curly", "braids", "ponytail", "medium_wavy"])
+    p.add_argument("--hair-identities", type=int, default=6)
     p = sub.add_parser("hair")
     p.add_argument("--identities", type=int, default=12)
     p.add_argument("--seed", type=int, default=0)
@@ -540,7 +646,7 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     from realism_judge import judge, mapping_table
 
-    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "body-end": body_end, "hair": hair, "drape": drape_table, "beard": beard_table, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
+    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "body-end": body_end, "shoulders": shoulders, "hair": hair, "drape": drape_table, "beard": beard_table, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
            "sheet": sheet}[args.cmd](args)
     if args.json:
         Path(args.json).write_text(json.dumps(res))

@@ -87,6 +87,11 @@ def dress(ctx: HeadContext, assets: dict[str, Any]) -> dict[str, Rig]:
             continue
         mod = rig_module(cls, entry)
         rigs[cls] = mod.build(ctx, entry)
+    arms = getattr(rigs.get("garment"), "arms", None)
+    if arms and hasattr(rigs.get("hair"), "keep_out_of"):
+        # hair is groomed before the garment, on the head and bust alone: it keeps out of the
+        # garment's arms from here on (synth.assets.fit.torso.keep_strands_out)
+        rigs["hair"].keep_out_of(arms, ctx)
     return rigs
 
 

@@ -10,6 +10,8 @@ grain) and procedural wrinkle bump. The headwear rig uses the same helpers.
 
 from __future__ import annotations
 
+import numpy as np
+
 from blender_scripts.assets import HeadContext, Rig
 from synth.assets.classes import CLASSES
 from synth.assets.fit.body import Body, Cloth, FittedShell, fit_shell
@@ -113,6 +115,7 @@ class FittedRig(Rig):
         super().__init__(fitted.cls, [ob], fitted.info)
         self.fitted = fitted
         self.torso = None  # (rest vertices, hem band indices) of the body below the bust
+        self.arms = []  # its upper arms (synth.assets.fit.torso.Arm), which hair keeps out of
 
     def update(self, ctx: HeadContext) -> None:
         from blender_scripts.mesh import set_positions
@@ -141,8 +144,9 @@ def see_through_from_inside(mat):
 
 def shell_rig(fitted: FittedShell, torso: bool = False) -> FittedRig:
     """The mesh object of a fitted shell, with one cloth material per slot; ``torso``: and the
-    body below the bust in the first cloth (:func:`synth.assets.fit.torso.torso_continuation`),
-    a second object that follows the garment's hem band."""
+    body below the bust and its upper arms in the first cloth
+    (:func:`synth.assets.fit.torso.garment_torso`), a second object that follows the garment's
+    hem band."""
     from blender_scripts.mesh import link_object, new_triangle_mesh
 
     materials = [cloth_material(fitted.cls, c) for c in fitted.cloths]
@@ -154,7 +158,9 @@ def shell_rig(fitted: FittedShell, torso: bool = False) -> FittedRig:
         mat = see_through_from_inside(cloth_material(fitted.cls, fitted.cloths[0]))
         rig.objects.append(link_object(name, new_triangle_mesh(name, Vt, Ft), [mat]))
         rig.torso = (Vt, torso_fit.hem_band(fitted))
+        rig.arms = torso_fit.arm_params(np.asarray(fitted.P, np.float64)[torso_fit.torso_shell_vertices(fitted)])
         rig.info["torso_vertices"] = int(len(Vt))
+        rig.info["torso_arms"] = True
     return rig
 
 

@@ -411,3 +411,98 @@ def test_torso_rejects_bad_input():
         torso.torso_continuation(np.full((10, 3), np.nan))
     with pytest.raises(ValueError, match="positive"):
         torso.torso_continuation(np.random.default_rng(0).normal(size=(50, 3)), length=0.0)
+    with pytest.raises(ValueError, match="not finite"):
+        torso.arm_params(np.full((10, 3), np.nan))
+    with pytest.raises(ValueError, match="positive"):
+        torso.arm_params(np.random.default_rng(0).normal(size=(50, 3)), length=-1.0)
+
+
+def _top_outline(meshes, xs: np.ndarray, ys: np.ndarray) -> list[np.ndarray]:
+    """Per mesh (vertices, triangles): the highest surface point over each x (seen from the front:
+    the largest height over all ``ys``), -inf where the mesh is not under that x."""
+    from synth.geometry.raycast import first_hits
+
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    O = np.stack([X.ravel(), Y.ravel(), np.full(X.size, 2.0)], 1)
+    D = np.tile([0.0, 0.0, -1.0], (len(O), 1))
+    return [(2.0 - first_hits(O, D, V, F)[2]).reshape(X.shape).max(1) for V, F in meshes]
+
+
+@pytest.mark.slow
+def test_arms_hang_from_every_garments_shoulders(fitted_garments):
+    """The upper arms (synth.assets.fit.torso.arms), for every garment on the hard cases: two closed,
+    outward tubes, one a side, against the torso's side; the body as broad as measured people
+    (bideltoid breadth about 1.45 times the chest's); seen from the front, the shoulder runs on
+    from the garment over the arm: no notch between them deeper than 7 mm (the sleeve's seam,
+    ARM_TUCK under the garment's shoulder), the arm's top within 6 mm under the garment's shoulder
+    at the torso's side (not sunk below it) and no knob rising over it."""
+    from synth.assets.fit import torso
+
+    for case, stage, aid, v, s in fitted_garments:
+        if stage != "build":
+            continue
+        Q = v[torso.torso_shell_vertices(s)]
+        arms = torso.arm_params(Q)
+        V, F = torso.arms(Q)
+        parts = trimesh.Trimesh(V, F).split(only_watertight=False)
+        assert len(parts) == 2 and all(p.is_watertight and p.is_winding_consistent and p.volume > 0 for p in parts)
+        assert [a.side for a in arms] == [-1.0, 1.0] and arms[0].axis[0] < 0 < arms[1].axis[0], (case, aid)
+        c, r, _ = torso.section(Q)
+        phi = (np.arange(len(r)) + 0.5) / len(r) * 2 * np.pi - np.pi
+        sx = c[0] + r * np.cos(phi)
+        chest = sx.max() - sx.min()
+        breadth = V[:, 0].max() - V[:, 0].min()
+        assert 1.3 < breadth / chest < 1.7, (case, aid, breadth / chest)
+        assert V[:, 2].min() == pytest.approx(Q[:, 2].min() - torso.LENGTH), (case, aid)
+        for a in arms:
+            half = (sx.max() - c[0]) if a.side > 0 else (c[0] - sx.min())
+            # its inner edge inside the torso's side: no gap between arm and body
+            assert abs(a.axis[0] - c[0]) - a.radius < half - 0.2 * a.radius, (case, aid)
+            xs = c[0] + a.side * np.arange(half - 0.03, abs(a.axis[0] - c[0]) + a.radius, 0.002)
+            ys = np.arange(a.axis[1] - 0.12, a.axis[1] + 0.12, 0.004)
+            zg, za = _top_outline([(v, s.F), (V, F)], xs, ys)
+            z = np.maximum(zg, za)
+            assert np.isfinite(z).all(), (case, aid)  # the outline does not break off
+            notch = max(min(z[:i].max(), z[i + 1:].max()) - z[i] for i in range(1, len(z) - 1))
+            assert notch < 0.007, (case, aid, notch)
+            at = a.side * (xs - c[0])
+            corner = zg[np.isfinite(zg) & (at > half - 0.015) & (at <= half)].max()
+            top = za[at > half].max()
+            assert corner - 0.006 < top < corner + 0.003, (case, aid, top - corner)  # meets it, no knob
+
+
+def test_keep_strands_out_of_arms():
+    """Strand points inside an arm move out of it (ray parity, against the arm's mesh), onto its cap
+    from above or out from its axis; roots and points outside stay where they were."""
+    from synth.assets.fit import torso
+    from synth.geometry.raycast import ray_hit_counts
+
+    arm = torso.Arm(axis=(0.17, 0.0), z_base=0.52, radius=0.045, z_bottom=-0.3, side=1.0)
+    V, F = arm.mesh()
+    rng = np.random.default_rng(3)
+    # strands hanging straight down from above the shoulder, over and beside the arm
+    roots = np.column_stack([rng.uniform(0.10, 0.24, 400), rng.uniform(-0.07, 0.07, 400), np.full(400, 0.70)])
+    pts = roots[:, None] + np.linspace(0.0, 0.35, 24)[None, :, None] * np.array([0.0, 0.0, -1.0])
+    before = ray_hit_counts(pts.reshape(-1, 3), np.tile([0.0, 0.0, 1.0], (pts.size // 3, 1)), V, F, t_min=1e-9) % 2 == 1
+    assert before.sum() > 1000  # the test's strands do pass through the arm
+    out, moved = torso.keep_strands_out([arm], pts)
+    # the analytic arm holds its faceted mesh, and a few points between the two
+    assert before.sum() <= moved <= 1.03 * before.sum()
+    flat = out.reshape(-1, 3)
+    for d in ([0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]):
+        assert not (ray_hit_counts(flat, np.tile(d, (len(flat), 1)), V, F, t_min=1e-9) % 2 == 1).any(), d
+    np.testing.assert_array_equal(out[:, 0], pts[:, 0])
+    inside = before.reshape(pts.shape[:2])
+    m = (out != pts).any(-1)
+    assert (m | ~inside).all() and moved == m.sum()
+    # besides the points inside the mesh only those between its facets and the analytic surface
+    # (the cap's six rings lie up to about 1.3 mm inside it)
+    step = np.linalg.norm(out - pts, axis=-1)
+    assert (step[m & ~inside] < torso.ARM_HAIR_CLEARANCE + 0.0015).all()
+    # a point moved lies ARM_HAIR_CLEARANCE beyond the analytic surface: on the cap or the tube
+    q = out[m]
+    rho = np.linalg.norm(q[:, :2] - arm.axis, axis=1)
+    on_tube = np.abs(rho - arm.radius_at(np.minimum(q[:, 2], arm.z_base)) - torso.ARM_HAIR_CLEARANCE) < 1e-9
+    on_cap = np.abs(q[:, 2] - arm.cap_z(q[:, :2]) - torso.ARM_HAIR_CLEARANCE) < 1e-9
+    assert (on_tube | on_cap).all()
+    assert on_cap.sum() > 100  # strands from above drape over the shoulder

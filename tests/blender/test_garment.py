@@ -34,6 +34,11 @@ def test_rig_mesh_is_the_fitted_shell():
     rec = rig.record()
     assert rec.pop("hidden_bust_polygons") > 0  # the bust under the hem (synth.assets.fit.hem)
     assert rec.pop("torso_vertices") == len(Vt)
+    assert rec.pop("torso_arms") is True  # the arms follow the prism's vertices
+    arms = torso.arm_params(want.P[torso.torso_shell_vertices(want)])
+    assert len(rig.arms) == 2 and rig.arms == arms
+    Va, Fa = torso.arms(want.P[torso.torso_shell_vertices(want)])
+    np.testing.assert_array_equal(Vt[-len(Va):], Va)
     assert rec == want.info and rec["vertices"] == len(got)
     asset_scene.set_case(ctx, hm, "id-3_jaw")
     rig.update(ctx)
@@ -71,3 +76,40 @@ def test_render_shows_clothing_and_headwear(tmp_path):
     assert (seg == CLASSES["headwear"]).sum() > 20
     assert (seg == CLASSES["skin"]).sum() > 20
     assert np.isfinite(r["rgba"]).all()
+
+
+def test_dressed_hair_keeps_out_of_the_arms():
+    """Hair is groomed before the garment, on the head and bust alone; once the garment's arms exist
+    (``dress``) its strands leave them (synth.assets.fit.torso.keep_strands_out), also after an
+    expression change. Long straight hair on this head hangs through both shoulders otherwise."""
+    from tests.support import asset_scene
+    from blender_scripts.assets import dress, update
+    from synth.assets.fit import torso
+    from synth.geometry.raycast import ray_hit_counts
+
+    ctx, hm = asset_scene.head_context("neutral", resolution=96)
+    rigs = dress(ctx, {"hair": {"id": "long_straight", "generator": "procedural:hair_strands", "params": {}},
+                       "garment": {"id": "tshirt_crew", "generator": "procedural:garment_shell", "params": {}}})
+    arms = rigs["garment"].arms
+    V, F = torso.arms(rigs["garment"].fitted.P[torso.torso_shell_vertices(rigs["garment"].fitted)])
+    hair = rigs["hair"]
+    groomed = hair.attachment.positions(ctx).reshape(-1, 3)  # where the groom alone puts them
+
+    def inside(pts):
+        return ray_hit_counts(pts, np.tile([0.0, 0.0, 1.0], (len(pts), 1)), V, F, t_min=1e-9) % 2 == 1
+
+    def curve_points():
+        cv = hair.ob.data
+        out = np.empty(len(cv.points) * 3, np.float32)
+        cv.position_data.foreach_get("vector", out)
+        return out.reshape(-1, 3).astype(np.float64)
+
+    assert inside(groomed).sum() > 50 and hair.record()["points_out_of_arms"] > 50
+    assert len(arms) == 2 and not inside(curve_points()).any()
+    asset_scene.set_case(ctx, hm, "id+3_jaw")
+    update(rigs, ctx)
+    assert not inside(curve_points()).any()
+    # without a garment there is nothing to keep out of
+    ctx2, _ = asset_scene.head_context("neutral", resolution=96)
+    alone = dress(ctx2, {"hair": {"id": "long_straight", "generator": "procedural:hair_strands", "params": {}}})
+    assert "points_out_of_arms" not in alone["hair"].record()
