@@ -305,7 +305,7 @@ HEAD_BREADTH_MM = {"men": (155.0, 6.0), "women": (145.0, 6.0)}
 def shoulders(args) -> dict:
     """The body's breadth against the head's (docs/realism.md, "Arms"): for planned identities
     (neutral), each garment of ``--garments``, the widest extent side to side of the garment
-    and the body below it, without the arms (as before 2026-12-02) and with them
+    and the body below it, without the arms (as before 2026-12-01) and with them
     (synth.assets.fit.torso.arms), over the head's breadth (its scalp, above the ears), against
     bideltoid over head breadth of measured adults."""
     from synth.assets.fit import torso

@@ -66,7 +66,7 @@ def _shell(module: str, cls: str, data, rest: HeadPose, poses: list[HeadPose], r
     if "torso_vertices" in built:  # the body below the bust, the garment rig's second object (renders since
         from synth.assets.fit import torso  # 2026-12-01; synth.assets.fit.torso)
 
-        Vt, Ft = torso.garment_torso(fitted, with_arms=bool(built.get("torso_arms")))  # arms since 2026-12-02
+        Vt, Ft = torso.garment_torso(fitted, with_arms=bool(built.get("torso_arms")))  # arms since 2026-12-01
         if len(Vt) != built["torso_vertices"]:
             return None, f"rebuilt torso vertices {len(Vt)} differ from the render's {built['torso_vertices']}"
         band = torso.hem_band(fitted)

@@ -1,6 +1,6 @@
 """The USD export rebuilds a garment's body below the bust only for renders that built one (their
 record has ``torso_vertices``), with the rendered vertex count; older renders get the shell alone.
-Renders with arms (``torso_arms``, 2026-12-02) get the prism and the arms, renders before them the
+Renders with arms (``torso_arms``, 2026-12-01) get the prism and the arms, renders before them the
 prism alone."""
 
 from __future__ import annotations

@@ -12,7 +12,9 @@ tailor's dummy, not a person. Real portraits never show where the body ends.
   (:data:`ANGLES` bins), the largest radius of the garment's vertices within :data:`BAND` above
   the garment's lowest point at that angle, minus :data:`INSET` (so that the garment's hem stays
   visible as a hem over it), smoothed around; across the arm stumps' openings (the garment's
-  lowest point :data:`STUMP_RISE` above its lowest overall) straight between the angles beside;
+  lowest point :data:`STUMP_RISE` above its lowest overall; also a coat's front opening or a
+  back hem riding high) straight between the angles beside, at most as far out as the farther
+  of the two;
 * it starts :data:`OVERLAP` above the garment's lowest point at each angle (hidden inside the
   garment, so no gap opens at the hem), and runs straight down :data:`LENGTH` below the lowest
   point of the hem: out of every default view (``docs/realism.md``, "The body below the bust");
@@ -59,6 +61,10 @@ RINGS = 8
 #: arm stumps' openings, whose hem runs up over the shoulder), the section runs straight between
 #: the neighbouring angles: the lowest vertices there can be the inner rim of the opening
 STUMP_RISE = 0.05
+#: the arm stumps' openings lie within this many degrees of the sides (x): a back hem that rides
+#: higher than the front (a work shirt on some bodies) or a coat's front opening is not where an
+#: arm hangs (:func:`arm_params`; the section runs straight across all of them)
+STUMP_SECTOR = 45.0
 #: passes of circular averaging of the section's radius and height
 SMOOTHING = 3
 #: an upper arm's radius as a fraction of the torso's width (side to side) at the arms
@@ -74,6 +80,9 @@ ARM_TUCK = 0.003
 #: the radius at ELBOW (m) below the cap's base, as a fraction of the radius at the top
 ARM_TAPER = 0.85
 ELBOW = 0.3
+#: the garment's shoulder over an arm lies at most this far (m) above the opening's lowest rim
+#: (2-3 cm on the hard cases); higher cloth at the torso's side is a hood's, beside the head
+SHOULDER_ABOVE_OPENING = 0.05
 #: hair points inside an arm are moved this far (m) beyond its surface (:func:`keep_strands_out`)
 ARM_HAIR_CLEARANCE = 0.002
 #: segments around an arm; rings of its cap
@@ -116,7 +125,10 @@ def _fill_chords(r: np.ndarray) -> np.ndarray:
         e = B - A
         den = u[k, 0] * e[1] - u[k, 1] * e[0]
         t = (A[0] * e[1] - A[1] * e[0]) / den if abs(den) > 1e-12 else np.nan
-        out[k] = t if np.isfinite(t) and t > 0 else 0.5 * (r[p] + r[q])
+        # a point of the chord lies no farther out than its farther end; beyond that the ray meets
+        # the chord's line on the far side of the centre (an opening wider than a half turn)
+        ok_t = np.isfinite(t) and 0 < t <= max(r[p], r[q]) * (1 + 1e-9)
+        out[k] = t if ok_t else 0.5 * (r[p] + r[q])
     return out
 
 
@@ -321,15 +333,19 @@ def arm_params(P: np.ndarray, length: float = LENGTH) -> list[Arm]:
     z_low = P[:, 2].min()
     width = S[:, 0].max() - S[:, 0].min()
     rad = ARM_RADIUS * width
-    stump = zmin > z_low + STUMP_RISE
+    stump = (zmin > z_low + STUMP_RISE) & (np.abs(np.cos(phi)) > np.cos(np.radians(STUMP_SECTOR)))
     out = []
     for side in (-1.0, 1.0):
         w = (side * (S[:, 0] - c[0])).max()  # the torso's half width on this side
         B = stump & (side * np.cos(phi) > 0)
         if not B.any():  # no opening found: the bins within 20 degrees of the side
             B = side * np.cos(phi) > np.cos(np.radians(20))
-        near = side * (P[:, 0] - c[0]) > w - 0.015
-        z_shoulder = P[near, 2].max()  # the garment's shoulder at the torso's side
+        # the garment's shoulder at the torso's side: its highest point there, at most
+        # SHOULDER_ABOVE_OPENING over the opening's rim (not a hood's side at the head)
+        reach = side * (P[:, 0] - c[0])
+        rim = zmin[B].max()
+        near = (reach > min(w, reach.max()) - 0.015) & (P[:, 2] <= rim + SHOULDER_ABOVE_OPENING)
+        z_shoulder = P[near, 2].max() if near.any() else rim
         d = (1 - ARM_INSIDE) * rad  # from the arm's axis to the torso's side
         # the cap over the torso's side (u = -d / rad across the arm): ARM_TUCK under the shoulder
         u_side = -d / rad
@@ -371,8 +387,10 @@ def keep_strands_out(arms_: list[Arm], pts: np.ndarray, clearance: float = ARM_H
 
 
 def torso_shell_vertices(fitted) -> np.ndarray:
-    """Indices of a fitted garment's torso shell (:class:`synth.assets.fit.body.FittedShell`): the
-    largest connected piece of its outer cloth (material slot 0, not a hem cap)."""
+    """Indices of a fitted garment's torso shell (:class:`synth.assets.fit.body.FittedShell`): of the
+    connected pieces of its outer cloth (material slot 0, not a hem cap) with at least a fifth of
+    the largest one's vertices, the one whose lowest tenth lies lowest (not a hood up, which
+    on a +3 SD body is the largest piece)."""
     import scipy.sparse as sp
     from scipy.sparse.csgraph import connected_components
 
@@ -387,7 +405,14 @@ def torso_shell_vertices(fitted) -> np.ndarray:
     g = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
     _, label = connected_components(g, directed=False)
     used = np.unique(F)
-    return used[label[used] == np.bincount(label[used]).argmax()]
+    size = np.bincount(label[used])
+    # of the large pieces (drawstrings and ties are small), the one that reaches lowest: a hood
+    # up on a small body can be larger than the body's piece under it
+    z = np.asarray(fitted.P, np.float64)[used, 2]
+    low = np.full(len(size), np.inf)
+    for k in np.nonzero(size >= 0.2 * size.max())[0]:
+        low[k] = np.percentile(z[label[used] == k], 10)
+    return used[label[used] == int(np.argmin(low))]
 
 
 def hem_band(fitted, height: float = 0.02) -> np.ndarray:
@@ -409,7 +434,7 @@ def garment_torso(fitted, with_arms: bool = True) -> tuple[np.ndarray, np.ndarra
     """:func:`torso_continuation` of a fitted garment, shaped by its torso shell
     (:func:`torso_shell_vertices`), so that drawstrings, scarf ends, ties and collars hanging
     below the hem do not shape the body; ``with_arms``: and its :func:`arms` (after the prism's
-    vertices). Renders before the arms (2026-12-02) recorded the prism alone."""
+    vertices). Renders before the arms (2026-12-01) recorded the prism alone."""
     Q = np.asarray(fitted.P, np.float64)[torso_shell_vertices(fitted)]
     V, F = torso_continuation(Q)
     if not with_arms:
