@@ -198,7 +198,7 @@ class StrandRig(Rig):
 
     def _positions(self, ctx):
         pts = self.attachment.positions(ctx)
-        if not getattr(self, "arms", None):
+        if not self.arms:
             return pts, 0
         from synth.assets.fit.torso import keep_strands_out
 

@@ -210,47 +210,6 @@ def torso_continuation(P: np.ndarray, length: float = LENGTH) -> tuple[np.ndarra
     return V, F
 
 
-def _closed_tube(profile: list[tuple[float, float]], axis: np.ndarray, segments: int) -> tuple[np.ndarray, np.ndarray]:
-    """(vertices, outward triangles) of a closed surface of revolution about the vertical through
-    ``axis`` (x, y): ``profile`` is (z, radius) from the top down; a radius of 0 is a pole, and the
-    last ring is closed by a fan on its centre."""
-    phi = np.arange(segments) / segments * 2 * np.pi
-    ring = np.stack([np.cos(phi), np.sin(phi)], 1)
-    V, F = [], []
-    prev = None  # (first index, is pole)
-    for z, rad in profile:
-        if rad <= 0:
-            idx = len(V)
-            V.append([axis[0], axis[1], z])
-            cur = (idx, True)
-        else:
-            idx = len(V)
-            V.extend(np.column_stack([axis + rad * ring, np.full(segments, z)]).tolist())
-            cur = (idx, False)
-        if prev is not None:
-            a, b = prev, cur
-            k = np.arange(segments)
-            if a[1]:  # pole above a ring: faces toward the outside, counter-clockwise seen from outside
-                F.extend(np.stack([np.full(segments, a[0]), b[0] + k, b[0] + (k + 1) % segments], 1).tolist())
-            else:
-                i0, i1 = a[0] + k, a[0] + (k + 1) % segments
-                j0, j1 = b[0] + k, b[0] + (k + 1) % segments
-                F.extend(np.stack([i0, j0, j1], 1).tolist())
-                F.extend(np.stack([i0, j1, i1], 1).tolist())
-        prev = cur
-    # close the bottom
-    z = profile[-1][0]
-    idx = len(V)
-    V.append([axis[0], axis[1], z])
-    k = np.arange(segments)
-    F.extend(np.stack([np.full(segments, idx), prev[0] + (k + 1) % segments, prev[0] + k], 1).tolist())
-    V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
-    # outward: the summed signed volume is positive
-    if np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]])).sum() < 0:
-        F = F[:, ::-1]
-    return V, F
-
-
 def _cap_height(u):
     """The arm cap's height in radii at ``u`` across the arm (-1: its inner edge, 1: its outer)."""
     return ARM_CAP_IN + (ARM_CAP_OUT - ARM_CAP_IN) * 0.5 * (np.asarray(u) + 1)
@@ -283,12 +242,16 @@ class Arm:
 
     def mesh(self) -> tuple[np.ndarray, np.ndarray]:
         """(vertices, outward triangles): a closed tube, the cap's rings on :meth:`cap_z`."""
-        prof = [(self.z_base + 1.0, 0.0)]  # a unit half sphere, sheared onto cap_z below
-        for t in np.linspace(0, 0.5 * np.pi, ARM_CAP_RINGS + 1)[1:]:
-            prof.append((self.z_base + np.cos(t), self.radius * np.sin(t)))
-        for z in (self.z_base - 0.5 * ELBOW, self.z_base - ELBOW, self.z_bottom):
-            prof.append((z, float(self.radius_at(z))))
-        V, F = _closed_tube(prof, np.asarray(self.axis), ARM_SEGMENTS)
+        from synth.assets.fit.meshops import sweep_tube
+
+        t = np.linspace(0, 0.5 * np.pi, ARM_CAP_RINGS + 1)[1:]
+        z = np.concatenate([self.z_base + np.cos(t), [self.z_base - 0.5 * ELBOW, self.z_base - ELBOW, self.z_bottom]])
+        rad = np.concatenate([self.radius * np.sin(t), self.radius_at(z[ARM_CAP_RINGS:])])
+        path = np.column_stack([np.broadcast_to(self.axis, (len(z), 2)), z])
+        V, F = sweep_tube(path, rad, n_sides=ARM_SEGMENTS)
+        V[-2, 2] = self.z_base + 1.0  # the top cap's centre: the pole of a unit half sphere, sheared below
+        if np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]])).sum() < 0:
+            F = F[:, ::-1]  # outward
         cap = V[:, 2] > self.z_base + 1e-9
         u = np.clip(self.side * (V[cap, 0] - self.axis[0]) / self.radius, -1.0, 1.0)
         V[cap, 2] = self.z_base + (V[cap, 2] - self.z_base) * _cap_height(u) * self.radius
