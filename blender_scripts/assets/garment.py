@@ -15,9 +15,10 @@ import numpy as np
 from blender_scripts.assets import HeadContext, Rig
 from synth.assets.classes import CLASSES
 from synth.assets.fit.body import Body, Cloth, FittedShell, fit_shell
-from synth.assets.fit.garment import CLEARANCE, FABRICS, colour_rgb, garment_shell
+from synth.assets.fit.garment import BARE_ARMS, CLEARANCE, FABRICS, colour_rgb, garment_shell
 from synth.assets.fit.hem import hidden_polygons
 from synth.assets.fit import torso as torso_fit
+from synth.dataset.segmentation import CLASSES as SEGMENTATION
 
 
 def cloth_material(cls: str, cloth: Cloth):
@@ -142,25 +143,35 @@ def see_through_from_inside(mat):
     return mat
 
 
-def shell_rig(fitted: FittedShell, torso: bool = False) -> FittedRig:
+def shell_rig(fitted: FittedShell, torso: bool = False, skin=None) -> FittedRig:
     """The mesh object of a fitted shell, with one cloth material per slot; ``torso``: and the
     body below the bust and its upper arms in the first cloth
     (:func:`synth.assets.fit.torso.garment_torso`), a second object that follows the garment's
-    hem band."""
+    hem band. ``skin``: the material of bare upper arms (the head's skin), for the garments
+    without sleeves (:data:`synth.assets.fit.garment.BARE_ARMS`); the arms are then the second
+    object's second material slot (segmentation class skin)."""
     from blender_scripts.mesh import link_object, new_triangle_mesh
 
     materials = [cloth_material(fitted.cls, c) for c in fitted.cloths]
     ob = link_object(fitted.name, new_triangle_mesh(fitted.name, fitted.P, fitted.F, fitted.M), materials)
     rig = FittedRig(ob, fitted)
     if torso:
-        Vt, Ft = torso_fit.garment_torso(fitted)
+        (Vp, Fp), (Va, Fa) = torso_fit.garment_torso_parts(fitted)
+        Vt, Ft = np.vstack([Vp, Va]), np.vstack([Fp, Fa + len(Vp)])
         name = f"{fitted.name}_torso"
-        mat = see_through_from_inside(cloth_material(fitted.cls, fitted.cloths[0]))
-        rig.objects.append(link_object(name, new_triangle_mesh(name, Vt, Ft), [mat]))
+        mats = [see_through_from_inside(cloth_material(fitted.cls, fitted.cloths[0]))]
+        slots = None
+        bare = skin is not None and fitted.info.get("id") in BARE_ARMS
+        if bare:
+            mats.append(skin)
+            slots = np.concatenate([np.zeros(len(Fp), np.int64), np.ones(len(Fa), np.int64)])
+        rig.objects.append(link_object(name, new_triangle_mesh(name, Vt, Ft, slots), mats))
         rig.torso = (Vt, torso_fit.hem_band(fitted))
         rig.arms = torso_fit.arm_params(np.asarray(fitted.P, np.float64)[torso_fit.torso_shell_vertices(fitted)])
         rig.info["torso_vertices"] = int(len(Vt))
         rig.info["torso_arms"] = True
+        if bare:
+            rig.info["torso_arms_skin"] = True
     return rig
 
 
@@ -198,6 +209,8 @@ def hide_bust_under_hem(head, body: Body) -> int:
 
 def build(ctx: HeadContext, entry: dict) -> Rig:
     body = Body.of(ctx)
-    rig = shell_rig(fit_shell(body, garment_shell(body, entry, ctx.rng("garment")), CLEARANCE), torso=True)
+    skin = (ctx.materials or {}).get(SEGMENTATION["skin"])
+    rig = shell_rig(fit_shell(body, garment_shell(body, entry, ctx.rng("garment")), CLEARANCE), torso=True,
+                    skin=skin)
     rig.info["hidden_bust_polygons"] = hide_bust_under_hem(ctx.head, body)
     return rig

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from synth.assets.classes import CLASSES, RECORD_ORDER, rig_rng
+from synth.dataset.segmentation import CLASSES as SEGMENTATION
 
 
 @dataclass
@@ -66,18 +67,28 @@ def _shell(module: str, cls: str, data, rest: HeadPose, poses: list[HeadPose], r
     if "torso_vertices" in built:  # the body below the bust, the garment rig's second object (renders since
         from synth.assets.fit import torso  # 2026-12-01; synth.assets.fit.torso)
 
-        Vt, Ft = torso.garment_torso(fitted, with_arms=bool(built.get("torso_arms")))  # arms since 2026-12-01
-        if len(Vt) != built["torso_vertices"]:
-            return None, f"rebuilt torso vertices {len(Vt)} differ from the render's {built['torso_vertices']}"
+        bare = bool(built.get("torso_arms_skin"))  # bare upper arms in the head's skin (tank tops)
+        if bare:
+            (Vp, Fp), (Va, Fa) = torso.garment_torso_parts(fitted)
+            parts = [(f"{fitted.name}_torso", CLASSES[cls].segmentation_id, Vp, Fp),
+                     (f"{fitted.name}_arms", SEGMENTATION["skin"], Va, Fa)]
+        else:
+            Vt, Ft = torso.garment_torso(fitted, with_arms=bool(built.get("torso_arms")))  # arms since 2026-12-01
+            parts = [(f"{fitted.name}_torso", CLASSES[cls].segmentation_id, Vt, Ft)]
+        n = sum(len(part[2]) for part in parts)
+        if n != built["torso_vertices"]:
+            return None, f"rebuilt torso vertices {n} differ from the render's {built['torso_vertices']}"
         band = torso.hem_band(fitted)
-        meshes.append(AssetMesh(cls, f"{fitted.name}_torso", CLASSES[cls].segmentation_id))
+        for name, seg, _, _ in parts:
+            meshes.append(AssetMesh(cls, name, seg))
     for p in poses:
         P = fitted.follow(p.vertices, data.triangles)
         mesh.points.append(P)
         mesh.faces.append(np.asarray(fitted.F, np.int64))
         if len(meshes) > 1:
-            meshes[1].points.append(torso.follow(Vt, fitted.P[band], P[band]))
-            meshes[1].faces.append(np.asarray(Ft, np.int64))
+            for m, (_, _, Vx, Fx) in zip(meshes[1:], parts):
+                m.points.append(torso.follow(Vx, fitted.P[band], P[band]))
+                m.faces.append(np.asarray(Fx, np.int64))
     return meshes, None
 
 

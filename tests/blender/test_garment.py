@@ -113,3 +113,43 @@ def test_dressed_hair_keeps_out_of_the_arms():
     ctx2, _ = asset_scene.head_context("neutral", resolution=96)
     alone = dress(ctx2, {"hair": {"id": "long_straight", "generator": "procedural:hair_strands", "params": {}}})
     assert "points_out_of_arms" not in alone["hair"].record()
+
+
+@pytest.mark.parametrize("garment_id,bare", [("tank_top", True), ("tshirt_crew", False)])
+def test_sleeveless_garments_have_bare_arms(tmp_path, garment_id, bare):
+    """A tank top's upper arms are the head's skin (segmentation class skin, second slot of the
+    torso object); a T-shirt's are its cloth. Checked on the mesh and in the pixels: the outer side of
+    each arm, 8 cm under its cap's base, seen from the front."""
+    from tests.support import asset_scene
+    from blender_scripts import camera, passes, scene
+    from blender_scripts.assets import garment
+    from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world, project
+    from synth.dataset.segmentation import CLASSES
+
+    ctx, _ = asset_scene.head_context("neutral")
+    g = garment.build(ctx, {"id": garment_id, "params": {"colour_hsv": "navy"}})
+    torso_ob = g.objects[1]
+    mats = list(torso_ob.data.materials)
+    slots = np.zeros(len(torso_ob.data.polygons), np.int64)
+    torso_ob.data.polygons.foreach_get("material_index", slots)
+    assert mats[0].pass_index == CLASSES["clothing"]
+    if bare:
+        assert g.record()["torso_arms_skin"] is True
+        assert len(mats) == 2 and mats[1] is ctx.materials[CLASSES["skin"]]
+        assert 0 < (slots == 1).sum() < len(slots)  # the arms' faces, not the prism's
+    else:
+        assert "torso_arms_skin" not in g.record() and len(mats) == 1 and not slots.any()
+    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu"}, 64, 64)
+    scene.uniform_environment(1.0)
+    cam = camera.make_camera()
+    z = min(a.z_base for a in g.arms) - 0.08
+    target = np.array([0.0, float(np.mean([a.axis[1] for a in g.arms])), z])
+    K = intrinsics(64, 64, 40.0, (0.0, 0.0))
+    w2c = invert_rigid(orbit_camera_to_world(0.0, 0.0, 1.0, target))
+    camera.set_camera(cam, K, w2c, 64, 64, 0.05, 10.0)
+    seg = passes.render_view(tmp_path, 3)["segmentation"]
+    pts = np.array([[a.axis[0] + a.side * 0.8 * float(a.radius_at(z)), a.axis[1], z] for a in g.arms])
+    uv, _ = project(K, w2c, pts)
+    want = CLASSES["skin"] if bare else CLASSES["clothing"]
+    for u, v in uv:
+        assert seg[int(v), int(u)] == want, (garment_id, seg[int(v), int(u)])

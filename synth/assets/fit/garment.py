@@ -101,6 +101,11 @@ def _num(p: dict, key: str, default: float) -> float:
     return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else float(default)
 
 
+#: garments without sleeves: their upper arms (synth.assets.fit.torso.arms) are bare skin, not
+#: the garment's cloth
+BARE_ARMS = frozenset({"tank_top"})
+
+
 def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
     """The garment of a plan entry on ``body`` (``rng``: the rig's generator, ctx.rng("garment"))."""
     aid = str(entry.get("id", "tshirt_crew"))

@@ -393,14 +393,19 @@ def follow(V: np.ndarray, rest: np.ndarray, moved: np.ndarray) -> np.ndarray:
     return np.asarray(V) + (np.asarray(moved, np.float64) - np.asarray(rest, np.float64)).mean(0)
 
 
+def garment_torso_parts(fitted) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """The two parts of :func:`garment_torso`: ((prism vertices, faces), (arms' vertices, faces)),
+    each part's faces indexing its own vertices."""
+    Q = np.asarray(fitted.P, np.float64)[torso_shell_vertices(fitted)]
+    return torso_continuation(Q), arms(Q)
+
+
 def garment_torso(fitted, with_arms: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """:func:`torso_continuation` of a fitted garment, shaped by its torso shell
     (:func:`torso_shell_vertices`), so that drawstrings, scarf ends, ties and collars hanging
     below the hem do not shape the body; ``with_arms``: and its :func:`arms` (after the prism's
     vertices). Renders before the arms (2026-12-01) recorded the prism alone."""
-    Q = np.asarray(fitted.P, np.float64)[torso_shell_vertices(fitted)]
-    V, F = torso_continuation(Q)
     if not with_arms:
-        return V, F
-    Va, Fa = arms(Q)
+        return torso_continuation(np.asarray(fitted.P, np.float64)[torso_shell_vertices(fitted)])
+    (V, F), (Va, Fa) = garment_torso_parts(fitted)
     return np.vstack([V, Va]), np.vstack([F, Fa + len(V)])
