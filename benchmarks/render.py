@@ -3,6 +3,7 @@
     .venv/bin/python benchmarks/render.py overhead [--identities 1 --expressions 2 --views 15]
     .venv/bin/python benchmarks/render.py quality  [--views 2 --reference-spp 1024]
     .venv/bin/python benchmarks/render.py memory   [--scenes 20]
+    .venv/bin/python benchmarks/render.py settings --plan PLAN [--variants base fastpf spp14 ...]
     .venv/bin/python benchmarks/render.py all
 
 overhead: the whole `synth render` (planning, worker start, model load, scene and asset
@@ -12,6 +13,13 @@ overhead: the whole `synth render` (planning, worker start, model load, scene an
 quality: speed against error. One planned identity (with its assets) at 256x256; spp in
   {4, 16, 64, 256} x denoiser {off, on}, PSNR against a high-spp, non-denoised reference,
   over the pixels the reference's alpha covers (> 0.5), on sRGB-encoded RGB clipped to [0, 1].
+settings: Cycles settings against the preset's, on every frame of a plan's first expression
+  per identity (``--identities``): seconds in Cycles' render call and PSNR / fringe RMSE against
+  a ``--reference-spp`` render (denoised), paired per frame. Variants are ``+``-joined parts:
+  base, sppN, fastpf (denoising prefilter FAST), dqbalanced / dqfast (OIDN quality),
+  diffN / glossN / transN / transpN / maxN (bounces), nolt (no light tree), burley (skin
+  subsurface), nbcloth / nbskin (no bump on cloth / skin). Each identity renders its variants
+  in turn (reversed every other identity), each from a dropped render cache.
 memory: RSS of one process building, rendering (1 view, ci preset) and resetting 20
   identity scenes in turn (what a worker does between recycles).
 """
@@ -153,6 +161,110 @@ def quality(args) -> None:
         print(f"| {spp} | {'OIDN' if dn else 'off'} | {s:.2f} | {p:.2f} | {fr:.4f} |")
 
 
+# --------------------------------------------------------------------------- settings
+
+_DEFAULTS = ("diffuse_bounces", "glossy_bounces", "transmission_bounces", "transparent_max_bounces",
+             "volume_bounces", "use_light_tree", "denoising_prefilter", "denoising_quality")
+
+
+def _apply_variant(variant: str, sc, defaults: dict, undo: list) -> None:
+    """Configure the preset's render settings, then the variant's parts (see ``settings``)."""
+    import bpy
+
+    from blender_scripts import scene as bscene
+
+    while undo:  # links removed by nbcloth / nbskin, subsurface methods changed by burley
+        undo.pop()()
+    bscene.configure_render(dict(sc.render_cfg), sc.width, sc.height)
+    c = bpy.context.scene.cycles
+    for k, v in defaults.items():
+        setattr(c, k, v)
+    for part in variant.split("+"):
+        if part == "base":
+            continue
+        head = part.rstrip("0123456789")
+        num = int(part[len(head):]) if part[len(head):] else None
+        attr = {"spp": "samples", "diff": "diffuse_bounces", "gloss": "glossy_bounces",
+                "trans": "transmission_bounces", "transp": "transparent_max_bounces", "max": "max_bounces"}
+        if head in attr and num is not None:
+            setattr(c, attr[head], num)
+        elif part == "fastpf":
+            c.denoising_prefilter = "FAST"
+        elif part in ("dqbalanced", "dqfast"):
+            c.denoising_quality = part[2:].upper()
+        elif part == "nolt":
+            c.use_light_tree = False
+        elif part in ("burley", "nbcloth", "nbskin"):
+            for m in bpy.data.materials:
+                for n in (m.node_tree.nodes if m.node_tree else ()):
+                    if n.bl_idname != "ShaderNodeBsdfPrincipled":
+                        continue
+                    cloth = m.get("fabric") is not None
+                    sss = n.inputs["Subsurface Weight"].default_value > 0
+                    if part == "burley" and n.subsurface_method == "RANDOM_WALK":
+                        n.subsurface_method = "BURLEY"
+                        undo.append(lambda n=n: setattr(n, "subsurface_method", "RANDOM_WALK"))
+                    elif (part == "nbcloth" and cloth) or (part == "nbskin" and sss and not cloth):
+                        for link in list(n.inputs["Normal"].links):
+                            a, b, nt = link.from_socket, n.inputs["Normal"], m.node_tree
+                            nt.links.remove(link)
+                            undo.append(lambda a=a, b=b, nt=nt: nt.links.new(a, b))
+        else:
+            raise SystemExit(f"unknown variant part {part!r} (see benchmarks/render.py's docstring)")
+
+
+def settings(args) -> None:
+    import bpy
+
+    from blender_scripts import scene as bscene
+    from blender_scripts.worker import IdentityScene, software_versions
+    from synth.model.head import HeadModel
+    from synth.plan.io import load_plan
+
+    plan = load_plan(args.plan)
+    hm = HeadModel(plan.model_data())
+    variants = list(args.variants)
+    rows: dict[str, list] = {v: [] for v in variants}
+    defaults, undo = None, []
+    with tempfile.TemporaryDirectory(prefix="synth-bench-") as d:
+        tmp = Path(d)
+        for n, sid in enumerate(plan.shard_ids()[: args.identities]):
+            spec = plan.shard(sid)
+            ident = spec["identities"][0]
+            sc = IdentityScene(ident, hm, plan, plan.render_settings(), int(spec["run_seed"]),
+                               {"name": hm.data.name, "sha256": plan.model_sha256()}, software_versions(), sid)
+            sc.set_expression(ident["expressions"][0])
+            if defaults is None:
+                defaults = {k: getattr(bpy.context.scene.cycles, k) for k in _DEFAULTS}
+            frames = ident["expressions"][0]["frames"]
+            _apply_variant("base", sc, defaults, undo)
+            bscene.configure_render({**sc.render_cfg, "samples": args.reference_spp, "denoise": True},
+                                    sc.width, sc.height)
+            bscene.drop_render_cache()
+            ref = [sc.render(f, tmp)[0]["rgba"] for f in frames]
+            for v in (variants if n % 2 == 0 else variants[::-1]):
+                _apply_variant(v, sc, defaults, undo)
+                bscene.drop_render_cache()
+                for f, r in zip(frames, ref):
+                    out, _ = sc.render(f, tmp)
+                    rows[v].append((out["render_seconds"], psnr_masked(out["rgba"], r, r[..., 3] > 0.5),
+                                    fringe_rmse(out["rgba"], r)))
+                    print(f"  {sid} {f['seed']} {v}: {out['render_seconds']:.2f} s", file=sys.stderr)
+            _apply_variant("base", sc, defaults, undo)
+            sc.close()
+            bscene.reset()
+    base = np.array([x[0] for x in rows[variants[0]]])
+    print(f"\n### Render settings against the `{plan.render_settings().get('preset')}` preset ({machine()})\n")
+    print(f"{len(base)} frames of {args.plan}; error against {args.reference_spp} spp, denoised; times paired "
+          f"per frame against `{variants[0]}`.\n")
+    print("| variant | s / frame (mean) | time / first, median of frames | time / first, sums | PSNR (dB) | fringe RMSE |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for v in variants:
+        t = np.array([x[0] for x in rows[v]])
+        print(f"| {v} | {t.mean():.2f} | {np.median(t / base):.3f} | {t.sum() / base.sum():.3f} | "
+              f"{np.mean([x[1] for x in rows[v]]):.2f} | {np.mean([x[2] for x in rows[v]]):.4f} |")
+
+
 # --------------------------------------------------------------------------- memory
 
 def rss_mb() -> float:
@@ -190,7 +302,9 @@ def memory(args) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("overhead", "quality", "memory", "all"))
+    ap.add_argument("what", choices=("overhead", "quality", "memory", "settings", "all"))
+    ap.add_argument("--plan", help="settings: a plan directory (synth plan)")
+    ap.add_argument("--variants", nargs="+", default=["base", "fastpf", "spp14", "dqbalanced", "burley"])
     ap.add_argument("--identities", type=int, default=1)
     ap.add_argument("--expressions", type=int, default=2)
     ap.add_argument("--views", type=int, nargs="+", default=None)
@@ -210,6 +324,12 @@ def main() -> None:
         quality(a)
     if args.what in ("memory", "all"):
         memory(args)
+    if args.what == "settings":
+        if not args.plan:
+            ap.error("settings needs --plan")
+        a = argparse.Namespace(**vars(args))
+        a.reference_spp = args.reference_spp if args.reference_spp != 1024 else 128
+        settings(a)
 
 
 if __name__ == "__main__":
