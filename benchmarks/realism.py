@@ -9,6 +9,7 @@
     .venv/bin/python benchmarks/realism.py hats [--identities 3 --seed 0 --resolution 256]
     .venv/bin/python benchmarks/realism.py judge DATASET --mp-python MPENV/bin/python [--max-azimuth 45]
         [--detections MP.json]
+    .venv/bin/python benchmarks/realism.py jaw DATASET [--detections MP.json]
     .venv/bin/python benchmarks/realism.py mapping [--relax convex 1e-2 1e-3 ...] [--dataset D --detections MP.json]
     .venv/bin/python benchmarks/realism.py timing DATASET [DATASET ...]
     .venv/bin/python benchmarks/realism.py fringe REFERENCE DATASET [DATASET ...]
@@ -623,6 +624,10 @@ def main(argv=None) -> None:
     p.add_argument("--mp-python", required=True)
     p.add_argument("--max-azimuth", type=float, default=45.0)
     p.add_argument("--detections", help="mediapipe's JSON: read it if it exists (no mediapipe run), else write it")
+    p = sub.add_parser("jaw")
+    p.add_argument("dataset")
+    p.add_argument("--detections", help="mediapipe's JSON written by judge --detections")
+    p.add_argument("--max-azimuth", type=float, default=45.0)
     p = sub.add_parser("mapping")
     p.add_argument("--relax", nargs="+", default=["convex", "1e-2", "3e-3", "1e-3", "3e-4", "1e-4"])
     p.add_argument("--dataset")
@@ -644,9 +649,9 @@ def main(argv=None) -> None:
     for q in sub.choices.values():
         q.add_argument("--json", help="also write the figures to this JSON file")
     args = ap.parse_args(argv)
-    from realism_judge import judge, mapping_table
+    from realism_judge import jaw_table, judge, mapping_table
 
-    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "body-end": body_end, "shoulders": shoulders, "hair": hair, "drape": drape_table, "beard": beard_table, "judge": lambda a: judge(a, _png, CATS), "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
+    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "body-end": body_end, "shoulders": shoulders, "hair": hair, "drape": drape_table, "beard": beard_table, "judge": lambda a: judge(a, _png, CATS), "jaw": jaw_table, "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
            "sheet": sheet}[args.cmd](args)
     if args.json:
         Path(args.json).write_text(json.dumps(res))

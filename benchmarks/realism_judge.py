@@ -387,3 +387,69 @@ def mapping_table(args) -> dict:
         print(line)
         out.append(row)
     return {"rows": out}
+
+
+#: ibug68 jaw points mirrored (0 <-> 16, ...)
+_JAW_MIRROR = list(range(16, -1, -1))
+
+
+def jaw_table(args) -> dict:
+    """``realism.py jaw``: where our jaw labels sit against the pixels and against mediapipe.
+    (1) The chin: for frames within 15 degrees of frontal (azimuth and elevation) without a beard,
+    the first depth step over 1.5 cm going down the image column of ibug68 point 8 (the chin's
+    outline over the neck) against the label's row, in inter-ocular distances (+ = outline
+    below the label). (2) With ``--detections`` (mediapipe's JSON of ``judge``): mediapipe's jaw
+    (mapped) minus ours per jaw point, by |azimuth| band, frames turned the other way mirrored so
+    that points 0-5 are the far side; with a beard and without."""
+    import json
+    from pathlib import Path
+
+    from synth.dataset.reader import iter_frames
+    from synth.model.default import load_default_model
+
+    det = json.loads(Path(args.detections).read_text())["images"] if args.detections else None
+    idx = w = None
+    if det is not None:
+        idx, w, _ = sample_mapping(load_default_model())
+    chin, offsets = [], []
+    for fr in iter_frames(args.dataset):
+        cam = fr.meta["camera"]
+        az, el = float(cam["azimuth_deg"]), float(cam.get("elevation_deg", 0.0))
+        lm = np.asarray(fr.meta["landmarks_2d"], np.float64)
+        iod = float(np.linalg.norm(lm[45] - lm[36]))
+        beard = bool(fr.meta["assets"].get("beard"))
+        if abs(az) <= 15 and abs(el) <= 15 and not beard:
+            col = fr.depth[:, int(lm[8, 0])]
+            y0 = int(lm[8, 1])
+            steps = [y for y in range(max(y0 - 8, 0), min(y0 + 40, len(col) - 1)) if col[y + 1] - col[y] > 0.015]
+            if steps:
+                chin.append((steps[0] + 1.0 - lm[8, 1]) / iod)
+        if det is not None and abs(az) <= args.max_azimuth and det.get(fr.key, {}).get("mesh") is not None:
+            m = apply_mapping(to_synth_pixels([det[fr.key]["mesh"]]), idx, w)[0]
+            d = (m[:17] - lm[:17]) / iod
+            if az < 0:
+                d = d[_JAW_MIRROR] * np.array([-1.0, 1.0])
+            offsets.append((abs(az), beard, d))
+    out: dict = {"chin_outline_below_label": chin}
+    print(f"\n### Our jaw labels against the pixels and mediapipe ({args.dataset})\n")
+    if chin:
+        print(f"Chin outline below ibug68 point 8 (frames within 15 deg of frontal, no beard; {len(chin)} with a "
+              f"depth step): median {np.median(chin):+.3f}, range {min(chin):+.3f} .. {max(chin):+.3f} "
+              "inter-ocular distances.\n")
+    if offsets:
+        print("mediapipe's jaw minus ours (mapped; inter-ocular distances; x toward the near side, y down; "
+              "points 0-5 the far side):\n")
+        print("| frames | n | " + " | ".join(str(i) for i in range(17)) + " |")
+        print("|---|---:|" + "---:|" * 17)
+        for lo, hi in ((0, 15), (15, 30), (30, 181)):
+            for name, pick in (("", None), (", no beard", False), (", beard", True)):
+                d = [o[2] for o in offsets if lo <= o[0] < hi and (pick is None or o[1] == pick)]
+                if not d:
+                    continue
+                d = np.mean(d, 0)
+                key = f"az{lo}-{hi}{name.replace(', ', '_').replace(' ', '_')}"
+                out[key] = d.tolist()
+                for axis, label in ((0, "x"), (1, "y")):
+                    print(f"| {lo}-{min(hi, 180)} deg{name}, {label} | {sum(lo <= o[0] < hi and (pick is None or o[1] == pick) for o in offsets)} | "
+                          + " | ".join(f"{v:+.3f}" for v in d[:, axis]) + " |")
+    return out
