@@ -14,14 +14,18 @@ from synth.assets.fit.garment import CLEARANCE, garment_shell
 from synth.export.usd_assets import HeadPose, asset_meshes
 
 
-def test_torso_exported_only_when_rendered(default_head):
-    hm = default_head
+def _fitted(hm, garment_id: str):
+    """(model data, the neutral head, the plan entry, the garment fitted as the renderer fits it)."""
     d = hm.data
     ev = hm.evaluate(np.zeros(d.identity_dims), np.zeros(d.expression_dims), np.zeros((hm.J, 3)))
     rest = HeadPose(ev.vertices[0].astype(np.float64), {k: v[0].astype(np.float64) for k, v in ev.landmarks.items()})
-    entry = {"id": "tshirt_crew", "params": {}}
+    entry = {"id": garment_id, "params": {}}
     body = Body(rest.vertices, d.triangles, d.regions, rest.landmarks["ibug68"])
-    fitted = fit_shell(body, garment_shell(body, entry, rig_rng(7, 3, "garment")), CLEARANCE)
+    return d, rest, entry, fit_shell(body, garment_shell(body, entry, rig_rng(7, 3, "garment")), CLEARANCE)
+
+
+def test_torso_exported_only_when_rendered(default_head):
+    d, rest, entry, fitted = _fitted(default_head, "tshirt_crew")
     Vt, _ = torso.garment_torso(fitted)
     Vp, _ = torso.garment_torso(fitted, with_arms=False)
     assert len(Vt) > len(Vp)
@@ -45,13 +49,7 @@ def test_bare_arms_exported_as_skin(default_head):
     the rendered torso's vertices."""
     from synth.dataset.segmentation import CLASSES as SEG
 
-    hm = default_head
-    d = hm.data
-    ev = hm.evaluate(np.zeros(d.identity_dims), np.zeros(d.expression_dims), np.zeros((hm.J, 3)))
-    rest = HeadPose(ev.vertices[0].astype(np.float64), {k: v[0].astype(np.float64) for k, v in ev.landmarks.items()})
-    entry = {"id": "tank_top", "params": {}}
-    body = Body(rest.vertices, d.triangles, d.regions, rest.landmarks["ibug68"])
-    fitted = fit_shell(body, garment_shell(body, entry, rig_rng(7, 3, "garment")), CLEARANCE)
+    d, rest, entry, fitted = _fitted(default_head, "tank_top")
     Vt, Ft = torso.garment_torso(fitted)
     (Vp, Fp), (Va, Fa) = torso.garment_torso_parts(fitted)
     np.testing.assert_array_equal(Vt, np.vstack([Vp, Va]))
