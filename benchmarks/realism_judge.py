@@ -446,10 +446,9 @@ def jaw_table(args) -> dict:
                 d = [o[2] for o in offsets if lo <= o[0] < hi and (pick is None or o[1] == pick)]
                 if not d:
                     continue
-                d = np.mean(d, 0)
-                key = f"az{lo}-{hi}{name.replace(', ', '_').replace(' ', '_')}"
-                out[key] = d.tolist()
+                n, d = len(d), np.mean(d, 0)
+                out[f"az{lo}-{hi}{name.replace(', ', '_').replace(' ', '_')}"] = d.tolist()
                 for axis, label in ((0, "x"), (1, "y")):
-                    print(f"| {lo}-{min(hi, 180)} deg{name}, {label} | {sum(lo <= o[0] < hi and (pick is None or o[1] == pick) for o in offsets)} | "
+                    print(f"| {lo}-{min(hi, 180)} deg{name}, {label} | {n} | "
                           + " | ".join(f"{v:+.3f}" for v in d[:, axis]) + " |")
     return out
