@@ -628,6 +628,9 @@ def main(argv=None) -> None:
     p.add_argument("dataset")
     p.add_argument("--detections", help="mediapipe's JSON written by judge --detections")
     p.add_argument("--max-azimuth", type=float, default=45.0)
+    p = sub.add_parser("eyes")
+    p.add_argument("--identities", type=int, default=200)
+    p.add_argument("--seed", type=int, default=0)
     p = sub.add_parser("mapping")
     p.add_argument("--relax", nargs="+", default=["convex", "1e-2", "3e-3", "1e-3", "3e-4", "1e-4"])
     p.add_argument("--dataset")
@@ -649,9 +652,10 @@ def main(argv=None) -> None:
     for q in sub.choices.values():
         q.add_argument("--json", help="also write the figures to this JSON file")
     args = ap.parse_args(argv)
+    from realism_eyes import eyes_table
     from realism_judge import jaw_table, judge, mapping_table
 
-    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "body-end": body_end, "shoulders": shoulders, "hair": hair, "drape": drape_table, "beard": beard_table, "judge": lambda a: judge(a, _png, CATS), "jaw": jaw_table, "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
+    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "body-end": body_end, "shoulders": shoulders, "hair": hair, "drape": drape_table, "beard": beard_table, "judge": lambda a: judge(a, _png, CATS), "jaw": jaw_table, "eyes": eyes_table, "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
            "sheet": sheet}[args.cmd](args)
     if args.json:
         Path(args.json).write_text(json.dumps(res))

@@ -136,6 +136,21 @@ def test_ibug68_landmarks_are_plausible(default_model, rest):
     np.testing.assert_allclose(L[IBUG_MIRROR] * [-1.0, 1.0, 1.0], L, atol=1e-4)
 
 
+def test_eye_openings_have_measured_adult_proportions(rest):
+    """The template's lid openings (EYE_OPENING) against published adult means (docs/default-model.md,
+    "Eye proportions"): fissure ex-en 26-30 mm, intercanthal 31-41 mm, canthal index 36-44, lid
+    opening 9-12 mm. Before builder 5 the fissure was 22.2 mm, the canthal index 46.8 and the opening
+    at the thirds 7.9 mm: small eyes set wide apart."""
+    _, L = rest
+    mm = lambda a, b: 1000.0 * np.linalg.norm(L[a] - L[b])
+    fissure = (mm(36, 39) + mm(42, 45)) / 2
+    height = np.mean([mm(37, 41), mm(38, 40), mm(43, 47), mm(44, 46)])
+    assert 23.5 < fissure < 30.0
+    assert 31.0 < mm(39, 42) < 41.0
+    assert 36.0 < 100.0 * mm(39, 42) / mm(36, 45) < 46.0
+    assert 8.5 < height < 12.0
+
+
 def test_dense_landmarks_cover_the_face(default_model, rest):
     V, _ = rest
     tri, bary = default_model.landmarks["dense"]

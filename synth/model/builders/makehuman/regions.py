@@ -84,7 +84,7 @@ def feature_regions(mesh: Mesh, X: np.ndarray, tris: np.ndarray, space: TargetSp
     lids = {}
     sockets = []
     for t, seed in (("l", L[HM08_LID_SEED]), ("r", mesh.mirror[L[HM08_LID_SEED]])):
-        loop = topo.horizontal_loop(X, int(seed))
+        loop = topo.horizontal_loop(mesh.base, int(seed))  # topology: the base mesh's edges
         lids[t] = split_loop(X, loop)
         sockets.append(topo.enclosed(loop, skin))
         medial_first = (lambda a: a) if t == "l" else (lambda a: a[::-1])  # medial -> lateral

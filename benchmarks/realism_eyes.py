@@ -1,0 +1,113 @@
+"""The eyes' proportions against published measurements of adult faces (issue 13): distances
+between the model's ibug68 landmarks of planned identities (neutral expression, rest pose),
+in millimetres, next to anthropometric studies of the same distances.
+
+ibug68 points and the anthropometric landmarks they stand for (the builder's rules,
+synth/model/builders/makehuman/landmarks.py): 36 / 45 the lateral ends of the lid margins
+(exocanthion, ex), 39 / 42 the medial ends (endocanthion, en), 37 / 38 and 41 / 40 the upper and
+lower lid margins at a third and two thirds of the eye's width (the lid opening there stands in
+for palpebrale superius - inferius, ps-pi, which is taken at the opening's highest point: ours
+reads a little lower).
+
+Plain numpy; the command is ``benchmarks/realism.py eyes`` (tested in
+tests/benchmarks/test_realism_eyes.py).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: measurement -> (what it is, its ibug68 pairs: the mean of their distances)
+MEASURES = {
+    "en-en": ("intercanthal width", ((39, 42),)),
+    "ex-ex": ("biocular width", ((36, 45),)),
+    "ex-en": ("eye fissure length (mean of both eyes)", ((36, 39), (42, 45))),
+    "ps-pi": ("eye fissure height at the thirds (mean of both eyes)", ((37, 41), (38, 40), (43, 47), (44, 46))),
+}
+#: derived: canthal index and fissure index, 100 x a / b
+INDICES = {"canthal index": ("en-en", "ex-ex"), "fissure height / length": ("ps-pi", "ex-en")}
+
+#: published measurements: (study, population, {measure: (mean, sd or None)}), mm
+REFERENCES = (
+    ("Wong et al. 2013, BioMed Res. Int. 821428 (3D photos)", "Hong Kong Chinese 18-35 y, 51 men",
+     {"en-en": (40.61, 4.91), "ex-ex": (93.00, 5.56), "ex-en": (27.64, 1.67), "ps-pi": (11.55, 1.05),
+      "canthal index": (43.95, 8.23), "fissure height / length": (41.84, 3.69)}),
+    ("", "52 women",
+     {"en-en": (38.27, 2.61), "ex-ex": (88.39, 3.74), "ex-en": (26.04, 1.83), "ps-pi": (11.94, 1.23),
+      "canthal index": (43.29, 2.35), "fissure height / length": (45.89, 4.05)}),
+    ("Knezi et al. 2020, Int. J. Morphol. 38(5) (photographs; right eye)", "Serbian, 19 y, 90",
+     {"ex-en": (27.05, 1.71), "ps-pi": (9.35, 1.55)}),
+    ("Malik et al. 2022, Ophthalmology Journal (ruler; means only)", "Pakistan, 15 y and over, 380",
+     {"en-en": (31.7, None), "ex-en": (29.7, None), "ps-pi": (10.04, None)}),
+    ("Read et al. 2006, Optom. Vis. Sci. 83(10) (photographs; primary gaze)", "white, young, 76",
+     {"ps-pi": (9.7, 1.2)}),
+    ("pooled review, 67 studies, Plast. Reconstr. Surg. Glob. Open 2022 (PMC9029890)", "White / African / Asian",
+     {"en-en": (31.4, 2.5)}),
+    ("", "African", {"en-en": (38.5, 3.2)}),
+    ("", "Asian", {"en-en": (36.4, 1.6)}),
+)
+
+
+def eye_measures(ibug: np.ndarray) -> dict[str, np.ndarray]:
+    """Measurements (mm) of ibug68 landmarks ``ibug`` (N, 68, 3) in metres: each of
+    :data:`MEASURES` (the mean of its pairs' distances) and :data:`INDICES` (per identity)."""
+    p = np.asarray(ibug, np.float64)
+    out = {name: 1000.0 * np.mean([np.linalg.norm(p[:, a] - p[:, b], axis=-1) for a, b in pairs], axis=0)
+           for name, (_, pairs) in MEASURES.items()}
+    for name, (a, b) in INDICES.items():
+        out[name] = 100.0 * out[a] / out[b]
+    return out
+
+
+def reference_range(name: str) -> tuple[float, float] | None:
+    """The lowest and highest published mean of a measurement (:data:`REFERENCES`)."""
+    means = [m[name][0] for _, _, m in REFERENCES if name in m]
+    return (min(means), max(means)) if means else None
+
+
+def table(values: dict[str, np.ndarray]) -> list[dict]:
+    """Rows: measurement, our 5th / 50th / 95th percentiles, the published means' range and how
+    many published standard deviations (their largest) our median lies outside that range."""
+    rows = []
+    for name in [*MEASURES, *INDICES]:
+        v = values[name]
+        lo, hi = reference_range(name) or (np.nan, np.nan)
+        sds = [m[name][1] for _, _, m in REFERENCES if name in m and m[name][1]]
+        med = float(np.median(v))
+        off = (lo - med if med < lo else med - hi if med > hi else 0.0) / max(sds) if sds else np.nan
+        rows.append({"measure": name, "p5": float(np.percentile(v, 5)), "median": med,
+                     "p95": float(np.percentile(v, 95)), "published_low": lo, "published_high": hi,
+                     "sd_outside": float(np.sign(med - (lo + hi) / 2) * off) if off == off else np.nan})
+    return rows
+
+
+def planned_landmarks(seed: int, identities: int) -> np.ndarray:
+    """(N, 68, 3) ibug68 landmarks (m) of the first planned identities, neutral, rest pose."""
+    from synth.config import load_config
+    from synth.model.default import load_default_model
+    from synth.model.head import HeadModel
+    from synth.plan import identities as plan_ids
+
+    model = load_default_model()
+    cfg = load_config()
+    ids = np.arange(identities)
+    codes = plan_ids.sample_identities(seed, ids, plan_ids.prior_of(model),
+                                       plan_ids.truncation_radius(model.identity_dims, cfg.identity))
+    hm = HeadModel(model, np.float64)
+    ev = hm.evaluate(codes, np.zeros((identities, model.expression_dims)), np.zeros((identities, hm.J, 3)))
+    return np.asarray(ev.landmarks["ibug68"], np.float64)
+
+
+def eyes_table(args) -> dict:
+    values = eye_measures(planned_landmarks(args.seed, args.identities))
+    rows = table(values)
+    print(f"\n### The eyes against published measurements ({args.identities} planned identities of seed "
+          f"{args.seed}, neutral; mm)\n")
+    print("| measure | ours: 5 % / median / 95 % | published means | median outside them, in published SDs |")
+    print("|---|---:|---:|---:|")
+    for r in rows:
+        pub = f"{r['published_low']:.1f} - {r['published_high']:.1f}" if r["published_low"] == r["published_low"] else "-"
+        off = f"{r['sd_outside']:+.1f}" if r["sd_outside"] == r["sd_outside"] else "-"
+        print(f"| {r['measure']} | {r['p5']:.1f} / {r['median']:.1f} / {r['p95']:.1f} | {pub} | {off} |")
+    print("\nPublished: " + "; ".join(f"{s or '(same)'}: {pop}" for s, pop, _ in REFERENCES))
+    return {"rows": rows, "identities": args.identities, "seed": args.seed}

@@ -1,0 +1,58 @@
+"""benchmarks/realism_eyes.py: the eyes' proportions against published measurements (issue 13)."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def E():
+    spec = importlib.util.spec_from_file_location("realism_eyes", ROOT / "benchmarks" / "realism_eyes.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _eyes(fissure_mm, gap_mm, height_mm):
+    """(1, 68, 3) points in metres: two eyes on the x axis, medial corners ``gap_mm`` apart, each
+    ``fissure_mm`` long, lids ``height_mm`` apart at the thirds, rotated off the axes."""
+    p = np.zeros((68, 3))
+    g, f, h = gap_mm / 2000, fissure_mm / 1000, height_mm / 1000
+    for s, (lat, up1, up2, med, lo2, lo1) in ((-1, range(36, 42)), (1, (45, 44, 43, 42, 47, 46))):
+        p[med] = [s * g, 0, 0]
+        p[lat] = [s * (g + f), 0, 0]
+        for up, lo, t in ((up1, lo1, 2 / 3), (up2, lo2, 1 / 3)):  # at a third and two thirds from the medial corner
+            x = s * (g + t * f)
+            p[up], p[lo] = [x, 0, h / 2], [x, 0, -h / 2]
+    c, sn = np.cos(0.4), np.sin(0.4)
+    R = np.array([[c, -sn, 0], [sn, c, 0], [0, 0, 1]])  # distances do not depend on the head's pose
+    return (p @ R.T + [0.1, -0.2, 1.5])[None]
+
+
+def test_measures_of_known_eyes(E):
+    v = E.eye_measures(np.concatenate([_eyes(27.0, 32.0, 10.0), _eyes(22.0, 39.0, 8.0)]))
+    np.testing.assert_allclose(v["en-en"], [32.0, 39.0], atol=1e-9)
+    np.testing.assert_allclose(v["ex-ex"], [86.0, 83.0], atol=1e-9)
+    np.testing.assert_allclose(v["ex-en"], [27.0, 22.0], atol=1e-9)
+    np.testing.assert_allclose(v["ps-pi"], [10.0, 8.0], atol=1e-9)
+    np.testing.assert_allclose(v["canthal index"], [100 * 32 / 86, 100 * 39 / 83], atol=1e-9)
+    np.testing.assert_allclose(v["fissure height / length"], [100 * 10 / 27, 100 * 8 / 22], atol=1e-9)
+
+
+def test_table_says_how_far_outside_the_published_means(E):
+    lo, hi = E.reference_range("ex-en")
+    sd = max(m["ex-en"][1] for _, _, m in E.REFERENCES if "ex-en" in m and m["ex-en"][1])
+    inside = E.eye_measures(_eyes((lo + hi) / 2, 34.0, 10.0))
+    short = E.eye_measures(np.repeat(_eyes(lo - 2 * sd, 34.0, 10.0), 3, axis=0))
+    rows_in = {r["measure"]: r for r in E.table(inside)}
+    rows_short = {r["measure"]: r for r in E.table(short)}
+    assert rows_in["ex-en"]["sd_outside"] == 0.0
+    assert rows_short["ex-en"]["sd_outside"] == pytest.approx(-2.0)
+    assert rows_short["ex-en"]["median"] == pytest.approx(lo - 2 * sd)
+    assert (rows_in["ex-en"]["published_low"], rows_in["ex-en"]["published_high"]) == (lo, hi)
