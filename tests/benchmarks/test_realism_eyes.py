@@ -2,22 +2,15 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.support.scripts import load_script
 
 
 @pytest.fixture(scope="module")
 def E():
-    spec = importlib.util.spec_from_file_location("realism_eyes", ROOT / "benchmarks" / "realism_eyes.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
+    return load_script("benchmarks/realism_eyes.py", "realism_eyes")
 
 def _eyes(fissure_mm, gap_mm, height_mm):
     """(1, 68, 3) points in metres: two eyes on the x axis, medial corners ``gap_mm`` apart, each
@@ -34,7 +27,6 @@ def _eyes(fissure_mm, gap_mm, height_mm):
     R = np.array([[c, -sn, 0], [sn, c, 0], [0, 0, 1]])  # distances do not depend on the head's pose
     return (p @ R.T + [0.1, -0.2, 1.5])[None]
 
-
 def test_measures_of_known_eyes(E):
     v = E.eye_measures(np.concatenate([_eyes(27.0, 32.0, 10.0), _eyes(22.0, 39.0, 8.0)]))
     np.testing.assert_allclose(v["en-en"], [32.0, 39.0], atol=1e-9)
@@ -43,7 +35,6 @@ def test_measures_of_known_eyes(E):
     np.testing.assert_allclose(v["ps-pi"], [10.0, 8.0], atol=1e-9)
     np.testing.assert_allclose(v["canthal index"], [100 * 32 / 86, 100 * 39 / 83], atol=1e-9)
     np.testing.assert_allclose(v["fissure height / length"], [100 * 10 / 27, 100 * 8 / 22], atol=1e-9)
-
 
 def test_table_says_how_far_outside_the_published_means(E):
     lo, hi = E.reference_range("ex-en")

@@ -3,28 +3,20 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.support.scripts import load_script
 
 
 @pytest.fixture(scope="module")
 def J():
-    spec = importlib.util.spec_from_file_location("realism_judge", ROOT / "benchmarks" / "realism_judge.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
+    return load_script("benchmarks/realism_judge.py", "realism_judge")
 
 def _faces(n, seed=0):
     """(n, 68, 2) random point sets with the outer eye corners 36, 45 apart."""
     g = np.random.default_rng(seed)
     return g.uniform(0, 200, (n, 68, 2))
-
 
 def test_face_errors_against_a_rotation_reference(J):
     truth, pred = _faces(5), _faces(5, 1)
@@ -41,7 +33,6 @@ def test_face_errors_against_a_rotation_reference(J):
     p[0, 30] += (4.0, -2.0)
     np.testing.assert_allclose(J.face_errors(p, t)[0, 30], (0.1, -0.05), atol=1e-12)
 
-
 @pytest.mark.parametrize("angle", [0.0, np.pi / 2, np.pi, -2.5])
 def test_face_errors_invariant_to_similarity(J, angle):
     truth, pred = _faces(3, 2), _faces(3, 3)
@@ -49,7 +40,6 @@ def test_face_errors_invariant_to_similarity(J, angle):
     move = lambda x: 3.7 * x @ R.T + (-40.0, 1e3)  # noqa: E731
     np.testing.assert_allclose(J.face_errors(move(pred), move(truth)), J.face_errors(pred, truth), atol=1e-9)
     assert np.all(J.nme(J.face_errors(truth, truth)) == 0)
-
 
 def test_fit_mapping_recovers_exact_convex_weights(J):
     g = np.random.default_rng(4)
@@ -63,7 +53,6 @@ def test_fit_mapping_recovers_exact_convex_weights(J):
     np.testing.assert_allclose(w, w_true, atol=1e-5)
     assert rms.max() < 1e-5
 
-
 def _outside_hull(seed: int, samples: int):
     """Random mesh points (samples, 6, 2) and ibug68 targets mostly outside the hull of the first
     5 (candidates of every target), the outer eye corners 35 px apart."""
@@ -72,7 +61,6 @@ def _outside_hull(seed: int, samples: int):
     truth = g.normal(0, 30, (samples, 68, 2))
     truth[:, 45] = truth[:, 36] + (35.0, 5.0)
     return mesh, truth, np.tile(np.arange(5), (68, 1))
-
 
 def test_fit_mapping_outside_the_hull_matches_a_constrained_solver(J):
     from scipy.optimize import minimize
@@ -89,14 +77,12 @@ def test_fit_mapping_outside_the_hull_matches_a_constrained_solver(J):
         assert cost(w[j]) <= ref.fun * (1 + 1e-5) + 1e-12
         assert rms[j] == pytest.approx(np.sqrt(cost(w[j]) / len(mesh)), rel=1e-6)
 
-
 def test_single_candidate_is_the_point_itself(J):
     mesh = _faces(4, 6)[:, :20]
     truth = _faces(4, 7)
     w, _ = J.fit_mapping(mesh, truth, np.full((68, 1), 3))
     np.testing.assert_allclose(w, 1.0)
     np.testing.assert_allclose(J.apply_mapping(mesh, np.full((68, 1), 3), w), np.repeat(mesh[:, 3:4], 68, 1))
-
 
 def test_mirror_permutation_on_the_default_model(J, default_model):
     """IBUG68_MIRROR is an involution and pairs the default model's landmarks with their
@@ -113,11 +99,9 @@ def test_mirror_permutation_on_the_default_model(J, default_model):
     flipped = J.unmirror(pts, 256)
     np.testing.assert_allclose(flipped[:, 16, 0], 256 - pts[:, 0, 0])
 
-
 def test_mediapipe_pixels_shift_to_synth_convention(J):
     # mediapipe puts the centre of pixel column 10 at x = 10; synth at 10.5
     np.testing.assert_allclose(J.to_synth_pixels([[10.0, 0.0]]), [[10.5, 0.5]])
-
 
 def test_relaxed_fit_spans_convex_to_affine_least_squares(J):
     """relax -> infinity keeps the convex weights; relax -> 0 gives the least squares over
@@ -139,7 +123,6 @@ def test_relaxed_fit_spans_convex_to_affine_least_squares(J):
         np.testing.assert_allclose(w0[j], ref, atol=1e-6)
     assert np.any(w0 < -1e-3)  # the random targets lie outside the hull: signs are free
     assert np.all(r0 <= rm + 1e-12) and np.all(rm <= rc + 1e-12)
-
 
 def test_sample_mapping_beats_the_template_mapping_on_held_out_samples(J, default_model):
     idx, w, rms = J.sample_mapping(default_model, identities=12, views=4)
@@ -164,7 +147,6 @@ def test_sample_mapping_beats_the_template_mapping_on_held_out_samples(J, defaul
     # matrix products may differ in the last bit with the arrays' memory alignment (seen: 1.4e-13 px)
     again = J.model_samples(default_model, 7, 8, 4)
     np.testing.assert_allclose(again[0], mesh, rtol=1e-12, atol=0)
-
 
 @pytest.mark.parametrize("factor", [0.7, 1.0, 1.2])
 def test_shrink_recovers_a_judge_that_scales_shape_variation(J, factor):
