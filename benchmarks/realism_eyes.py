@@ -74,10 +74,10 @@ def table(values: dict[str, np.ndarray]) -> list[dict]:
         lo, hi = reference_range(name) or (np.nan, np.nan)
         sds = [m[name][1] for _, _, m in REFERENCES if name in m and m[name][1]]
         med = float(np.median(v))
-        off = (lo - med if med < lo else med - hi if med > hi else 0.0) / max(sds) if sds else np.nan
+        outside = med - lo if med < lo else med - hi if med > hi else 0.0  # signed, mm (or index units)
         rows.append({"measure": name, "p5": float(np.percentile(v, 5)), "median": med,
                      "p95": float(np.percentile(v, 95)), "published_low": lo, "published_high": hi,
-                     "sd_outside": float(np.sign(med - (lo + hi) / 2) * off) if off == off else np.nan})
+                     "sd_outside": outside / max(sds) if sds else np.nan})
     return rows
 
 

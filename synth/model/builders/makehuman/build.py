@@ -30,11 +30,12 @@ N_SAMPLES = 3000  # identity samples before mirroring (the PCA sees 2 * N_SAMPLE
 GMM_COMPONENTS = 6
 GMM_FIT_SAMPLES = 2000
 GMM_ITERS = 60
-#: weight of MakeHuman's eye-scale-incr targets (both eyes) added to the template: it widens the lid
-#: openings about the fixed eyeballs, the mean eye fissure (ex-en) from 22.2 to 26.7 mm, the
-#: intercanthal width from 38.6 to 34.5 mm and the biocular width from 82.5 to 87.3 mm, into the
-#: ranges of published measurements of adults (docs/default-model.md, "Eye proportions";
-#: ``benchmarks/realism.py eyes``). The identity basis is unchanged: identities vary about this.
+#: weight of MakeHuman's eye-scale-incr targets (both eyes) added to the template (1.0: the slider's
+#: end): they widen the lid openings about the fixed eyeballs. With the eyelid rig resting the
+#: margins on the eyeballs the template's eye fissure (ex-en) goes from 22.2 to 24.2 mm, the
+#: intercanthal width from 38.6 to 36.5 mm and the biocular width from 82.5 to 84.4 mm, toward
+#: published adult means (docs/default-model.md "Identity space" 6, docs/realism.md "Eye
+#: proportions", ``benchmarks/realism.py eyes``). The identity basis is unchanged.
 EYE_OPENING = 1.0
 
 
