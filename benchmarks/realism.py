@@ -586,6 +586,17 @@ def sheet(args) -> dict:
     return {}
 
 
+def eyes(args) -> dict:
+    """The eyes' proportions of the first planned identities (neutral, rest pose) against
+    published measurements (benchmarks/realism_eyes.py)."""
+    from realism_eyes import eyes_table
+
+    model, hm, ids, codes = _planned_heads(args.seed, args.identities)
+    n = len(ids)
+    ev = hm.evaluate(codes, np.zeros((n, model.expression_dims)), np.zeros((n, hm.J, 3)))
+    return eyes_table(args, np.asarray(ev.landmarks["ibug68"], np.float64))
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -652,10 +663,9 @@ def main(argv=None) -> None:
     for q in sub.choices.values():
         q.add_argument("--json", help="also write the figures to this JSON file")
     args = ap.parse_args(argv)
-    from realism_eyes import eyes_table
     from realism_judge import jaw_table, judge, mapping_table
 
-    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "body-end": body_end, "shoulders": shoulders, "hair": hair, "drape": drape_table, "beard": beard_table, "judge": lambda a: judge(a, _png, CATS), "jaw": jaw_table, "eyes": eyes_table, "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
+    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "body-end": body_end, "shoulders": shoulders, "hair": hair, "drape": drape_table, "beard": beard_table, "judge": lambda a: judge(a, _png, CATS), "jaw": jaw_table, "eyes": eyes, "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
            "sheet": sheet}[args.cmd](args)
     if args.json:
         Path(args.json).write_text(json.dumps(res))

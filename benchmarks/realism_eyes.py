@@ -81,25 +81,9 @@ def table(values: dict[str, np.ndarray]) -> list[dict]:
     return rows
 
 
-def planned_landmarks(seed: int, identities: int) -> np.ndarray:
-    """(N, 68, 3) ibug68 landmarks (m) of the first planned identities, neutral, rest pose."""
-    from synth.config import load_config
-    from synth.model.default import load_default_model
-    from synth.model.head import HeadModel
-    from synth.plan import identities as plan_ids
-
-    model = load_default_model()
-    cfg = load_config()
-    ids = np.arange(identities)
-    codes = plan_ids.sample_identities(seed, ids, plan_ids.prior_of(model),
-                                       plan_ids.truncation_radius(model.identity_dims, cfg.identity))
-    hm = HeadModel(model, np.float64)
-    ev = hm.evaluate(codes, np.zeros((identities, model.expression_dims)), np.zeros((identities, hm.J, 3)))
-    return np.asarray(ev.landmarks["ibug68"], np.float64)
-
-
-def eyes_table(args) -> dict:
-    values = eye_measures(planned_landmarks(args.seed, args.identities))
+def eyes_table(args, ibug: np.ndarray) -> dict:
+    """Print and return the table for ``ibug`` (N, 68, 3), the planned identities of ``args``."""
+    values = eye_measures(ibug)
     rows = table(values)
     print(f"\n### The eyes against published measurements ({args.identities} planned identities of seed "
           f"{args.seed}, neutral; mm)\n")
