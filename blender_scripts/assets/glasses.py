@@ -3,8 +3,8 @@
 Geometry and the pose solve live in :mod:`synth.assets.fit.glasses` (plain numpy,
 tested without Blender); this module builds the Blender side: one mesh object for the frame
 (rims, bridge, end pieces, hinges, pad arms, temples, temple tips, nose pads; one material
-slot per finish) and one for the two lenses (glass: Principled transmission tinted by
-``lens_tint``). Every material has ``pass_index = CLASSES['glasses']`` (10), lenses included.
+slot per finish) and one for the two lenses (glass tinted by ``lens_tint``, its reflection
+set by the lens coating, see :func:`_lens_material`). Every material has ``pass_index = CLASSES['glasses']`` (10), lenses included.
 
 Meshes are built in world coordinates (object transform = identity). ``update`` re-solves
 on the current expression and swaps in fresh mesh data (expressions barely move the nose
@@ -20,11 +20,14 @@ from blender_scripts.assets import Rig
 from synth.assets.classes import CLASSES
 from synth.assets.fit.glasses.front import build_front
 from synth.assets.fit.glasses.solve import FRAME_PARTS, GlassesFit, fit_glasses
-from synth.assets.fit.glasses.spec import COLOURS, METALLIC_COLOURS, FrameSpec, frame_spec
+from synth.assets.fit.glasses.spec import (COLOURS, LENS_IOR, METALLIC_COLOURS, FrameSpec, frame_spec,
+                                           reflectance_ior)
 
 PASS = CLASSES["glasses"].segmentation_id
 LENS_SHARP_DEG = 45.0  #: lens edges with a steeper dihedral angle (cap to wall: ~90) are shaded sharp
 TINTS = {"aviator": (0.30, 0.26, 0.16), "default": (0.35, 0.33, 0.30)}  # tint colour at full strength
+LENS_ROUGHNESS = 0.02
+AR_RESIDUAL_RGB = (0.85, 1.05, 0.85)  #: residual reflection of an anti-reflective coating (luminance ~1)
 
 
 def _principled(name: str):
@@ -74,14 +77,34 @@ def _finish(name: str, colour: str, kind: str, seed: float = 0.0):
     return mat
 
 
-def _lens_material(style: str, tint: float):
+def _lens_material(spec: FrameSpec):
+    """Clear lens: sharp refraction at LENS_IOR mixed with a mirror reflection by the Fresnel
+    factor of the index whose normal-incidence reflectance is ``spec.lens_reflectance`` (4 %
+    uncoated: the lens's own index; an anti-reflective coating leaves 0.3-1.2 %, with the
+    greenish residual hue of multilayer coatings). The Principled BSDF cannot lower the
+    reflection of a transmissive surface without changing its refraction."""
     mat, b = _principled("glasses_lens")
-    tc = np.asarray(TINTS.get(style, TINTS["default"]))
-    col = 1.0 - float(np.clip(tint, 0.0, 1.0)) * (1.0 - tc)
-    b.inputs["Base Color"].default_value = (*col, 1.0)
-    b.inputs["Transmission Weight"].default_value = 1.0
-    b.inputs["Roughness"].default_value = 0.02
-    b.inputs["IOR"].default_value = 1.5
+    nt = mat.node_tree
+    nt.nodes.remove(b)
+    tc = np.asarray(TINTS.get(spec.style, TINTS["default"]))
+    col = 1.0 - float(np.clip(spec.tint, 0.0, 1.0)) * (1.0 - tc)
+    refr = nt.nodes.new("ShaderNodeBsdfRefraction")
+    refr.distribution = "GGX"
+    refr.inputs["Color"].default_value = (*col, 1.0)
+    refr.inputs["Roughness"].default_value = LENS_ROUGHNESS
+    refr.inputs["IOR"].default_value = LENS_IOR
+    mirror = nt.nodes.new("ShaderNodeBsdfGlossy")
+    mirror.distribution = "GGX"
+    mirror.inputs["Roughness"].default_value = LENS_ROUGHNESS
+    coated = spec.coating == "anti_reflective"
+    mirror.inputs["Color"].default_value = (*(AR_RESIDUAL_RGB if coated else (1.0, 1.0, 1.0)), 1.0)
+    fresnel = nt.nodes.new("ShaderNodeFresnel")
+    fresnel.inputs["IOR"].default_value = reflectance_ior(spec.lens_reflectance)
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    nt.links.new(fresnel.outputs["Fac"], mix.inputs["Fac"])
+    nt.links.new(refr.outputs["BSDF"], mix.inputs[1])
+    nt.links.new(mirror.outputs["BSDF"], mix.inputs[2])
+    nt.links.new(mix.outputs["Shader"], nt.nodes["Material Output"].inputs["Surface"])
     return mat
 
 
@@ -150,7 +173,7 @@ def build(ctx, entry: dict) -> GlassesRig:
                           "metal" if spec.material == "metal" else "acetate", seed + 1),
         "tip": _finish("glasses_tip", spec.temple_colour, "tip" if spec.material == "metal" else "acetate", seed + 2),
         "pad": _finish("glasses_pad", "clear", "pad"),
-        "lens": _lens_material(style, spec.tint),
+        "lens": _lens_material(spec),
     }
     frame_me = bpy.data.meshes.new("glasses_frame")
     lens_me = bpy.data.meshes.new("glasses_lenses")

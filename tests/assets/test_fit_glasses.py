@@ -147,6 +147,39 @@ def test_fit_deterministic_and_spec_from_params(default_head):
         frame_spec("monocle", {}, np.random.default_rng(0))
 
 
+def test_lens_coating_drawn_after_the_other_draws_and_pinnable():
+    """A quarter of lenses (AR_SHARE) are uncoated, reflecting 4 % per surface (the Fresnel
+    reflectance of the lens index); coated ones 0.3-1.2 %. The two draws come after all others,
+    so every other field is what the same generator gave before they existed; the manifest can
+    pin both, and a wrong value is refused."""
+    from synth.assets.fit.glasses import spec as gs
+
+    assert gs.reflectance_ior(gs.UNCOATED_REFLECTANCE) == pytest.approx(gs.LENS_IOR)
+    assert gs.reflectance_ior(0.0) == 1.0
+    specs = [frame_spec("round", {}, np.random.default_rng(s)) for s in range(400)]
+    coated = np.array([sp.coating == "anti_reflective" for sp in specs])
+    assert abs(coated.mean() - gs.AR_SHARE) < 0.07, coated.mean()
+    r = np.array([sp.lens_reflectance for sp in specs])
+    lo, hi = gs.AR_REFLECTANCE
+    assert np.all((r[coated] >= lo) & (r[coated] <= hi)) and r[coated].max() - r[coated].min() > 0.5 * (hi - lo)
+    assert np.all(r[~coated] == pytest.approx(0.04))
+    for s in range(5):  # the earlier draws are unchanged: the generator's first 8 values
+        rng = np.random.default_rng(s)
+        first = [rng.uniform(0.046, 0.054), rng.uniform(0.03, 0.038), rng.uniform(0.002, 0.005),
+                 rng.uniform(0.016, 0.021), rng.uniform(6.0, 10.0), rng.uniform(2.0, 6.0)]
+        sp = specs[s]
+        assert (sp.lens_w, sp.bridge, sp.pantoscopic_deg, sp.wrap_deg) == (first[0], first[3], first[4], first[5])
+    pinned = frame_spec("round", {"lens_coating": "none"}, np.random.default_rng(0))
+    assert pinned.coating == "none" and pinned.lens_reflectance == pytest.approx(0.04)
+    pinned = frame_spec("round", {"lens_coating": "anti_reflective", "lens_reflectance": 0.002},
+                        np.random.default_rng(0))
+    assert pinned.lens_reflectance == 0.002 and pinned.record()["coating"] == "anti_reflective"
+    with pytest.raises(ValueError, match="lens_coating"):
+        frame_spec("round", {"lens_coating": "mirror"}, np.random.default_rng(0))
+    with pytest.raises(ValueError, match="lens_reflectance"):
+        frame_spec("round", {"lens_reflectance": 0.5}, np.random.default_rng(0))
+
+
 @pytest.mark.slow
 def test_fit_contact_on_hard_cases(default_head):
     """Every style built at one hard case (the rig's own parameters and generator) and re-fitted

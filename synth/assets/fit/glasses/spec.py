@@ -1,7 +1,7 @@
 """Glasses styles, frame colours and the frame description (:class:`FrameSpec`).
 
 :func:`frame_spec` completes the plan's parameters of one glasses asset with rig-drawn ones
-(bridge width, missing sizes, tilt, wrap, colour) from the rig's generator; the draws are
+(bridge width, missing sizes, tilt, wrap, colour, lens coating) from the rig's generator; the draws are
 always made, in a fixed order, so they stay aligned whatever the plan gives.
 """
 
@@ -21,6 +21,20 @@ COLOURS = {  # linear sRGB base colours
     "titanium": (0.55, 0.53, 0.5),
 }
 METALLIC_COLOURS = {"silver", "gold", "titanium"}
+
+LENS_IOR = 1.5  #: CR-39 / crown glass
+#: Reflectance of one lens surface at normal incidence: uncoated (Fresnel of LENS_IOR, 4 %) and the
+#: range drawn for anti-reflective coatings (multilayer stacks leave roughly 0.3-1.2 % per surface)
+UNCOATED_REFLECTANCE = ((LENS_IOR - 1.0) / (LENS_IOR + 1.0)) ** 2
+AR_REFLECTANCE = (0.003, 0.012)
+AR_SHARE = 0.75  #: share of lenses drawn with an anti-reflective coating (a choice, not a census)
+COATINGS = ("anti_reflective", "none")
+
+
+def reflectance_ior(r0: float) -> float:
+    """The index whose Fresnel reflectance at normal incidence (from air) is ``r0``."""
+    s = float(np.sqrt(np.clip(r0, 0.0, 0.99)))
+    return (1.0 + s) / (1.0 - s)
 
 
 @dataclasses.dataclass
@@ -44,6 +58,8 @@ class FrameSpec:
     lens_thickness: float = 0.002
     temple_r: tuple = (0.0012, 0.0022)  # half sizes (horizontal, vertical) of the temple section
     tip_r: float = 0.0016
+    coating: str = "none"  # anti_reflective | none
+    lens_reflectance: float = UNCOATED_REFLECTANCE  # per surface, at normal incidence
 
     def record(self) -> dict:
         d = dataclasses.asdict(self)
@@ -58,7 +74,8 @@ def frame_spec(style: str, params: dict, rng: np.random.Generator) -> FrameSpec:
     p = dict(params or {})
     u = lambda lo, hi: float(rng.uniform(lo, hi))  # noqa: E731 - always drawn, so draws stay aligned
     draws = {"w": u(0.046, 0.054), "h": u(0.03, 0.038), "rim": u(0.002, 0.005), "bridge": u(0.016, 0.021),
-             "pct": u(6.0, 10.0), "wrap": u(2.0, 6.0), "mat": u(0.0, 1.0), "col": int(rng.integers(1 << 30))}
+             "pct": u(6.0, 10.0), "wrap": u(2.0, 6.0), "mat": u(0.0, 1.0), "col": int(rng.integers(1 << 30)),
+             "coat": u(0.0, 1.0), "refl": u(0.0, 1.0)}
     w = float(p.get("lens_width_m", p.get("lens_diameter_m", draws["w"])))
     h = float(p.get("lens_height_m", p.get("lens_diameter_m", 0.0))) or None
     colour = str(p.get("frame_colour", ["black", "tortoise", "brown", "silver", "gold"][draws["col"] % 5]))
@@ -89,10 +106,18 @@ def frame_spec(style: str, params: dict, rng: np.random.Generator) -> FrameSpec:
         rim_w = float(np.clip(0.45 * rim_w, 0.0012, 0.0022))
     rim_d = rim_w if metal else float(np.clip(1.3 * rim_w, 0.003, 0.006))
     temple_colour = str(p.get("temple_colour", colour))
+    coating = str(p.get("lens_coating", COATINGS[0] if draws["coat"] < AR_SHARE else COATINGS[1]))
+    if coating not in COATINGS:
+        raise ValueError(f"unknown lens_coating {coating!r}; expected one of {COATINGS}")
+    lo, hi = AR_REFLECTANCE
+    refl = lo * (hi / lo) ** draws["refl"] if coating == "anti_reflective" else UNCOATED_REFLECTANCE
+    refl = float(p.get("lens_reflectance", refl))
+    if not 0.0 <= refl < 0.25:
+        raise ValueError(f"lens_reflectance {refl!r} is outside [0, 0.25)")
     return FrameSpec(style=style, lens_w=w, lens_h=float(h), rim_w=rim_w, rim_d=rim_d, bridge=draws["bridge"],
                      rim_mode=rim_mode, material=material, colour=colour, temple_colour=temple_colour,
                      tint=float(p.get("lens_tint", 0.0)), superellipse=n_exp, wing_lift=wing, double_bridge=dbl,
                      pantoscopic_deg=draws["pct"], wrap_deg=draws["wrap"],
                      lens_thickness=0.0022 if style == "rimless" else 0.0018,
                      temple_r=(0.0007, 0.0007) if metal else (0.0011, 0.0021),
-                     tip_r=0.0014 if metal else 0.0016)
+                     tip_r=0.0014 if metal else 0.0016, coating=coating, lens_reflectance=refl)
