@@ -4,7 +4,8 @@ Geometry and the pose solve live in :mod:`synth.assets.fit.glasses` (plain numpy
 tested without Blender); this module builds the Blender side: one mesh object for the frame
 (rims, bridge, end pieces, hinges, pad arms, temples, temple tips, nose pads; one material
 slot per finish) and one for the two lenses (glass tinted by ``lens_tint``, its reflection
-set by the lens coating, see :func:`_lens_material`). Every material has ``pass_index = CLASSES['glasses']`` (10), lenses included.
+set by the lens coating, see :func:`_lens_material`). Every material has
+``pass_index = CLASSES['glasses']`` (10), lenses included.
 
 Meshes are built in world coordinates (object transform = identity). ``update`` re-solves
 on the current expression and swaps in fresh mesh data (expressions barely move the nose

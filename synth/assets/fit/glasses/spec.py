@@ -1,8 +1,8 @@
 """Glasses styles, frame colours and the frame description (:class:`FrameSpec`).
 
 :func:`frame_spec` completes the plan's parameters of one glasses asset with rig-drawn ones
-(bridge width, missing sizes, tilt, wrap, colour, lens coating) from the rig's generator; the draws are
-always made, in a fixed order, so they stay aligned whatever the plan gives.
+(bridge width, missing sizes, tilt, wrap, colour, lens coating) from the rig's generator; the
+draws are always made, in a fixed order, so they stay aligned whatever the plan gives.
 """
 
 from __future__ import annotations
