@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from synth.assets import packs
-from synth.assets.classes import NAMES
+from synth.assets.classes import NAMES, PROCEDURAL_GENERATORS
 from synth.errors import SynthError
 from synth.io import sha256_bytes
 
@@ -133,9 +133,21 @@ def _check_params(asset: dict, path: Path) -> None:
         raise SynthError(what, where, fix)
 
 
+#: generator -> "module:function" giving (what, parameter, fix) for the values its rig would refuse
+GENERATOR_CHECKS = {"procedural:glasses_frame": "synth.assets.fit.glasses.spec:manifest_defects"}
+
+
 def parameter_defects(asset: dict, max_parameters: int = MAX_PARAMETERS) -> list[tuple[str, str, str]]:
-    """(what, parameter name or '', fix) for each inconsistent parameter spec of one asset."""
+    """(what, parameter name or '', fix) for each inconsistent parameter spec of one asset, and
+    each value its generator's rig would refuse (:data:`GENERATOR_CHECKS`)."""
     out: list[tuple[str, str, str]] = []
+    gen = str(asset.get("generator", ""))
+    check = GENERATOR_CHECKS.get(gen)
+    if check is not None and PROCEDURAL_GENERATORS.get(gen.split(":", 1)[-1]) == asset.get("class"):
+        import importlib
+
+        module, func = check.split(":")
+        out.extend(getattr(importlib.import_module(module), func)(asset))
     params = asset.get("parameters", {}) or {}
     if len(params) > max_parameters:
         out.append((f"asset '{asset.get('id')}' has more than {max_parameters} parameters", "",

@@ -126,6 +126,27 @@ def test_duplicate_id_bad_range_unknown_generator(manifest, fake_rigs, capsys):
         load_catalogue(manifest)
 
 
+def test_glasses_values_the_rig_would_refuse(manifest, fake_rigs):
+    """An unknown glasses style (the asset id), colour or lens coating, or a lens reflectance
+    outside [0, 0.25), is reported when the catalogue loads, not first by a render worker."""
+    (manifest / "glasses.toml").write_text(
+        'class = "glasses"\npresence = 0.25\n'
+        '\n[[assets]]\nid = "monocle"\nclass = "glasses"\ngenerator = "procedural:glasses_frame"\nlicence = "MIT"\n'
+        '\n[[assets]]\nid = "round"\nclass = "glasses"\ngenerator = "procedural:glasses_frame"\nlicence = "MIT"\n'
+        '[assets.parameters]\nlens_coating = { choices = ["anti_reflective", "mirror"] }\n'
+        'frame_colour = { value = "pink" }\nlens_reflectance = { range = [0.01, 0.3] }\n')
+    lines = _defects(manifest, fake_rigs)
+    want = [("unknown glasses style 'monocle'", "asset monocle", "rectangular, round"),
+            ("unknown lens_coating 'mirror'", "asset round parameter lens_coating", "anti_reflective, none"),
+            ("unknown frame_colour 'pink'", "asset round parameter frame_colour", "black"),
+            ("lens_reflectance outside [0, 0.25)", "asset round parameter lens_reflectance", "0.04 = uncoated")]
+    for what, where, fix in want:
+        assert any(what in x and where in x and fix in x for x in lines), (what, lines)
+    assert len(lines) == len(want), lines
+    with pytest.raises(SynthError, match="unknown glasses style 'monocle'"):  # the plan-time loader
+        load_catalogue(manifest)
+
+
 def test_missing_class_unknown_file_rule_tags_and_schema(manifest, fake_rigs):
     (manifest / "iris.toml").unlink()
     (manifest / "wigs.toml").write_text('class = "hair"\n')

@@ -37,6 +37,35 @@ def reflectance_ior(r0: float) -> float:
     return (1.0 + s) / (1.0 - s)
 
 
+#: manifest parameters whose values the rig reads from fixed sets
+_CATEGORICAL = {"frame_colour": tuple(COLOURS), "temple_colour": tuple(COLOURS), "lens_coating": COATINGS}
+
+
+def manifest_defects(asset: dict) -> list[tuple[str, str, str]]:
+    """(what, parameter name or '', fix) for each value of a procedural glasses asset of the
+    manifest that :func:`frame_spec` would refuse or silently replace: an unknown style (the
+    asset id), colour or coating, a lens reflectance outside [0, 0.25). Checked when the
+    catalogue loads (``synth plan``, ``synth assets validate``), not first at render time."""
+    out: list[tuple[str, str, str]] = []
+    if asset.get("id") not in STYLES:
+        out.append((f"unknown glasses style '{asset.get('id')}' (the asset id names the style)", "",
+                    f"use one of: {', '.join(STYLES)}"))
+    for name, spec in (asset.get("parameters") or {}).items():
+        if not isinstance(spec, dict):
+            continue
+        values = [spec["value"]] if "value" in spec else list(spec.get("choices", spec.get("range", [])))
+        if name in _CATEGORICAL:
+            bad = [v for v in values if v not in _CATEGORICAL[name]]
+            if bad:
+                out.append((f"unknown {name} {', '.join(repr(v) for v in bad)}", name,
+                            f"use one of: {', '.join(_CATEGORICAL[name])}"))
+        elif name == "lens_reflectance":
+            if any(not isinstance(v, (int, float)) or not 0.0 <= v < 0.25 for v in values):
+                out.append(("lens_reflectance outside [0, 0.25)", name,
+                            "give the reflectance of one lens surface as a fraction (0.04 = uncoated glass)"))
+    return out
+
+
 @dataclasses.dataclass
 class FrameSpec:
     style: str
