@@ -59,6 +59,13 @@ def _defects(d: Path, rigs: Path) -> list[str]:
     return [x.line() for x in validate_manifest(d, rigs).defects]
 
 
+def _expect(lines: list[str], want: list[tuple[str, str, str]]) -> None:
+    """Exactly the defects ``want`` (what, where, fix: substrings of one line each)."""
+    for what, where, fix in want:
+        assert any(what in x and where in x and fix in x for x in lines), (what, lines)
+    assert len(lines) == len(want), lines
+
+
 def _cli(capsys, *args) -> tuple[int, str, str]:
     rc = main(list(args))
     out, err = capsys.readouterr()
@@ -117,9 +124,7 @@ def test_duplicate_id_bad_range_unknown_generator(manifest, fake_rigs, capsys):
             ("unknown generator 'procedural:hair_magic'", "hair.toml asset mystery", "procedural:hair_strands"),
             ("builds class 'glasses', not 'hair'", "asset wrong_rig", "hair generator"),
             ("weights and choices differ in length", "asset bad_weights parameter colour", "one weight per choice")]
-    for what, where, fix in want:
-        assert any(what in x and where in x and fix in x for x in lines), (what, lines)
-    assert len(lines) == len(want)
+    _expect(lines, want)
     rc, out, _ = _cli(capsys, "assets", "validate", "--manifest-dir", str(manifest))
     assert rc == 1 and all(any(w[0] in x for x in out.splitlines()) for w in want)
     with pytest.raises(SynthError):  # the plan-time loader refuses the same folder
@@ -140,9 +145,7 @@ def test_glasses_values_the_rig_would_refuse(manifest, fake_rigs):
             ("unknown lens_coating 'mirror'", "asset round parameter lens_coating", "anti_reflective, none"),
             ("unknown frame_colour 'pink'", "asset round parameter frame_colour", "black"),
             ("lens_reflectance outside [0, 0.25)", "asset round parameter lens_reflectance", "0.04 = uncoated")]
-    for what, where, fix in want:
-        assert any(what in x and where in x and fix in x for x in lines), (what, lines)
-    assert len(lines) == len(want), lines
+    _expect(lines, want)
     with pytest.raises(SynthError, match="unknown glasses style 'monocle'"):  # the plan-time loader
         load_catalogue(manifest)
 
