@@ -59,6 +59,12 @@ def _defects(d: Path, rigs: Path) -> list[str]:
     return [x.line() for x in validate_manifest(d, rigs).defects]
 
 
+def _asset(id_: str, cls: str, generator: str, parameters: str = "") -> str:
+    """One [[assets]] block of a class file (procedural generator, MIT), with parameter lines."""
+    text = f'\n[[assets]]\nid = "{id_}"\nclass = "{cls}"\ngenerator = "procedural:{generator}"\nlicence = "MIT"\n'
+    return text + (f"[assets.parameters]\n{parameters}\n" if parameters else "")
+
+
 def _expect(lines: list[str], want: list[tuple[str, str, str]]) -> None:
     """Exactly the defects ``want`` (what, where, fix: substrings of one line each)."""
     for what, where, fix in want:
@@ -110,14 +116,11 @@ def test_cli_list_table_and_json(capsys):
 
 def test_duplicate_id_bad_range_unknown_generator(manifest, fake_rigs, capsys):
     g = manifest / "glasses.toml"
-    g.write_text(g.read_text() + '\n[[assets]]\nid = "round"\nclass = "glasses"\ngenerator = "procedural:glasses_frame"'
-                 '\nlicence = "MIT"\n')
+    g.write_text(g.read_text() + _asset("round", "glasses", "glasses_frame"))
     h = manifest / "hair.toml"
     h.write_text(h.read_text().replace("length_m = { range = [0.003, 0.012]", "length_m = { range = [0.012, 0.003]")
-                 + '\n[[assets]]\nid = "mystery"\nclass = "hair"\ngenerator = "procedural:hair_magic"\nlicence = "MIT"\n'
-                 '\n[[assets]]\nid = "wrong_rig"\nclass = "hair"\ngenerator = "procedural:glasses_frame"\nlicence = "MIT"\n'
-                 '\n[[assets]]\nid = "bad_weights"\nclass = "hair"\ngenerator = "procedural:hair_strands"\nlicence = "MIT"\n'
-                 '[assets.parameters]\ncolour = { choices = ["a", "b"], weights = [1] }\n')
+                 + _asset("mystery", "hair", "hair_magic") + _asset("wrong_rig", "hair", "glasses_frame")
+                 + _asset("bad_weights", "hair", "hair_strands", 'colour = { choices = ["a", "b"], weights = [1] }'))
     lines = _defects(manifest, fake_rigs)
     want = [("duplicate asset id 'round'", "glasses.toml asset round", "unique id"),
             ("range low > high", "hair.toml asset buzz_cut parameter length_m", "[low, high]"),
@@ -135,11 +138,9 @@ def test_glasses_values_the_rig_would_refuse(manifest, fake_rigs):
     """An unknown glasses style (the asset id), colour or lens coating, or a lens reflectance
     outside [0, 0.25), is reported when the catalogue loads, not first by a render worker."""
     (manifest / "glasses.toml").write_text(
-        'class = "glasses"\npresence = 0.25\n'
-        '\n[[assets]]\nid = "monocle"\nclass = "glasses"\ngenerator = "procedural:glasses_frame"\nlicence = "MIT"\n'
-        '\n[[assets]]\nid = "round"\nclass = "glasses"\ngenerator = "procedural:glasses_frame"\nlicence = "MIT"\n'
-        '[assets.parameters]\nlens_coating = { choices = ["anti_reflective", "mirror"] }\n'
-        'frame_colour = { value = "pink" }\nlens_reflectance = { range = [0.01, 0.3] }\n')
+        'class = "glasses"\npresence = 0.25\n' + _asset("monocle", "glasses", "glasses_frame")
+        + _asset("round", "glasses", "glasses_frame", 'lens_coating = { choices = ["anti_reflective", "mirror"] }\n'
+                 'frame_colour = { value = "pink" }\nlens_reflectance = { range = [0.01, 0.3] }'))
     lines = _defects(manifest, fake_rigs)
     want = [("unknown glasses style 'monocle'", "asset monocle", "rectangular, round"),
             ("unknown lens_coating 'mirror'", "asset round parameter lens_coating", "anti_reflective, none"),
