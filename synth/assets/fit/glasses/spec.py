@@ -29,6 +29,12 @@ UNCOATED_REFLECTANCE = ((LENS_IOR - 1.0) / (LENS_IOR + 1.0)) ** 2
 AR_REFLECTANCE = (0.003, 0.012)
 AR_SHARE = 0.75  #: share of lenses drawn with an anti-reflective coating (a choice, not a census)
 COATINGS = ("anti_reflective", "none")
+MAX_LENS_REFLECTANCE = 0.25  #: per surface; larger values (and negative ones) are refused
+
+
+def reflectance_ok(r0) -> bool:
+    """Whether ``r0`` is a lens reflectance the rig accepts: a number in [0, MAX_LENS_REFLECTANCE)."""
+    return isinstance(r0, (int, float)) and not isinstance(r0, bool) and 0.0 <= r0 < MAX_LENS_REFLECTANCE
 
 
 def reflectance_ior(r0: float) -> float:
@@ -44,8 +50,8 @@ _CATEGORICAL = {"frame_colour": tuple(COLOURS), "temple_colour": tuple(COLOURS),
 def manifest_defects(asset: dict) -> list[tuple[str, str, str]]:
     """(what, parameter name or '', fix) for each value of a procedural glasses asset of the
     manifest that :func:`frame_spec` would refuse or silently replace: an unknown style (the
-    asset id), colour or coating, a lens reflectance outside [0, 0.25). Checked when the
-    catalogue loads (``synth plan``, ``synth assets validate``), not first at render time."""
+    asset id), colour or coating, a lens reflectance outside [0, MAX_LENS_REFLECTANCE). Checked
+    when the catalogue loads (``synth plan``, ``synth assets validate``), not first at render time."""
     out: list[tuple[str, str, str]] = []
     if asset.get("id") not in STYLES:
         out.append((f"unknown glasses style '{asset.get('id')}' (the asset id names the style)", "",
@@ -60,8 +66,8 @@ def manifest_defects(asset: dict) -> list[tuple[str, str, str]]:
                 out.append((f"unknown {name} {', '.join(repr(v) for v in bad)}", name,
                             f"use one of: {', '.join(_CATEGORICAL[name])}"))
         elif name == "lens_reflectance":
-            if any(not isinstance(v, (int, float)) or not 0.0 <= v < 0.25 for v in values):
-                out.append(("lens_reflectance outside [0, 0.25)", name,
+            if not all(reflectance_ok(v) for v in values):
+                out.append((f"lens_reflectance outside [0, {MAX_LENS_REFLECTANCE:g})", name,
                             "give the reflectance of one lens surface as a fraction (0.04 = uncoated glass)"))
     return out
 
@@ -141,8 +147,8 @@ def frame_spec(style: str, params: dict, rng: np.random.Generator) -> FrameSpec:
     lo, hi = AR_REFLECTANCE
     refl = lo * (hi / lo) ** draws["refl"] if coating == "anti_reflective" else UNCOATED_REFLECTANCE
     refl = float(p.get("lens_reflectance", refl))
-    if not 0.0 <= refl < 0.25:
-        raise ValueError(f"lens_reflectance {refl!r} is outside [0, 0.25)")
+    if not reflectance_ok(refl):
+        raise ValueError(f"lens_reflectance {refl!r} is outside [0, {MAX_LENS_REFLECTANCE:g})")
     return FrameSpec(style=style, lens_w=w, lens_h=float(h), rim_w=rim_w, rim_d=rim_d, bridge=draws["bridge"],
                      rim_mode=rim_mode, material=material, colour=colour, temple_colour=temple_colour,
                      tint=float(p.get("lens_tint", 0.0)), superellipse=n_exp, wing_lift=wing, double_bridge=dbl,
