@@ -260,6 +260,24 @@ def shrink(err: np.ndarray, truth: np.ndarray) -> dict:
     return out
 
 
+def presence_report(det: dict, names: list) -> dict | None:
+    """Print how sure mediapipe's face landmark model is that each frame shows a face: its face
+    presence score, bracketed by ``mediapipe_judge.py`` (``presence``; the face mesh needs 0.5).
+    Returns the brackets, or None for detections written before the brackets were."""
+    got = {k: det[k].get("presence") for k in names if det[k].get("presence") is not None}
+    if not got:
+        return None
+    low = np.asarray([b[0] for b in got.values()])
+    print(f"Face presence score of the face mesh model ({len(got)} frames bracketed; the mesh needs 0.5): "
+          + ", ".join(f"below {t:g}: {int((low < t).sum())}" for t in (0.5, 0.9, 0.99))
+          + "; lowest: " + ", ".join(f"{k} {got[k][0]:g}-{got[k][1]:g}"
+                                     for k in sorted(got, key=lambda k: got[k][0])[:5]) + "\n")
+    bad = [k for k in got if (det[k]["mesh"] is None) != (got[k][1] <= 0.5)]
+    if bad:
+        print(f"(the mesh of {len(bad)} frames disagrees with its bracket: {', '.join(bad)})\n")
+    return got
+
+
 def judge(args, png, categories) -> dict:
     """``realism.py judge`` (see its doc and docs/realism.md); ``png(frame, path)`` writes a frame
     composited over grey, ``categories`` names the six ITA categories."""
@@ -313,6 +331,7 @@ def judge(args, png, categories) -> dict:
     print("|---:|---:|---:|---:|---:|---:|---:|")
     print(f"| {n} | {n_det}/{n} | {len(keys)}/{n} | {fmt(s['nme68'])} | {fmt(s['nme68_no_jaw'])} | {fmt(s['nme7'])} | "
           f"{fmt(s['nme7_mapped'])} |\n")
+    presence_report(det, list(truth))
     print(f"The mesh averaged with the mirrored image's (mapped back; {len(mir)} frames with both): NME68 "
           f"{fmt(both['nme68'])}, without jaw {fmt(both['nme68_no_jaw'])}, 7-point (mapped) {fmt(both['nme7_mapped'])}\n")
     print("| " + " | ".join(REGIONS) + " |\n|" + "---:|" * len(REGIONS))
@@ -343,7 +362,8 @@ def judge(args, png, categories) -> dict:
             "mirror_self_nme68": self_nme.tolist(), "keys": keys,
             "mirror_self_region": {r: v.tolist() for r, v in self_region.items()},
             "mirror_averaged": {"keys": [keys[i] for i in mir], **{k: v.tolist() for k, v in both.items()}},
-            "per_frame_error": np.round(err, 5).tolist(), "shrink_frontal": sk,
+            "per_frame_error": np.round(err, 5).tolist(),
+            "presence": {k: det[k].get("presence") for k in truth}, "shrink_frontal": sk,
             "mapping": {"mediapipe": idx.tolist(), "weights": np.round(w, 4).tolist(), "rms_iod": rms.tolist()}}
 
 

@@ -174,3 +174,29 @@ def test_shrink_recovers_a_judge_that_scales_shape_variation(J, factor):
         assert after <= before + 1e-12
         if factor != 1.0 and len(r) == len(J.REGIONS[name]):
             assert after < 0.5 * before, name
+
+
+def test_presence_bracket_from_the_thresholds_that_found_a_mesh():
+    M = load_script("benchmarks/mediapipe_judge.py", "mediapipe_judge")
+    grid = M.PRESENCE_GRID
+    n = len(grid)
+    assert M.bracket([True] * n) == [grid[-1], 1.0]
+    assert M.bracket([False] * n) == [0.0, grid[0]]
+    i = grid.index(0.5)
+    assert M.bracket([True] * i + [False] * (n - i)) == [grid[i - 1], 0.5]  # no mesh at the default 0.5
+    assert M.bracket([True] * (i + 1) + [False] * (n - i - 1)) == [0.5, grid[i + 1]]
+    assert M.bracket([False] + [True] * (n - 1)) is None  # found above a threshold that failed
+    assert M.bracket([True] * (n - 1)) is None  # not one answer per threshold
+
+
+def test_presence_report_counts_and_flags_a_mesh_that_contradicts_its_bracket(J, capsys):
+    det = {"a": {"mesh": [[0, 0]], "presence": [0.999, 1.0]}, "b": {"mesh": [[0, 0]], "presence": [0.8, 0.9]},
+           "c": {"mesh": None, "presence": [0.4, 0.5]}, "d": {"mesh": None, "presence": [0.95, 0.98]},
+           "e": {"mesh": None}}
+    got = J.presence_report(det, list(det))
+    out = capsys.readouterr().out
+    assert set(got) == {"a", "b", "c", "d"}
+    assert "below 0.5: 1, below 0.9: 2, below 0.99: 3" in out
+    assert "lowest: c 0.4-0.5, b 0.8-0.9, d 0.95-0.98, a 0.999-1" in out
+    assert "disagrees with its bracket: d" in out  # no mesh although the score reached 0.5
+    assert J.presence_report({"x": {"mesh": None}}, ["x"]) is None  # detections from before the brackets
