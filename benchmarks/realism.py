@@ -5,7 +5,7 @@
     .venv/bin/python benchmarks/realism.py body-end DATASET [DATASET ...]
     .venv/bin/python benchmarks/realism.py shoulders [--identities 40 --seed 0 --garments tshirt_crew ...]
         [--hair long_straight ... --hair-identities 6]
-    .venv/bin/python benchmarks/realism.py hair [--identities 12 --seed 0]
+    .venv/bin/python benchmarks/realism.py hair [--identities 12 --seed 0 --style braids]
     .venv/bin/python benchmarks/realism.py hats [--identities 3 --seed 0 --resolution 256]
     .venv/bin/python benchmarks/realism.py judge DATASET --mp-python MPENV/bin/python [--max-azimuth 45]
         [--detections MP.json]
@@ -32,7 +32,8 @@ shoulders: the body's breadth over the head's for planned identities (neutral) a
   breadth of measured adults (Pheasant's tables); and hair (--hair styles, tshirt_crew) through
   the arms as groomed and after synth.assets.fit.torso.keep_strands_out.
 hair: strands in front of the inner face (synth.assets.fit.occlusion) for the planned hair of
-  identities that have hair, seen from cameras at azimuth 0, +-30, +-45 (elevation 0).
+  identities that have hair, seen from cameras at azimuth 0, +-30, +-45 (elevation 0); with
+  --style S, of the first --identities planned identities whose hair is S.
 hats: hair under a beanie or cap, groomed without and with the hat: strands, share of hair points
   beyond the hat's cut plane (through its crown), groom seconds.
 judge: mediapipe 0.10.21 (its own environment; benchmarks/mediapipe_judge.py) on the frames
@@ -197,8 +198,9 @@ def framing(args) -> dict:
     return out
 
 
-def _planned_heads(seed: int, n: int):
-    """(model, HeadModel, identity indices, identity codes) of the first n planned identities."""
+def _planned_heads(seed: int, n: int, ids=None):
+    """(model, HeadModel, identity indices, identity codes) of the first n planned identities
+    (or of the identities ``ids``)."""
     from synth.config import load_config
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
@@ -206,7 +208,7 @@ def _planned_heads(seed: int, n: int):
 
     model = load_default_model()
     cfg = load_config()
-    ids = np.arange(n)
+    ids = np.arange(n) if ids is None else np.asarray(ids, np.int64)
     codes = identities.sample_identities(seed, ids, identities.prior_of(model),
                                          identities.truncation_radius(model.identity_dims, cfg.identity))
     return model, HeadModel(model, np.float64), ids, codes
@@ -268,10 +270,22 @@ def hair(args) -> dict:
     from synth.conventions import spherical_offset
     from synth.plan.assets import sample_assets_batch
 
-    model, hm, ids, codes = _planned_heads(args.seed, args.identities)
-    assets = sample_assets_batch(args.seed, ids, load_catalogue(None))
+    cat = load_catalogue(None)
+    if args.style:  # the first planned identities with that style, with their planned parameters
+        pool = np.arange(args.identities * 400)
+        pool_assets = sample_assets_batch(args.seed, pool, cat)
+        pick = [i for i in pool.tolist() if (pool_assets[i].get("hair") or {}).get("id") == args.style][:args.identities]
+        if not pick:
+            raise SystemExit(f"hair: no identity of seed {args.seed} among the first {len(pool)} has hair "
+                             f"'{args.style}'; check the style's name (assets_manifest/hair.toml)")
+        model, hm, ids, codes = _planned_heads(args.seed, len(pick), pick)
+        assets = [pool_assets[i] for i in pick]
+    else:
+        model, hm, ids, codes = _planned_heads(args.seed, args.identities)
+        assets = sample_assets_batch(args.seed, ids, cat)
     az = np.array([0.0, -30.0, 30.0, -45.0, 45.0])
-    print(f"\n### Hair strands in front of the inner face (seed {args.seed}, 64 px strand density)\n")
+    print(f"\n### Hair strands in front of the inner face (seed {args.seed}, 64 px strand density"
+          + (f"; the first {len(ids)} identities with {args.style}" if args.style else "") + ")\n")
     print("| identity | style | strands | in front of the inner face, az 0 / -30 / +30 / -45 / +45 | "
           "of its centre (eyes, nose, mouth) |\n|---:|---|---:|---|---|")
     rows = []
@@ -621,6 +635,7 @@ def main(argv=None) -> None:
     p = sub.add_parser("hair")
     p.add_argument("--identities", type=int, default=12)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--style", default=None, help="only identities planned with this hair style")
     p = sub.add_parser("drape")
     p.add_argument("--identities", type=int, default=4)
     p.add_argument("--seed", type=int, default=0)

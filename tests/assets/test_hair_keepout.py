@@ -143,3 +143,45 @@ def test_long_groom_leaves_the_face_centre_free(default_head, monkeypatch):
     az = np.array([0.0, -30.0, 30.0])
     for cam in 0.5 * (lm[36] + lm[45]) + spherical_offset(az, np.zeros_like(az)):
         assert not occluding_points(g.pts, cam, ctx.vertices, centre).any()
+
+
+def test_braids_fall_beside_the_face(default_head, monkeypatch):
+    """Braids (8, 35 cm) on the neutral head: before 2026-12-02 the braids rooted at the front
+    hairline hung straight down in front of the eyes (the braid centre lines were never kept
+    out); now no strand point lies in front of the eyes, nose or mouth from azimuth 0 and +-30
+    degrees. The turned centre lines keep their segment lengths, bend below their base by no more
+    than before or 40 degrees, and stay outside the head."""
+    hair = importlib.import_module("synth.assets.fit.hair")
+    real = hair._braids_beside_the_face
+    seen = {}
+
+    def spy(surface, hf, c, cent, rb, clearance):
+        out = real(surface, hf, c, cent, rb, clearance)
+        seen.update(surface=surface, before=np.array(cent), after=out)
+        return out
+
+    ctx = asset_scene.head_arrays(default_head, "neutral", 64, 1, 0)
+    entry = {"id": "braids", "params": {"braid_count": 8, "length_m": 0.35}}
+    lm = head_frame(ctx)["lm"]
+    centre = inner_face_triangles(ctx.data, ctx.vertices, lm, centre_only=True)
+    az = np.array([0.0, -30.0, 30.0])
+    cams = 0.5 * (lm[36] + lm[45]) + spherical_offset(az, np.zeros_like(az))
+
+    def in_front(g):  # every 5th strand: each braid has dozens of strands
+        return [int(occluding_points(g.pts[::5], cam, ctx.vertices, centre).any(1).sum()) for cam in cams]
+
+    monkeypatch.setattr(hair, "_braids_beside_the_face", lambda surface, hf, c, cent, rb, clearance: cent)
+    assert in_front(hair.groom(ctx, entry))[0] > 0  # the old braids cover the face from the front
+    monkeypatch.setattr(hair, "_braids_beside_the_face", spy)
+    assert in_front(hair.groom(ctx, entry)) == [0, 0, 0]
+    before, after = seen["before"], seen["after"]
+    moved = np.abs(after - before).max(axis=(1, 2)) > 1e-9
+    assert 0 < moved.sum() < len(before)
+    np.testing.assert_allclose(np.linalg.norm(np.diff(after, axis=1), axis=2),
+                               np.linalg.norm(np.diff(before, axis=1), axis=2), atol=1e-9)
+    # below the base (its first joint, where a grown line leaves the scalp, bends by up to 110
+    # degrees before and after): each line's sharpest bend is its old one or at most 40 degrees
+    tb, ta = _max_turn(before[moved][:, 2:]), _max_turn(after[moved][:, 2:])
+    assert np.all(ta <= np.maximum(tb, 40.0) + 1e-9)
+    _, d, _ = seen["surface"].closest(after[moved][:, 1:].reshape(-1, 3))
+    assert d.min() > 0.0

@@ -12,7 +12,7 @@ import numpy as np
 
 from synth.assets.fit.groom import Groom, Styling, setup
 from synth.assets.fit.headwear import headwear_cut
-from synth.assets.fit.keepout import face_keep_out, keep_out
+from synth.assets.fit.keepout import _envelope, face_keep_out, follow_the_leader, keep_out
 from synth.assets.fit.strands import (BACK, DOWN, FORWARD, LEFT, UP, add_curl, arc_length, grow, interpolate,
                                       push_out_strands, resample_fast, scale_count, transport_frames, trim_at_plane,
                                       trim_below)
@@ -323,6 +323,52 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
 # --------------------------------------------------------------------------- gathered styles
 
 
+#: braids: distance of a braid's centre line from the head
+BRAID_CLEARANCE_M = 0.01
+#: braids: the keep-out's margin beyond the wedge's edge is widened by the angle a braid's
+#: radius subtends at the face's radius, times this (its strands wind that far off its centre)
+BRAID_KEEPOUT_SPREAD = 1.5
+
+
+def _braids_beside_the_face(surface, hf, c, cent: np.ndarray, rb: float, clearance: float) -> np.ndarray:
+    """Braid centre lines (K, P, 3) turned out of the face keep-out (keepout.py) with a margin for
+    the braid's radius ``rb``: braids rooted at the front hairline fall beside the face, not in
+    front of the eyes. A braid is never trimmed (a cut braid would end in a stub at the brows):
+    the turn it needs is spread along it, whatever its size. The turned lines keep
+    ``clearance`` from the head, as they were grown (turned at a constant distance from the
+    axis, a line from the forehead can pass the temples closer than that)."""
+    ko = face_keep_out(surface.data, surface.V, hf["lm"], c)
+    face_r = float(np.median(ko.radius))
+    width = 6.0 + np.degrees(BRAID_KEEPOUT_SPREAD * rb / max(face_r, 1e-3))
+    out, turned, _ = keep_out(ko, cent, width_deg=width, trim_deg=360.0)
+    if turned.any():
+        out[turned] = _clear_of_the_head(surface, ko.axis, out[turned], clearance)
+    return out
+
+
+def _clear_of_the_head(surface, axis: np.ndarray, L: np.ndarray, clearance: float, reach: float = 0.04,
+                       passes: int = 3) -> np.ndarray:
+    """Lines (N, P, 3) moved horizontally away from the vertical ``axis`` where they come closer
+    to the head than ``clearance``: each point's shortfall, spread ``reach`` metres along the
+    line each way with smoothstep bumps (keepout._envelope: no kinks, unlike a point-wise
+    push-out), then the line rebuilt with its segment lengths (roots kept); ``passes`` times."""
+    seg = np.linalg.norm(np.diff(L, axis=1), axis=2)
+    for _ in range(passes):
+        _, d, _ = surface.closest(L[:, 1:].reshape(-1, 3))
+        need = np.zeros(L.shape[:2])
+        need[:, 1:] = np.maximum(clearance - d.reshape(len(L), -1), 0.0)
+        if not need.any():
+            break
+        s = np.zeros(L.shape[:2])
+        s[:, 1:] = np.cumsum(seg, axis=1)
+        push = _envelope(need, s, reach, reach)
+        radial = np.zeros_like(L)
+        radial[..., :2] = L[..., :2] - axis
+        radial /= np.maximum(np.linalg.norm(radial, axis=-1, keepdims=True), 1e-9)
+        L = follow_the_leader(L + push[..., None] * radial, seg)
+    return L
+
+
 def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
     c = hf["centre"]
     R = surface.points(c_tri, c_bary)
@@ -400,9 +446,11 @@ def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
         part1 = _sphere_path(c, R, Bk[assign], n1 + 1, lift=0.002)
         # per-braid centre lines hanging down from their bases
         cent = grow(surface, Bk, bn, Lb * rng.uniform(0.85, 1.0, K), n2 + 1,
-                      lambda p, s, k: DOWN[None] + 0.3 * normalize(p - c), 0.01, 0.01)
-        _, b1, b2 = transport_frames(cent, np.tile(LEFT, (K, 1)))
+                      lambda p, s, k: DOWN[None] + 0.3 * normalize(p - c), 0.01, BRAID_CLEARANCE_M)
         rb = float(np.clip(0.012 * np.sqrt(6.0 / K), 0.003, 0.012))
+        if "lm" in hf:
+            cent = _braids_beside_the_face(surface, hf, c, cent, rb, BRAID_CLEARANCE_M)
+        _, b1, b2 = transport_frames(cent, np.tile(LEFT, (K, 1)))
         sub = np.arange(N) % 3
         u = arc_length(cent)  # (K, n2+1)
         lam = 6.0 * rb
