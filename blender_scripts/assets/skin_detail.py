@@ -18,7 +18,9 @@ G T-zone, B wrinkle zones, A beard area):
   :func:`synth.assets.fit.eyes.lid_margin`),
 * stubble shadow over the beard area (feathered at its edge) when the identity has no beard
   (drawn with probability 0.5 and a light strength) or has the ``stubble`` beard, as dark as
-  the beard's (else the scalp hair's) colour is (:func:`synth.appearance.pigment.shaft_darkness`).
+  the beard's (else the scalp hair's) colour is (:func:`synth.appearance.pigment.shaft_darkness`),
+* scalp shadow where scalp hair grows (``scalp_mask`` attribute,
+  :func:`synth.assets.fit.masks.scalp_hair_area`), as dark as the hair's colour is.
 
 The base albedo (melanin/haemoglobin) is set by the worker through ``head_materials``.
 """
@@ -33,8 +35,8 @@ from synth.appearance import skin_optics as so
 from synth.appearance.skin_optics import WRINKLES, detail_weight, sharp_lobe
 from synth.appearance.pigment import pigment, shaft_darkness
 from synth.assets.fit.eyes import lid_margin
-from synth.assets.fit.groom import colour_of
-from synth.assets.fit.masks import skin_detail_mask
+from synth.assets.fit.groom import colour_of, head_frame
+from synth.assets.fit.masks import scalp_hair_area, skin_detail_mask
 from synth.dataset.segmentation import CLASSES
 
 
@@ -42,6 +44,12 @@ from synth.dataset.segmentation import CLASSES
 #: light skin read as a dirty brown patch); identities without a beard draw 0.1-0.3 with
 #: probability 0.5; both scaled by the hair's :func:`shaft_darkness`
 STUBBLE_SHADOW = 0.3
+
+
+#: scalp shadow under scalp hair for black hair (scaled by the hair's :func:`shaft_darkness`), and
+#: the colour it multiplies the skin by at full strength (the stubble shadow's)
+SCALP_SHADOW = 1.0
+SCALP_SHADOW_COLOUR = (0.35, 0.33, 0.34)
 
 
 def _tex_node(mat, kind, scale, seed, vec=None):
@@ -160,8 +168,22 @@ def build(ctx, entry: dict) -> Rig:
         f = stubble_factor(mat, seed + 5, 1.6 * stubble, beard, w_st)
         bmat.layer_over(mat, "Base Color", (0.35, 0.33, 0.34), bmat.math_node(mat, "MINIMUM", f, 1.0),
                         blend="MULTIPLY")
+    # the scalp shadow: under scalp hair the skin between the strands reads as the hair's colour
+    # (a render carries far fewer strands than a head has hairs, and bare pink scalp showed
+    # through them from above); as dark as the hair is, where it grows (receding hairline kept)
+    hair_entry = (ctx.assets or {}).get("hair")
+    scalp = 0.0
+    if hair_entry:
+        scalp = SCALP_SHADOW * shaft_darkness(pigment(colour_of(hair_entry, ctx)))
+        rec_h = float((hair_entry.get("params") or {}).get("hairline_recession", 0.0))
+        area = scalp_hair_area(ctx.data, V, head_frame(ctx), rec_h)
+        bmat.write_point_vector(ctx.head.data, "scalp_mask", np.repeat(area[:, None], 3, 1))
+        sm = nt.nodes.new("ShaderNodeSeparateXYZ")
+        nt.links.new(bmat.attribute(mat, "scalp_mask").outputs["Vector"], sm.inputs[0])
+        bmat.layer_over(mat, "Base Color", SCALP_SHADOW_COLOUR, bmat.math_node(mat, "MULTIPLY", sm.outputs["X"], scalp),
+                        blend="MULTIPLY")
     rec.update(freckles=fr, age_spots=ag, redness=round(red, 4), oiliness=oil, wrinkle_depth=wd,
-               pore_scale=pore, stubble_shadow=round(stubble, 4),
+               pore_scale=pore, stubble_shadow=round(stubble, 4), scalp_shadow=round(scalp, 4),
                detail={"pixel_m": None if ctx.pixel_m is None else round(ctx.pixel_m, 7),
                        "pores": round(float(mat.get("detail_pores", 1.0)), 4),
                        "fine_lines": round(float(mat.get("detail_fine_lines", 1.0)), 4), "wrinkles": round(w_wr, 4),

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist
 
 from synth.assets.fit.eyes import eye_coordinates
@@ -229,3 +230,39 @@ def test_eyeliner_wing_is_a_line_not_blobs(head, liner):
         # the old per-vertex line, interpolated the same way: gaps on the axis or smudges beside it
         old = interp(feather(segment_distance(V, corner, tip), 0.0005 * (1 + liner), 0.0015))
         assert old[front].min() < 0.5 or old[np.abs(v) > 0.002].max() > 0.5
+
+
+@pytest.mark.parametrize("recession", [0.0, 0.6])
+def test_scalp_shadow_covers_where_the_hair_grows(default_head, recession):
+    """The skin-detail scalp shadow (masks.scalp_hair_area): 1 on the crown, 0 off the skin and on
+    the face beyond the hairline's fade, at most 0.15 within it; a receding hairline bares the front of the scalp in the shadow as in the groom:
+    every root the hair groom plants lies where the shadow is full or fading, and with recession
+    the shadow is 0 where the groom's rule (masks.hair_grows) plants no hair, 1.5 cm and more
+    inside the bare front."""
+    from synth.assets.fit.groom import head_frame
+    from synth.assets.fit.hair import groom
+    from synth.assets.fit.masks import SCALP_FEATHER_M, hair_grows, scalp_hair_area
+    from tests.support import asset_scene
+
+    ctx = asset_scene.head_arrays(default_head, "neutral", 64, 1, 0)
+    V = np.asarray(ctx.vertices, np.float64)
+    hf = head_frame(ctx)
+    a = scalp_hair_area(ctx.data, V, hf, recession)
+    scalp = region_mask(ctx.data.regions, ["scalp"], len(V))
+    assert a.min() >= 0.0 and a.max() <= 1.0 and not a[~skin_only(ctx.data, len(V))].any()
+    face = region_mask(ctx.data.regions, ["face"], len(V)) & ~scalp
+    assert a[face].max() < 0.15  # the top row of the forehead, at the hairline's fade
+    assert a[face & (distance_to(V, V[scalp]) > 2.5 * SCALP_FEATHER_M)].max() == 0.0
+    crown = scalp & (V[:, 2] > hf["top"] - 0.03) & (V[:, 1] > hf["centre"][1])  # its back half
+    assert crown.sum() > 10 and a[crown].min() == 1.0
+    g = groom(ctx, {"id": "short_straight", "params": {"hairline_recession": recession}})
+    roots = g.pts[:, 0]
+    near = cKDTree(V).query(roots)[1]
+    assert np.median(a[near]) == 1.0 and np.mean(a[near] > 0.0) > 0.99
+    bare = scalp & ~hair_grows(V, hf, recession)
+    if recession == 0.0:
+        assert not bare.any()
+    else:
+        deep = bare & (distance_to(V, V[scalp & ~bare]) > 2.5 * SCALP_FEATHER_M)
+        assert deep.sum() > 5 and a[deep].max() == 0.0
+        assert not hair_grows(roots, hf, recession).__invert__().any()

@@ -181,6 +181,17 @@ def test_every_shader_layer_id_builds(tmp_path):
         shadow[colour] = sd.build(ctx2, {"id": "procedural_skin", "params": {}}).record()["stubble_shadow"]
         assert shadow[colour] == pytest.approx(sd.STUBBLE_SHADOW * shaft_darkness(pigment(colour)), abs=1e-4)
     assert shadow["black"] > 3 * shadow["blonde"] > 0  # fair stubble barely shows
+    # the scalp shadow under scalp hair, as dark as the hair; none without hair
+    scalp = {}
+    for colour in ("black", "blonde", None):
+        ctx2.assets = {"hair": {"id": "short_straight", "params": {"colour": colour}}} if colour else {}
+        if "scalp_mask" in ctx2.head.data.attributes:
+            ctx2.head.data.attributes.remove(ctx2.head.data.attributes["scalp_mask"])
+        scalp[colour] = sd.build(ctx2, {"id": "procedural_skin", "params": {}}).record()["scalp_shadow"]
+        assert ("scalp_mask" in ctx2.head.data.attributes) == bool(colour)
+        if colour:
+            assert scalp[colour] == pytest.approx(sd.SCALP_SHADOW * shaft_darkness(pigment(colour)), abs=1e-4)
+    assert scalp["black"] > 3 * scalp["blonde"] > 0 and scalp[None] == 0.0
 
 
 @pytest.mark.blender

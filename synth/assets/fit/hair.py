@@ -13,6 +13,7 @@ import numpy as np
 from synth.assets.fit.groom import Groom, Styling, setup
 from synth.assets.fit.headwear import headwear_cut
 from synth.assets.fit.keepout import _envelope, face_keep_out, follow_the_leader, keep_out
+from synth.assets.fit.masks import hair_grows
 from synth.assets.fit.strands import (BACK, DOWN, FORWARD, LEFT, UP, add_curl, arc_length, grow, interpolate,
                                       push_out_strands, resample_fast, scale_count, transport_frames, trim_at_plane,
                                       trim_below)
@@ -67,12 +68,9 @@ def groom(ctx, entry) -> Groom:
 
     # ---- roots (rejection for receding hairlines), by area, from ctx.rng only
     rec = float(prm.get("hairline_recession", 0.0))
-    lo, hi = hf["scalp_lo"], hf["scalp_hi"]
 
     def keep(p):
-        u = (p[:, 1] - lo[1]) / max(hi[1] - lo[1], 1e-6)  # 0 at the front hairline, 1 at the back
-        thr = rec * (0.22 + 0.35 * (np.abs(p[:, 0] - c[0]) / 0.06) ** 2)
-        return ~((u < thr) & (p[:, 2] > hf["brow_z"] + 0.02))
+        return hair_grows(p, hf, rec)
 
     def roots(m):
         t, b = surface.sample(tris, 2 * m + 16, rng)

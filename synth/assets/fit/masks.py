@@ -192,6 +192,33 @@ def beard_area(data, V: np.ndarray) -> np.ndarray:
     return a * near * ~hard
 
 
+def hair_grows(P: np.ndarray, hf: dict, recession: float) -> np.ndarray:
+    """(N,) bool: whether scalp hair grows at points ``P`` (on the scalp) for a hairline receding
+    by ``recession`` (0 none, 1 far): the hair groom's root rule (``synth.assets.fit.hair``),
+    given the head frame ``hf`` (``synth.assets.fit.groom.head_frame``). The recession bares the
+    front of the scalp above the brows, more at the temples than in the middle."""
+    P = np.asarray(P, np.float64)
+    lo, hi, c = hf["scalp_lo"], hf["scalp_hi"], hf["centre"]
+    u = (P[:, 1] - lo[1]) / max(hi[1] - lo[1], 1e-6)  # 0 at the front hairline, 1 at the back
+    thr = recession * (0.22 + 0.35 * (np.abs(P[:, 0] - c[0]) / 0.06) ** 2)
+    return ~((u < thr) & (P[:, 2] > hf["brow_z"] + 0.02))
+
+
+#: width (metres) over which the scalp shadow fades out at the hairline
+SCALP_FEATHER_M = 0.006
+
+
+def scalp_hair_area(data, V: np.ndarray, hf: dict, recession: float) -> np.ndarray:
+    """(V,) where scalp hair grows (the ``scalp`` region, less a receding hairline:
+    :func:`hair_grows`), faded over :data:`SCALP_FEATHER_M` at its edge (:func:`soft_region`,
+    squared): the skin-detail rig's scalp shadow."""
+    V = np.asarray(V, np.float64)
+    inside = region_mask(data.regions, ("scalp",), len(V)) & hair_grows(V, hf, recession)
+    # squared: the fade of soft_region straddles the region's edge; squared, the skin just
+    # outside the hairline (the forehead's top row) keeps at most about a seventh of the shadow
+    return soft_region(V, inside, SCALP_FEATHER_M) ** 2 * skin_only(data, len(V))
+
+
 def soft_region(V: np.ndarray, inside: np.ndarray, sigma: float) -> np.ndarray:
     """(V,) a 0/1 vertex set smoothed in space: the Gaussian-weighted (width ``sigma``) share of
     region vertices among the vertices within 2.5 sigma, rescaled (``(share - 0.05) / 0.75``,
