@@ -34,6 +34,8 @@ shoulders: the body's breadth over the head's for planned identities (neutral) a
 hair: strands in front of the inner face (synth.assets.fit.occlusion) for the planned hair of
   identities that have hair, seen from cameras at azimuth 0, +-30, +-45 (elevation 0); with
   --style S, of the first --identities planned identities whose hair is S.
+scalp: skin seen between hair strands above the brows, its luminance over the face skin's
+  and the hair's, by hair colour (docs/realism.md, "The scalp under the hair").
 hats: hair under a beanie or cap, groomed without and with the hat: strands, share of hair points
   beyond the hat's cut plane (through its crown), groom seconds.
 judge: mediapipe 0.10.21 (its own environment; benchmarks/mediapipe_judge.py) on the frames
@@ -600,6 +602,44 @@ def sheet(args) -> dict:
     return {}
 
 
+def scalp(args) -> dict:
+    """Scalp seen between hair strands: per frame with scalp hair, the skin-class pixels more
+    than 0.6 inter-ocular distances above the brows (the scalp, between strands) and the median
+    luminance of their colour (alpha divided out) over the face skin's (rows between the eyes
+    and the upper lip); the hair's for reference. Medians over frames by hair colour."""
+    from synth.dataset.reader import iter_frames
+    from synth.dataset.segmentation import CLASSES as SEG
+
+    w = np.array([0.2126, 0.7152, 0.0722])
+    rows = {}
+    for fr in iter_frames(args.dataset):
+        hair = (fr.meta["assets"].get("hair") or {})
+        if not hair:
+            continue
+        seg, lm = fr.segmentation, np.asarray(fr.meta["landmarks_2d"], np.float64)
+        iod = float(np.linalg.norm(lm[45] - lm[36]))
+        y = np.arange(fr.height)[:, None]
+        skin = seg == SEG["skin"]
+        lum = (fr.rgb_premultiplied / np.maximum(fr.alpha[..., None], 1e-6)) @ w
+        top = skin & (y < lm[17:27, 1].min() - 0.6 * iod)
+        face = skin & (y > lm[[36, 45], 1].mean()) & (y < lm[51, 1])
+        strands = seg == SEG["hair"]
+        if top.sum() < 20 or face.sum() < 20 or strands.sum() < 20:
+            continue
+        f = float(np.median(lum[face]))
+        colour = str((hair.get("params") or {}).get("colour") or (hair.get("build") or {}).get("colour"))
+        rows.setdefault(colour, []).append((int(top.sum()), float(np.median(lum[top])) / f, float(np.median(lum[strands])) / f))
+    print(f"\n### Scalp between strands ({args.dataset}; frames with at least 20 such pixels)\n")
+    print("| hair colour | frames | scalp pixels (median) | scalp / face luminance | hair / face |\n|---|---:|---:|---:|---:|")
+    out = {}
+    for colour, r in sorted(rows.items()):
+        a = np.asarray(r)
+        out[colour] = {"frames": len(r), "pixels": float(np.median(a[:, 0])), "scalp_over_face": float(np.median(a[:, 1])),
+                       "hair_over_face": float(np.median(a[:, 2]))}
+        print(f"| {colour} | {len(r)} | {np.median(a[:, 0]):.0f} | {np.median(a[:, 1]):.2f} | {np.median(a[:, 2]):.2f} |")
+    return out
+
+
 def eyes(args) -> dict:
     """The eyes' proportions of the first planned identities (neutral, rest pose) against
     published measurements (benchmarks/realism_eyes.py)."""
@@ -632,6 +672,8 @@ def main(argv=None) -> None:
     p.add_argument("--garments", nargs="+", default=["tshirt_crew", "tank_top", "jacket_blazer", "coat"])
     p.add_argument("--hair", nargs="*", default=["long_straight", "long_curly", "braids", "ponytail", "medium_wavy"])
     p.add_argument("--hair-identities", type=int, default=6)
+    p = sub.add_parser("scalp")
+    p.add_argument("dataset")
     p = sub.add_parser("hair")
     p.add_argument("--identities", type=int, default=12)
     p.add_argument("--seed", type=int, default=0)
@@ -680,7 +722,7 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     from realism_judge import jaw_table, judge, mapping_table
 
-    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "body-end": body_end, "shoulders": shoulders, "hair": hair, "drape": drape_table, "beard": beard_table, "judge": lambda a: judge(a, _png, CATS), "jaw": jaw_table, "eyes": eyes, "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
+    res = {"mapping": mapping_table, "skin": skin, "hats": hats, "framing": framing, "body-end": body_end, "shoulders": shoulders, "hair": hair, "scalp": scalp, "drape": drape_table, "beard": beard_table, "judge": lambda a: judge(a, _png, CATS), "jaw": jaw_table, "eyes": eyes, "timing": timing, "fringe": fringe, "plot-skin": plot_skin,
            "sheet": sheet}[args.cmd](args)
     if args.json:
         Path(args.json).write_text(json.dumps(res))
