@@ -13,8 +13,9 @@ the JSON: per image, ``detected`` (face detection, short-range model, confidence
 self-consistency) and ``presence`` ([low, high]: the bracket of the face landmark model's face
 presence score on the grid ``PRESENCE_GRID``; the face mesh is found when that score reaches its
 threshold, which the legacy solution sets from ``min_tracking_confidence``, 0.5 by default, also in
-static mode; so ``mesh`` is null exactly when the score is below 0.5). Pixels are mediapipe's ``x * W``, ``y * H``: pixel centres at integers (the
-judge adds 0.5 px to reach synth's convention, benchmarks/realism_judge.py).
+static mode; so ``mesh`` is null exactly when the score is below 0.5). Pixels are mediapipe's
+``x * W``, ``y * H``: pixel centres at integers (the judge adds 0.5 px to reach synth's
+convention, benchmarks/realism_judge.py).
 """
 
 from __future__ import annotations
