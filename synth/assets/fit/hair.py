@@ -12,7 +12,7 @@ import numpy as np
 
 from synth.assets.fit.groom import Groom, Styling, setup
 from synth.assets.fit.headwear import headwear_cut
-from synth.assets.fit.keepout import _envelope, face_keep_out, follow_the_leader, keep_out
+from synth.assets.fit.keepout import envelope, face_keep_out, follow_the_leader, keep_out
 from synth.assets.fit.masks import hair_grows
 from synth.assets.fit.strands import (BACK, DOWN, FORWARD, LEFT, UP, add_curl, arc_length, grow, interpolate,
                                       push_out_strands, resample_fast, scale_count, transport_frames, trim_at_plane,
@@ -348,7 +348,7 @@ def _clear_of_the_head(surface, axis: np.ndarray, L: np.ndarray, clearance: floa
                        passes: int = 3) -> np.ndarray:
     """Lines (N, P, 3) moved horizontally away from the vertical ``axis`` where they come closer
     to the head than ``clearance``: each point's shortfall, spread ``reach`` metres along the
-    line each way with smoothstep bumps (keepout._envelope: no kinks, unlike a point-wise
+    line each way with smoothstep bumps (keepout.envelope: no kinks, unlike a point-wise
     push-out), then the line rebuilt with its segment lengths (roots kept); ``passes`` times."""
     seg = np.linalg.norm(np.diff(L, axis=1), axis=2)
     for _ in range(passes):
@@ -359,7 +359,7 @@ def _clear_of_the_head(surface, axis: np.ndarray, L: np.ndarray, clearance: floa
             break
         s = np.zeros(L.shape[:2])
         s[:, 1:] = np.cumsum(seg, axis=1)
-        push = _envelope(need, s, reach, reach)
+        push = envelope(need, s, reach, reach)
         radial = np.zeros_like(L)
         radial[..., :2] = L[..., :2] - axis
         radial /= np.maximum(np.linalg.norm(radial, axis=-1, keepdims=True), 1e-9)

@@ -124,7 +124,7 @@ def follow_the_leader(targets: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     return out
 
 
-def _envelope(F: np.ndarray, s: np.ndarray, ahead: float, behind: float) -> np.ndarray:
+def envelope(F: np.ndarray, s: np.ndarray, ahead: float, behind: float) -> np.ndarray:
     """Upper envelope over a strand of the values ``F`` (N, P) (0: none), each spread along
     the arc length ``s`` with a smoothstep bump: ``ahead`` metres toward the root (the strand
     starts turning before it reaches the wedge) and ``behind`` metres toward the tip (it eases
@@ -153,7 +153,7 @@ def _turn(ko: FaceKeepOut, pts: np.ndarray, side: np.ndarray | None, width: floa
     # strand so that it starts turning before the wedge and eases back after it
     need = np.where(near & (u > -lim - 2.0 * width), np.maximum(_soft_max(u, lim + width, width) - u, 0.0), 0.0)
     # roots stay put: the turn fades in over the first ``root`` metres of a strand
-    move = _envelope(need, s, ahead, behind) * _smoothstep(s / root)
+    move = envelope(need, s, ahead, behind) * _smoothstep(s / root)
     a = th + side[:, None] * move
     out = np.stack([ko.axis[0] + r * np.sin(a), ko.axis[1] - r * np.cos(a), pts[..., 2]], -1)
     out[:, 0] = pts[:, 0]
