@@ -143,6 +143,12 @@ class ExpressionConfig:
     """eye gaze yaw limits (+ = subject's left)"""
     gaze_pitch_deg: Annotated[Interval, Bounds(-45.0, 45.0)] = (-15.0, 15.0)
     """eye gaze pitch limits (+ = up)"""
+    gaze_distribution: Annotated[str, Choices("normal", "uniform")] = "normal"
+    """how gaze yaw and pitch are drawn within their limits: 'normal' (centred on the primary position,
+    standard deviations gaze_sd_deg, truncated to the limits; most eye-in-head directions lie near it) or
+    'uniform'"""
+    gaze_sd_deg: Annotated[tuple[float, float], Bounds(0.1, 90.0)] = (6.0, 6.0)
+    """standard deviations of gaze yaw and pitch before truncation (gaze_distribution = 'normal')"""
     vergence_deg: Annotated[Interval, Bounds(0.0, 10.0)] = (0.0, 2.0)
     """each eye turns inward by this much"""
 

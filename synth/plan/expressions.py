@@ -169,6 +169,18 @@ def _lerp(u: np.ndarray, rng: tuple[float, float]) -> np.ndarray:
     return rng[0] + u * (rng[1] - rng[0])
 
 
+def _gaze(u: np.ndarray, limits: tuple[float, float], sd: float, distribution: str) -> np.ndarray:
+    """Gaze angles (degrees) from uniforms ``u`` in (0, 1): uniform over ``limits``, or a normal centred on
+    the primary position (0) with standard deviation ``sd`` truncated to ``limits`` (inverse CDF, so each
+    angle depends on its own uniform only; the limits need not contain 0)."""
+    lo, hi = float(limits[0]), float(limits[1])
+    if distribution == "uniform" or hi <= lo:
+        return _lerp(u, (lo, hi))
+    from scipy.stats import truncnorm
+
+    return np.clip(truncnorm.ppf(u, lo / sd, hi / sd, scale=sd), lo, hi)
+
+
 def sample_expressions(seed: int, identity: np.ndarray, expression: np.ndarray, em: ExpressionModel,
                        cfg) -> Expressions:
     """Expressions for (identity[p], expression[p]); ``cfg`` is an ExpressionConfig."""
@@ -213,8 +225,9 @@ def sample_expressions(seed: int, identity: np.ndarray, expression: np.ndarray, 
     jaw_deg = np.clip(jaw * hi, lo, hi) * (jaw > 0)
     jaw_lat = np.where(jaw > 0, _lerp(s["jaw_lateral"], cfg.jaw_lateral_deg) * jaw, 0.0)
     return Expressions(codes=codes, kind=kind, preset=preset, jaw_open_deg=jaw_deg, jaw_lateral_deg=jaw_lat,
-                       gaze_yaw_deg=_lerp(s["gaze_yaw"], cfg.gaze_yaw_deg),
-                       gaze_pitch_deg=_lerp(s["gaze_pitch"], cfg.gaze_pitch_deg),
+                       gaze_yaw_deg=_gaze(s["gaze_yaw"], cfg.gaze_yaw_deg, cfg.gaze_sd_deg[0], cfg.gaze_distribution),
+                       gaze_pitch_deg=_gaze(s["gaze_pitch"], cfg.gaze_pitch_deg, cfg.gaze_sd_deg[1],
+                                            cfg.gaze_distribution),
                        vergence_deg=_lerp(s["vergence"], cfg.vergence_deg))
 
 

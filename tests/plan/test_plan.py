@@ -198,6 +198,32 @@ def test_expression_sampling_is_plausible():
     assert set(rots) == {"jaw", "eye_l", "eye_r"} and np.all(np.linalg.norm(rots["eye_l"], axis=1) < np.deg2rad(40))
 
 
+def test_gaze_is_centred_on_the_primary_position_and_stays_in_its_limits():
+    P = 20000
+    rows = np.arange(P) // 13, np.arange(P) % 13
+    cfg = ExpressionConfig()
+    ex = expressions.sample_expressions(3, *rows, expressions.resolve(ARKIT, cfg), cfg)
+    for angle, (lo, hi), sd in ((ex.gaze_yaw_deg, cfg.gaze_yaw_deg, cfg.gaze_sd_deg[0]),
+                                (ex.gaze_pitch_deg, cfg.gaze_pitch_deg, cfg.gaze_sd_deg[1])):
+        assert angle.min() >= lo and angle.max() <= hi
+        assert abs(np.median(angle)) < 0.3
+        # a normal truncated at 2.5-4 sd: the central +-1 sd holds 68-71 %, not the uniform's 2 sd / width
+        inside = np.mean(np.abs(angle) <= sd)
+        assert 0.66 < inside < 0.72, inside
+    # the same uniforms drawn uniformly: the old behaviour, kept as an option
+    uni = ExpressionConfig(gaze_distribution="uniform")
+    ux = expressions.sample_expressions(3, *rows, expressions.resolve(ARKIT, uni), uni)
+    assert 0.22 < np.mean(np.abs(ux.gaze_yaw_deg) <= 6.0) < 0.26  # 12 / 50
+    assert np.array_equal(np.sign(ux.gaze_pitch_deg), np.sign(ex.gaze_pitch_deg))  # one uniform each: monotone
+    assert np.array_equal(ux.codes, ex.codes)  # nothing else moves
+    # limits that exclude the centre, and a narrow spread: still inside, still deterministic
+    far = ExpressionConfig(gaze_pitch_deg=(20.0, 30.0), gaze_sd_deg=(0.5, 0.5))
+    fx = expressions.sample_expressions(3, *rows, expressions.resolve(ARKIT, far), far)
+    assert fx.gaze_pitch_deg.min() >= 20.0 and fx.gaze_pitch_deg.max() <= 30.0 and np.isfinite(fx.gaze_pitch_deg).all()
+    again = expressions.sample_expressions(3, *rows, expressions.resolve(ARKIT, far), far)
+    assert np.array_equal(fx.gaze_pitch_deg, again.gaze_pitch_deg)
+
+
 def test_jaw_rotation_stays_within_limits_when_realised_by_the_joint():
     cfg = ExpressionConfig(jaw_via="joint", jaw_open_deg=(0.0, 20.0), random_jaw_probability=1.0)
     em = expressions.resolve(ARKIT, cfg)
