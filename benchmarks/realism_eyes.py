@@ -59,6 +59,28 @@ def eye_measures(ibug: np.ndarray) -> dict[str, np.ndarray]:
     return out
 
 
+#: how far sideways (m) of the pupil's centre the lid vertices count as the margin above / below it
+MARGIN_HALF_WIDTH_M = 0.0015
+
+
+def margin_reflex_distances(vertices: np.ndarray, regions: dict) -> dict[str, np.ndarray]:
+    """MRD1 and MRD2 (mm, mean of both eyes) of heads ``vertices`` (N, V, 3), metres, +z up: the
+    height of the upper lid margin above the centre of the ``pupil_l`` / ``pupil_r`` region and of
+    the pupil's centre above the lower lid margin. A margin is the lowest ``eyelid_*_upper`` (highest
+    ``eyelid_*_lower``) vertex within :data:`MARGIN_HALF_WIDTH_M` sideways of the pupil's centre
+    (clinically measured from the corneal light reflex, in primary gaze)."""
+    V = np.asarray(vertices, np.float64)
+    mrd1, mrd2 = [], []
+    for s in "lr":
+        pupil = V[:, np.asarray(regions[f"pupil_{s}"])].mean(axis=1)  # (N, 3)
+        for lid, out, sign in (("upper", mrd1, 1.0), ("lower", mrd2, -1.0)):
+            L = V[:, np.asarray(regions[f"eyelid_{s}_{lid}"])]  # (N, k, 3)
+            near = np.abs(L[..., 0] - pupil[:, None, 0]) <= MARGIN_HALF_WIDTH_M
+            dz = sign * (L[..., 2] - pupil[:, None, 2])  # above the pupil (upper) / below it (lower)
+            out.append(np.where(near, dz, np.inf).min(axis=1))
+    return {"MRD1": 1000.0 * np.mean(mrd1, axis=0), "MRD2": 1000.0 * np.mean(mrd2, axis=0)}
+
+
 def reference_range(name: str) -> tuple[float, float] | None:
     """The lowest and highest published mean of a measurement (:data:`REFERENCES`)."""
     means = [m[name][0] for _, _, m in REFERENCES if name in m]
@@ -81,8 +103,9 @@ def table(values: dict[str, np.ndarray]) -> list[dict]:
     return rows
 
 
-def eyes_table(args, ibug: np.ndarray) -> dict:
-    """Print and return the table for ``ibug`` (N, 68, 3), the planned identities of ``args``."""
+def eyes_table(args, ibug: np.ndarray, mrd: dict | None = None) -> dict:
+    """Print and return the table for ``ibug`` (N, 68, 3), the planned identities of ``args``, and
+    their margin-reflex distances ``mrd`` (:func:`margin_reflex_distances`) if given."""
     values = eye_measures(ibug)
     rows = table(values)
     print(f"\n### The eyes against published measurements ({args.identities} planned identities of seed "
@@ -94,4 +117,12 @@ def eyes_table(args, ibug: np.ndarray) -> dict:
         off = f"{r['sd_outside']:+.1f}" if r["sd_outside"] == r["sd_outside"] else "-"
         print(f"| {r['measure']} | {r['p5']:.1f} / {r['median']:.1f} / {r['p95']:.1f} | {pub} | {off} |")
     print("\nPublished: " + "; ".join(f"{s or '(same)'}: {pop}" for s, pop, _ in REFERENCES))
-    return {"rows": rows, "identities": args.identities, "seed": args.seed}
+    out = {"rows": rows, "identities": args.identities, "seed": args.seed}
+    if mrd is not None:
+        print("\nMargin-reflex distances, gaze 0 (lid margins above / below the pupil's centre; clinical "
+              "normal values are commonly given as about 4-4.5 mm / 5-5.5 mm):\n")
+        print("| | 5 % / median / 95 % |\n|---|---:|")
+        for k, v in mrd.items():
+            print(f"| {k} | {np.percentile(v, 5):.1f} / {np.median(v):.1f} / {np.percentile(v, 95):.1f} |")
+        out["mrd"] = {k: [float(np.percentile(v, q)) for q in (5, 50, 95)] for k, v in mrd.items()}
+    return out

@@ -47,3 +47,26 @@ def test_table_says_how_far_outside_the_published_means(E):
     assert rows_short["ex-en"]["sd_outside"] == pytest.approx(-2.0)
     assert rows_short["ex-en"]["median"] == pytest.approx(lo - 2 * sd)
     assert (rows_in["ex-en"]["published_low"], rows_in["ex-en"]["published_high"]) == (lo, hi)
+
+
+def test_margin_reflex_distances_take_the_margin_above_and_below_the_pupil(E):
+    """Two eyes; each lid has a margin vertex over the pupil and, beyond the half-width sideways,
+    vertices nearer the pupil's height (the canthi) that must not count."""
+    V, regions = [], {}
+
+    def add(name, pts):
+        regions.setdefault(name, []).extend(range(len(V), len(V) + len(pts)))
+        V.extend(pts)
+
+    for s, x0 in (("l", 0.032), ("r", -0.032)):
+        z0 = 0.70
+        add(f"pupil_{s}", [[x0 + dx, -0.11, z0 + dz] for dx, dz in ((-0.001, 0), (0.001, 0), (0, -0.001), (0, 0.001))])
+        add(f"eyelid_{s}_upper", [[x0 + 0.0005, -0.112, z0 + 0.004], [x0 - 0.001, -0.112, z0 + 0.0045],
+                                  [x0 + 0.004, -0.110, z0 + 0.001], [x0 + 0.0002, -0.115, z0 + 0.009]])
+        add(f"eyelid_{s}_lower", [[x0 - 0.0003, -0.112, z0 - 0.0055], [x0 + 0.001, -0.112, z0 - 0.006],
+                                  [x0 - 0.005, -0.110, z0 - 0.0005], [x0, -0.114, z0 - 0.012]])
+    V = np.asarray(V)
+    heads = np.stack([V, V + [0.0, 0.0, 0.3]])  # the same head raised: the distances do not change
+    m = E.margin_reflex_distances(heads, regions)
+    np.testing.assert_allclose(m["MRD1"], [4.0, 4.0], atol=1e-9)
+    np.testing.assert_allclose(m["MRD2"], [5.5, 5.5], atol=1e-9)
