@@ -602,33 +602,43 @@ def sheet(args) -> dict:
     return {}
 
 
+def scalp_measure(seg, rgb_premultiplied, alpha, landmarks_2d, min_pixels: int = 20):
+    """One frame of :func:`scalp`: (skin pixels more than 0.6 inter-ocular distances above the
+    brows, their median luminance over the face skin's, the hair's over the face skin's), or None
+    when scalp, face skin or hair has fewer than ``min_pixels`` pixels."""
+    from synth.dataset.segmentation import CLASSES as SEG
+
+    lm = np.asarray(landmarks_2d, np.float64)
+    iod = float(np.linalg.norm(lm[45] - lm[36]))
+    y = np.arange(seg.shape[0])[:, None]
+    skin = seg == SEG["skin"]
+    lum = (rgb_premultiplied / np.maximum(alpha[..., None], 1e-6)) @ np.array([0.2126, 0.7152, 0.0722])
+    top = skin & (y < lm[17:27, 1].min() - 0.6 * iod)
+    face = skin & (y > lm[[36, 45], 1].mean()) & (y < lm[51, 1])
+    strands = seg == SEG["hair"]
+    if min(top.sum(), face.sum(), strands.sum()) < min_pixels:
+        return None
+    f = float(np.median(lum[face]))
+    return int(top.sum()), float(np.median(lum[top])) / f, float(np.median(lum[strands])) / f
+
+
 def scalp(args) -> dict:
     """Scalp seen between hair strands: per frame with scalp hair, the skin-class pixels more
     than 0.6 inter-ocular distances above the brows (the scalp, between strands) and the median
     luminance of their colour (alpha divided out) over the face skin's (rows between the eyes
     and the upper lip); the hair's for reference. Medians over frames by hair colour."""
     from synth.dataset.reader import iter_frames
-    from synth.dataset.segmentation import CLASSES as SEG
 
-    w = np.array([0.2126, 0.7152, 0.0722])
     rows = {}
     for fr in iter_frames(args.dataset):
         hair = (fr.meta["assets"].get("hair") or {})
         if not hair:
             continue
-        seg, lm = fr.segmentation, np.asarray(fr.meta["landmarks_2d"], np.float64)
-        iod = float(np.linalg.norm(lm[45] - lm[36]))
-        y = np.arange(fr.height)[:, None]
-        skin = seg == SEG["skin"]
-        lum = (fr.rgb_premultiplied / np.maximum(fr.alpha[..., None], 1e-6)) @ w
-        top = skin & (y < lm[17:27, 1].min() - 0.6 * iod)
-        face = skin & (y > lm[[36, 45], 1].mean()) & (y < lm[51, 1])
-        strands = seg == SEG["hair"]
-        if top.sum() < 20 or face.sum() < 20 or strands.sum() < 20:
+        m = scalp_measure(fr.segmentation, fr.rgb_premultiplied, fr.alpha, fr.meta["landmarks_2d"])
+        if m is None:
             continue
-        f = float(np.median(lum[face]))
         colour = str((hair.get("params") or {}).get("colour") or (hair.get("build") or {}).get("colour"))
-        rows.setdefault(colour, []).append((int(top.sum()), float(np.median(lum[top])) / f, float(np.median(lum[strands])) / f))
+        rows.setdefault(colour, []).append(m)
     print(f"\n### Scalp between strands ({args.dataset}; frames with at least 20 such pixels)\n")
     print("| hair colour | frames | scalp pixels (median) | scalp / face luminance | hair / face |\n|---|---:|---:|---:|---:|")
     out = {}
