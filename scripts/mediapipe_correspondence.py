@@ -151,7 +151,7 @@ def mirror_pairs(det: np.ndarray, unmirrored: np.ndarray) -> np.ndarray:
 
 def derive(work: Path, train: int, out_dir: Path | None, independent: bool = False) -> Path:
     _setup_path()
-    from prior.fit.landmark_sources import CORRESPONDENCE_DIR, model_key
+    from prior.fit.landmark_sources import CORRESPONDENCE_DIR, model_key, template_points
     from synth.conventions import project
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
@@ -237,12 +237,15 @@ def derive(work: Path, train: int, out_dir: Path | None, independent: bool = Fal
             if p != j:
                 chosen[p] = entry(p, mt[c], mb[c], rp[c])
     points = [chosen[j] for j in sorted(chosen)]
-    doc = {"format": "synth-mediapipe-correspondence", "format_version": 1, "model": model.name,
+    doc = {"format": "synth-mediapipe-correspondence", "format_version": 2, "model": model.name,
            "model_key": model_key(model), "mediapipe": det["mediapipe"],
            "derivation": {"frames": len(keys), "mirrored_frames": len(mkeys), "identities": train,
                           "mirror_symmetric": pair is not None and not independent,
                           "script": "scripts/mediapipe_correspondence.py"},
-           "points": points}
+           "points": points,
+           # where the points lie on the rest shape they were derived on (checked when the file is read)
+           "template_points": np.round(template_points(model, [p["triangle"] for p in points],
+                                                       [p["bary"] for p in points]), 7).tolist()}
     if pair is not None:  # mediapipe's left-right partners (found from the data, mirror_pairs)
         doc["mirror"] = pair.tolist()
     path = (out_dir or CORRESPONDENCE_DIR) / f"mediapipe-{model_key(model)}.json"

@@ -96,31 +96,56 @@ def require_mediapipe():
     return mediapipe
 
 
+#: how far (m) a correspondence's surface points may lie from where they were on the rest shape it
+#: was derived on: builds of the same model on other CPUs differ in the last float32 bits only
+CORRESPONDENCE_TOLERANCE_M = 1e-5
+
+
 def model_key(model) -> str:
-    """Identifies a head model's topology and rest shape (what a correspondence depends on)."""
+    """Identifies a head model's name and topology, what a correspondence file is named by. Its rest
+    shape is checked by :func:`load_correspondence` against the file's ``template_points`` within
+    :data:`CORRESPONDENCE_TOLERANCE_M`, not hashed: the default model built on another CPU has the
+    same shape but not the same float32 bytes."""
     import hashlib
 
-    h = hashlib.sha256()
-    for a in (np.ascontiguousarray(model.triangles, np.int32), np.ascontiguousarray(model.template, np.float32)):
-        h.update(a.tobytes())
+    h = hashlib.sha256(str(model.name).encode())
+    h.update(np.ascontiguousarray(model.triangles, np.int32).tobytes())
     return h.hexdigest()[:16]
+
+
+def template_points(model, triangles, bary) -> np.ndarray:
+    """(P, 3) positions (m) of surface points (triangle, barycentric weights) on the model's template."""
+    T = np.asarray(model.template, np.float64)
+    tri = np.asarray(model.triangles)[np.asarray(triangles, np.int64)]
+    return np.einsum("pk,pkc->pc", np.asarray(bary, np.float64), T[tri])
 
 
 def load_correspondence(model) -> dict:
     """The mediapipe -> model correspondence for this model: ``index`` (P,) mediapipe point
     indices, ``triangles`` (P,), ``bary`` (P, 3), ``sigma_face`` (P,: the point's RMS residual
-    on the derivation renders in units of the face width) and the file's metadata."""
+    on the derivation renders in units of the face width) and the file's metadata. One SynthError
+    line if there is none for the model's topology, or if it was derived on another rest shape."""
     key = model_key(model)
     path = CORRESPONDENCE_DIR / f"mediapipe-{key}.json"
+    fix = "use --landmarks json, or derive one (docs/fitting.md)"
     if not path.is_file():
         raise SynthError(f"no mediapipe landmark correspondence for head model '{model.name}' ({key})",
-                         "--landmarks mediapipe", "use --landmarks json, or derive one (docs/fitting.md)")
+                         "--landmarks mediapipe", fix)
     d = json.loads(path.read_text())
     pts = d["points"]
-    return {**d, "index": np.array([p["mediapipe"] for p in pts], np.int64),
-            "triangles": np.array([p["triangle"] for p in pts], np.int64),
-            "bary": np.array([p["bary"] for p in pts], np.float64),
-            "sigma_face": np.array([p["sigma_face"] for p in pts], np.float64)}
+    out = {**d, "index": np.array([p["mediapipe"] for p in pts], np.int64),
+           "triangles": np.array([p["triangle"] for p in pts], np.int64),
+           "bary": np.array([p["bary"] for p in pts], np.float64),
+           "sigma_face": np.array([p["sigma_face"] for p in pts], np.float64)}
+    if "template_points" not in d:
+        raise SynthError(f"the mediapipe landmark correspondence {path.name} has no template_points (format "
+                         f"{d.get('format_version')}; 2 is read)", "--landmarks mediapipe", fix)
+    off = np.linalg.norm(template_points(model, out["triangles"], out["bary"]) - np.asarray(d["template_points"]), axis=1)
+    if off.max() > CORRESPONDENCE_TOLERANCE_M:
+        raise SynthError(f"the mediapipe landmark correspondence {path.name} was derived on another rest shape of head "
+                         f"model '{model.name}' (its points up to {1000.0 * off.max():.3f} mm away)",
+                         "--landmarks mediapipe", fix)
+    return out
 
 
 def mediapipe_observations(images, model, *, min_sigma_px: float = 1.0) -> tuple[Observations, list[np.ndarray]]:

@@ -87,6 +87,26 @@ def test_correspondence_only_for_its_model():
 # --------------------------------------------------------------------------- the correspondence
 
 
+def test_correspondence_checks_the_rest_shape_within_a_tolerance(default_model):
+    """The file is named by the model's topology; its rest shape is compared point by point, so that
+    the same model built on another CPU (float32 bytes that differ in the last bits) finds it, and a
+    model of the same topology whose face has moved by 0.1 mm does not."""
+    import dataclasses
+
+    from prior.fit.landmark_sources import CORRESPONDENCE_TOLERANCE_M
+
+    T = np.asarray(default_model.template, np.float64)
+    rng = np.random.default_rng(0)
+    ulp = dataclasses.replace(default_model, template=(T * (1.0 + rng.uniform(-2e-7, 2e-7, T.shape))).astype(np.float32))
+    assert not np.array_equal(ulp.template, default_model.template)
+    np.testing.assert_array_equal(load_correspondence(ulp)["triangles"], load_correspondence(default_model)["triangles"])
+    moved = T.copy()
+    moved[default_model.regions["face"], 1] -= 10 * CORRESPONDENCE_TOLERANCE_M  # the face 0.1 mm forward
+    with pytest.raises(SynthError, match="derived on another rest shape") as e:
+        load_correspondence(dataclasses.replace(default_model, template=moved.astype(np.float32)))
+    assert "\n" not in str(e.value) and "0.100 mm" in str(e.value)
+
+
 def test_default_correspondence_is_sane(default_model):
     m = default_model
     c = load_correspondence(m)
