@@ -5,6 +5,16 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null 2>&1 || PY=python3
+# The report's browser tests (tests/report/test_report_browser.py) open it in Debian's chromium:
+# installed with apt when missing and this runs as root; otherwise they skip, saying how.
+if ! command -v chromium >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+  echo "synth: installing chromium (Debian) for the report's browser tests" >&2
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get install -y -qq --no-install-recommends chromium >/tmp/synth-setup-apt.log 2>&1 \
+    || { apt-get update -qq >>/tmp/synth-setup-apt.log 2>&1 || true
+         apt-get install -y -qq --no-install-recommends chromium >>/tmp/synth-setup-apt.log 2>&1; } \
+    || echo "synth: apt-get install chromium failed (/tmp/synth-setup-apt.log); the 3 browser tests will skip" >&2
+fi
 stamp_key=$(cat requirements.lock pyproject.toml scripts/setup.sh | sha256sum | cut -c1-16)
 if [ -f .venv/.synth-stamp ] && [ "$(cat .venv/.synth-stamp)" = "$stamp_key" ]; then
   exit 0
