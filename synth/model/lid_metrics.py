@@ -5,7 +5,8 @@
   (negative: inside). The surface radius along a direction is interpolated from the eyeball's
   own vertices by their angle from the eye's axis (sphere and corneal bulge alike).
 - :func:`lid_opening`: the largest distance from an upper-margin vertex to the lower margin
-  (a polyline): the opening when open, ~0 when the upper margin lies on the lower one.
+  (a polyline in the margin's order): the opening when open, ~0 when the upper margin lies on
+  the lower one.
 """
 
 from __future__ import annotations
@@ -49,9 +50,12 @@ def _point_polyline_distance(p: np.ndarray, line: np.ndarray) -> np.ndarray:
 
 
 def lid_opening(data, vertices, side: str) -> float:
-    """Largest distance (metres) from an upper-margin vertex to the lower margin of eye ``side``."""
+    """Largest distance (metres) from an upper-margin vertex to the lower margin of eye ``side``, a
+    polyline through its vertices in their order along the margin: by x on the template, where the
+    margin runs from canthus to canthus. (Sorted by x as posed, a closed lid's margin, which folds
+    near the canthi, joined vertices that are not neighbours: 0.78 mm read where it lies 0.11 mm.)"""
     V = np.asarray(vertices, np.float64)
     up = V[np.asarray(data.regions[f"eyelid_{side}_upper"], np.int64)]
     lo = np.asarray(data.regions[f"eyelid_{side}_lower"], np.int64)
-    lo = V[lo[np.argsort(V[lo, 0])]]
+    lo = V[lo[np.argsort(np.asarray(data.template)[lo, 0])]]
     return float(_point_polyline_distance(up, lo).max())
