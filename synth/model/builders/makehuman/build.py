@@ -21,11 +21,10 @@ from synth.model.eyelids import build_eyelid_rig, rest_lids
 from synth.model.format import HeadModelData
 from synth.model.identity_gmm import fit_gmm
 
-BUILDER_VERSION = "6"  # bump on every output change ("3": ibug68 landmarks on mesh edges name another
+BUILDER_VERSION = "5"  # bump on every output change ("3": ibug68 landmarks on mesh edges name another
 # adjacent triangle since synth.geometry.closest places them; their evaluated positions are unchanged;
 # "4": the eyelid rig, extra["eyelids"], and a template whose lid margins rest on the eyeballs;
-# "5": the template's lid openings widened to measured eye fissures, EYE_OPENING;
-# "6": the eyeballs 0.8 mm lower in their openings, EYEBALL_DROP_M)
+# "5": the template's lid openings widened to measured eye fissures, EYE_OPENING)
 SEED = 20241128
 N_SAMPLES = 3000  # identity samples before mirroring (the PCA sees 2 * N_SAMPLES)
 GMM_COMPONENTS = 6
@@ -38,13 +37,6 @@ GMM_ITERS = 60
 #: published adult means (docs/default-model.md "Identity space" 6, docs/realism.md "Eye
 #: proportions", ``benchmarks/realism.py eyes``). The identity basis is unchanged.
 EYE_OPENING = 1.0
-#: how far (m) the eyeballs and the joints they turn about sit lower than MakeHuman's eye helpers.
-#: On the helpers the lid openings sat about 1 mm low on the eye, white showing below the iris in
-#: primary gaze: margin-reflex distances MRD1 3.8 / MRD2 6.2 mm (median of 200 planned identities;
-#: clinical normal values about 4-4.5 / 5-5.5 mm) and the pupil's centre 2.1 mm above the canthi's
-#: midpoint. 0.8 mm lower gives 4.5 / 5.5 mm; the lids rest on the eyeballs where they now are
-#: (docs/realism.md "The eyes lower in their openings", ``benchmarks/realism.py eyes``).
-EYEBALL_DROP_M = 0.0008
 
 
 def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dims: int | None = None) -> HeadModelData:
@@ -89,9 +81,6 @@ def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dim
     template = 0.5 * (template + template[mesh.mirror] * flip_x)  # exact symmetry (already equal to ~1e-12)
     joint_rest = base_joints + jmean.reshape(Jn, 3)
     joint_rest = 0.5 * (joint_rest + joint_rest[list(JOINT_MIRROR)] * flip_x)
-    for side in ("eye_l", "eye_r"):
-        template[mesh.eye_slices[side], 2] -= EYEBALL_DROP_M  # before the eyelid rig rests the lids
-        joint_rest[JOINT_NAMES.index(side), 2] -= EYEBALL_DROP_M
     # EM on a deterministic subset keeps the build fast (full-covariance EM is the slow step)
     gmm = fit_gmm(codes[rng.permutation(len(codes))[:GMM_FIT_SAMPLES]], GMM_COMPONENTS, rng, iters=GMM_ITERS)
 
