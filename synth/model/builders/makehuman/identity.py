@@ -180,12 +180,27 @@ def identity_pca(W: np.ndarray, T: np.ndarray, TJ: np.ndarray, Tm: np.ndarray, T
                          "build_makehuman_head", f"choose identity_dims <= {rank}")
     A = E @ (Z[:, :k] / sq[:, None])  # (2nt, k): basis_k = A[:, k] . T2
     basis = A.T @ T2
-    # canonical signs (eigenvectors are defined up to sign): largest-magnitude entry positive
-    sign = np.sign(basis[np.arange(k), np.argmax(np.abs(basis), axis=1)])
-    basis *= sign[:, None]
+    basis *= canonical_signs(basis)[:, None]  # eigenvectors are defined up to sign
     std = np.sqrt(ev[:k])
     codes = (Wc @ (T2 @ basis.T)) / std
     # joints: the same combination of samples as the mesh basis (regression of joints on codes)
     joint_basis = (codes.T @ (Wc @ J2)) / (2 * n - 1) / std[:, None]
     explained = float(ev[:k].sum() / ev[ev > 0].sum())
     return wbar @ T2, wbar @ J2, basis, std, joint_basis, codes, rank, explained
+
+
+#: entries within this fraction of a row's largest magnitude count as tied for :func:`canonical_signs`
+SIGN_TIE_REL = 1e-6
+
+
+def canonical_signs(basis: np.ndarray) -> np.ndarray:
+    """+1 / -1 per row of ``basis`` (K, D) such that the row's first entry, in index order, whose
+    magnitude is within :data:`SIGN_TIE_REL` of the row's largest is positive. A mirror-symmetric
+    component has its largest magnitude twice, at a vertex's x and at its mirror image's with the
+    opposite sign, equal but for the last bits; taking the plain argmax let those bits choose, and
+    OpenBLAS's kernels for another CPU flipped components 28, 30 and 44 of the default model (a
+    +-3 SD head 15.7 mm apart; docs/default-model.md)."""
+    a = np.abs(np.asarray(basis, np.float64))
+    first = np.argmax(a >= a.max(axis=1, keepdims=True) * (1.0 - SIGN_TIE_REL), axis=1)
+    s = np.sign(np.asarray(basis, np.float64)[np.arange(len(a)), first])
+    return np.where(s == 0, 1.0, s)
