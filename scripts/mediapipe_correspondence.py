@@ -151,11 +151,11 @@ def mirror_pairs(det: np.ndarray, unmirrored: np.ndarray) -> np.ndarray:
 
 def derive(work: Path, train: int, out_dir: Path | None, independent: bool = False) -> Path:
     _setup_path()
-    from prior.fit.landmark_sources import CORRESPONDENCE_DIR, model_key, template_points
+    from prior.fit.landmark_sources import CORRESPONDENCE_DIR, model_key
     from synth.conventions import project
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
-    from synth.model.meshutil import mesh_midline, mesh_mirror
+    from synth.model.meshutil import barycentric_points, mesh_midline, mesh_mirror
 
     model = load_default_model()
     hm = HeadModel(model, np.float64)
@@ -244,8 +244,9 @@ def derive(work: Path, train: int, out_dir: Path | None, independent: bool = Fal
                           "script": "scripts/mediapipe_correspondence.py"},
            "points": points,
            # where the points lie on the rest shape they were derived on (checked when the file is read)
-           "template_points": np.round(template_points(model, [p["triangle"] for p in points],
-                                                       [p["bary"] for p in points]), 7).tolist()}
+           "template_points": np.round(barycentric_points(
+               np.asarray(model.template, np.float64), model.triangles, np.array([p["triangle"] for p in points]),
+               np.array([p["bary"] for p in points], np.float64)), 7).tolist()}
     if pair is not None:  # mediapipe's left-right partners (found from the data, mirror_pairs)
         doc["mirror"] = pair.tolist()
     path = (out_dir or CORRESPONDENCE_DIR) / f"mediapipe-{model_key(model)}.json"

@@ -22,6 +22,7 @@ import numpy as np
 from prior.fit.landmarks_fit import Observations
 from synth import seeds
 from synth.errors import SynthError
+from synth.model.meshutil import barycentric_points
 
 MEDIAPIPE_VERSION = "0.10.21"
 CORRESPONDENCE_DIR = Path(__file__).resolve().parent / "data"
@@ -113,13 +114,6 @@ def model_key(model) -> str:
     return h.hexdigest()[:16]
 
 
-def template_points(model, triangles, bary) -> np.ndarray:
-    """(P, 3) positions (m) of surface points (triangle, barycentric weights) on the model's template."""
-    T = np.asarray(model.template, np.float64)
-    tri = np.asarray(model.triangles)[np.asarray(triangles, np.int64)]
-    return np.einsum("pk,pkc->pc", np.asarray(bary, np.float64), T[tri])
-
-
 def load_correspondence(model) -> dict:
     """The mediapipe -> model correspondence for this model: ``index`` (P,) mediapipe point
     indices, ``triangles`` (P,), ``bary`` (P, 3), ``sigma_face`` (P,: the point's RMS residual
@@ -140,7 +134,8 @@ def load_correspondence(model) -> dict:
     if "template_points" not in d:
         raise SynthError(f"the mediapipe landmark correspondence {path.name} has no template_points (format "
                          f"{d.get('format_version')}; 2 is read)", "--landmarks mediapipe", fix)
-    off = np.linalg.norm(template_points(model, out["triangles"], out["bary"]) - np.asarray(d["template_points"]), axis=1)
+    on_template = barycentric_points(np.asarray(model.template, np.float64), model.triangles, out["triangles"], out["bary"])
+    off = np.linalg.norm(on_template - np.asarray(d["template_points"]), axis=1)
     if off.max() > CORRESPONDENCE_TOLERANCE_M:
         raise SynthError(f"the mediapipe landmark correspondence {path.name} was derived on another rest shape of head "
                          f"model '{model.name}' (its points up to {1000.0 * off.max():.3f} mm away)",
