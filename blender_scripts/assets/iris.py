@@ -21,6 +21,12 @@ stretched along rho), crypts (Voronoi), a collarette / central-heterochromia inn
 the limbal ring and the pupil (radius from ``pupil_dilation``), mixed over the sclera. The
 sclera is not flat white: a faint yellow low-frequency tint and a vessel network (Voronoi
 edges, distorted) that grows toward the periphery (rho > ``SCLERA_VESSELS_FROM``).
+
+**Caruncle.** At each eye's medial canthus the pink caruncle (a mucosa dotted with glands) and,
+lateral to it, the fainter plica semilunaris cover the eyeball (:func:`caruncle_layer`). Without
+them the white sclera ran into the inner corner, a doll's eye. Their centre is the canthus on the
+current mesh (``eye_canthus``: :func:`synth.assets.fit.eyes.medial_canthi`), so they stay with
+the lids while the eyeball turns under them.
 """
 
 from __future__ import annotations
@@ -28,13 +34,20 @@ from __future__ import annotations
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
 from synth.appearance.iris import iris_palette, pupil_ratio
-from synth.assets.fit.eyes import FRAME_ATTRIBUTES, eye_coordinates, eye_frames
+from synth.assets.fit.eyes import FRAME_ATTRIBUTES, eye_coordinates, eye_frames, medial_canthi
 from synth.dataset.segmentation import CLASSES
 
 #: refractive index of the cornea / aqueous humour (Gullstrand: 1.376 / 1.336)
 CORNEA_IOR = 1.376
 #: rho (limbus = 1) from which scleral vessels appear, and where they are densest
 SCLERA_VESSELS_FROM, SCLERA_VESSELS_FULL = 1.3, 3.0
+#: the caruncle and plica semilunaris at the medial canthus (straight-line distance from the
+#: canthus, metres): the caruncle's colour up to CARUNCLE_CORE_M, fading out by CARUNCLE_EDGE_M;
+#: the plica's fainter pink fading out by PLICA_EDGE_M. The caruncle is a mound a few millimetres
+#: across in the tear lake at the rounded medial canthus, the plica a vertical fold lateral to it.
+CARUNCLE_CORE_M, CARUNCLE_EDGE_M, PLICA_EDGE_M = 0.0025, 0.004, 0.0055
+#: linear albedos: the caruncle (a pink-red mucosa, darker between its glands) and the plica
+CARUNCLE_RGB, CARUNCLE_DARK_RGB, PLICA_RGB = (0.46, 0.16, 0.14), (0.30, 0.08, 0.07), (0.66, 0.40, 0.36)
 
 
 class IrisRig(Rig):
@@ -47,6 +60,7 @@ class IrisRig(Rig):
 def _write_frames(ctx) -> None:
     for name, v in eye_frames(ctx.data, ctx.vertices).items():
         bmat.write_point_vector(ctx.head.data, name, v)
+    bmat.write_point_vector(ctx.head.data, "eye_canthus", medial_canthi(ctx.data, ctx.vertices))
 
 
 def _map_range(nt, value, lo: float, hi: float, smooth: bool = False):
@@ -139,6 +153,35 @@ def sclera_layer(mat, surface, seed: float) -> None:
     bmat.layer_over(mat, "Base Color", (0.78, 0.52, 0.48), bmat.math_node(mat, "MULTIPLY", zone, 0.25))
 
 
+def caruncle_layer(mat, seed: float) -> None:
+    """The caruncle and the plica semilunaris over the sclera at each eye's medial canthus
+    (``eye_canthus``, which follows the lids, not the gaze: the sclera turns under them as a
+    real eye's does). It covers the cornea too where the eye turns in far enough to bring the
+    limbus under it, as the real caruncle, in front of the eyeball, hides it."""
+    nt = mat.node_tree
+    geo = nt.nodes.new("ShaderNodeNewGeometry")
+    d = _vmath(nt, "DISTANCE", geo.outputs["Position"], bmat.attribute(mat, "eye_canthus").outputs["Vector"])
+    plica = _map_range(nt, d, PLICA_EDGE_M, CARUNCLE_CORE_M, smooth=True)
+    bmat.layer_over(mat, "Base Color", PLICA_RGB, bmat.math_node(mat, "MULTIPLY", plica, 0.6))
+    # glands: fine cells (about 0.4 mm) darker between them
+    vor = nt.nodes.new("ShaderNodeTexVoronoi")
+    vor.voronoi_dimensions = "4D"
+    vor.feature = "DISTANCE_TO_EDGE"
+    vor.inputs["W"].default_value = seed + 2.0
+    vor.inputs["Scale"].default_value = 2500.0
+    nt.links.new(geo.outputs["Position"], vor.inputs["Vector"])
+    col = nt.nodes.new("ShaderNodeMix")
+    col.data_type = "RGBA"
+    col.inputs[6].default_value = (*CARUNCLE_DARK_RGB, 1.0)
+    col.inputs[7].default_value = (*CARUNCLE_RGB, 1.0)
+    nt.links.new(_map_range(nt, vor.outputs["Distance"], 0.0, 0.12), col.inputs[0])
+    core = _map_range(nt, d, CARUNCLE_EDGE_M, CARUNCLE_CORE_M, smooth=True)
+    bmat.layer_over(mat, "Base Color", col.outputs[2], core)
+    bmat.layer_over(mat, "Roughness", 0.4, core)
+    # a rounded, slightly raised mound
+    bmat.chain_bump(mat, core, 0.6, 0.0004)
+
+
 def build(ctx, entry: dict) -> Rig:
     p = dict(entry.get("params") or {})
     rng = ctx.rng("iris")
@@ -222,6 +265,7 @@ def build(ctx, entry: dict) -> Rig:
     over((0.004, 0.004, 0.004), band(pupil - 0.03, pupil + 0.01, rising=False))
     # over the sclera, inside the limbus
     bmat.layer_over(mat, "Base Color", last, band(1.0, 1.05, rising=False))
+    caruncle_layer(mat, seed)
     rec = {"id": entry.get("id"), "palette": {k: [round(c, 5) for c in v] for k, v in pal.items()},
            "pupil_ratio": round(pupil, 4), "eyes": info, "cornea_ior": CORNEA_IOR}
     return IrisRig("iris", [], rec)

@@ -80,3 +80,46 @@ def test_lid_margin_is_the_lid_edge_per_sector(default_head):
                     best, best_t = i, np.arccos(q @ f)
             if best is not None:
                 assert m[best] == 1.0
+
+
+@pytest.mark.parametrize("case", ["neutral", "id+3_jaw", "id-3_jaw"])
+def test_caruncle_centre_is_each_eyes_medial_canthus_and_stays_when_the_eye_turns(default_head, case):
+    """``eye_canthus`` (the caruncle's centre in the iris shader) is, on each eye's vertices,
+    that eye's ibug68 inner corner (39 / 42), medial of the eye's centre and on the eyeball (the
+    lid margin rests on it); it does not turn with the gaze, and off the eyes it is zero."""
+    from synth.assets.fit.eyes import medial_canthi
+    from synth.model.meshutil import barycentric_points
+
+    hm = default_head
+    ctx = asset_scene.head_arrays(hm, case)
+    V = ctx.vertices
+    can = medial_canthi(hm.data, V)
+    fr = eye_frames(hm.data, V)
+    tri, bary = hm.data.landmarks["ibug68"]
+    lm = barycentric_points(V, hm.data.triangles, tri, bary)
+    for side, k in (("r", 39), ("l", 42)):
+        eye = np.asarray(hm.data.regions[f"eye_{side}"])
+        assert np.allclose(can[eye], lm[k]), (case, side)
+        c = fr["eye_centre"][eye[0]]
+        assert abs(lm[k][0]) < abs(c[0]) - 0.005, (case, side)  # medial, by over 5 mm
+        R = np.linalg.norm(V[np.asarray(hm.data.regions[f"sclera_{side}"])] - c, axis=1).mean()
+        assert abs(np.linalg.norm(lm[k] - c) - R) < 0.001, (case, side)
+    off = np.ones(len(V), bool)
+    off[np.concatenate([hm.data.regions["eye_l"], hm.data.regions["eye_r"]])] = False
+    assert not can[off].any()
+    # turned 20 degrees sideways, the eyeball moves under a canthus that stays put
+    beta, psi, rot = asset_scene._codes(hm, case)
+    rot[hm.joint_index["eye_l"]] = rot[hm.joint_index["eye_r"]] = gaze_axis_angle(20.0, 0.0)
+    Vt = hm.evaluate(beta, psi, rot, landmarks=False).vertices[0].astype(np.float64)
+    eye = np.asarray(hm.data.regions["eye_l"])
+    assert np.linalg.norm(medial_canthi(hm.data, Vt)[eye[0]] - can[eye[0]]) < 2e-4
+    assert np.abs(Vt[eye] - V[eye]).max() > 0.003
+
+
+def test_no_caruncle_without_ibug68_landmarks(default_head):
+    from dataclasses import replace
+
+    from synth.assets.fit.eyes import medial_canthi
+
+    data = replace(default_head.data, landmarks={})
+    assert not medial_canthi(data, default_head.data.template).any()

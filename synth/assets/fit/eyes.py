@@ -95,6 +95,35 @@ def eye_frames(data, vertices: np.ndarray) -> dict[str, np.ndarray]:
     return out
 
 
+#: ibug68 indices of the medial canthi (en; 39: the subject's right eye, 42: the left)
+MEDIAL_CANTHI = (39, 42)
+
+
+def medial_canthi(data, vertices: np.ndarray) -> np.ndarray:
+    """(V, 3) per-vertex position of the medial canthus (ibug68 point 39 / 42 on the *current*
+    vertices, so it follows the lids) of the eye a vertex belongs to, for the caruncle in the
+    iris shader (``blender_scripts/assets/iris.py``). Each eye takes the canthus nearer its
+    centre. Vertices off the eyes, and every vertex of a model without ibug68 landmarks, get
+    zeros: metres away from any eye, so the shader paints no caruncle there."""
+    from synth.model.meshutil import barycentric_points
+
+    V = np.asarray(vertices, np.float64)
+    out = np.zeros((len(V), 3))
+    lm = getattr(data, "landmarks", {}).get("ibug68")
+    if lm is None:
+        return out
+    tri, bary = lm
+    idx = list(MEDIAL_CANTHI)
+    P = barycentric_points(V, np.asarray(data.triangles), np.asarray(tri)[idx], np.asarray(bary)[idx])
+    for side in ("l", "r"):
+        fr = _eye_frame(data, V, side)
+        if fr is None:
+            continue
+        eye, c = fr[0], fr[1]
+        out[eye] = P[int(np.argmin(np.linalg.norm(P - c, axis=1)))]
+    return out
+
+
 #: angular sectors around the eye axis in which the lid margin vertex is picked
 MARGIN_SECTORS = 36
 
