@@ -653,13 +653,13 @@ def scalp(args) -> dict:
 def eyes(args) -> dict:
     """The eyes' proportions of the first planned identities (neutral, rest pose) against
     published measurements (benchmarks/realism_eyes.py)."""
-    from realism_eyes import eyes_table, margin_reflex_distances
+    from realism_eyes import eyeball_diameters, eyes_table, margin_reflex_distances
 
     model, hm, ids, codes = _planned_heads(args.seed, args.identities)
     n = len(ids)
     ev = hm.evaluate(codes, np.zeros((n, model.expression_dims)), np.zeros((n, hm.J, 3)))
     return eyes_table(args, np.asarray(ev.landmarks["ibug68"], np.float64),
-                      margin_reflex_distances(ev.vertices, model.regions))
+                      margin_reflex_distances(ev.vertices, model.regions), eyeball_diameters(ev.vertices, model.regions))
 
 
 def main(argv=None) -> None:

@@ -81,6 +81,29 @@ def margin_reflex_distances(vertices: np.ndarray, regions: dict) -> dict[str, np
     return {"MRD1": 1000.0 * np.mean(mrd1, axis=0), "MRD2": 1000.0 * np.mean(mrd2, axis=0)}
 
 
+#: adult eyeball, transverse diameter (mm): mean, and the range measured (Bekerman, Gottlieb and
+#: Vaiman 2014, J. Ophthalmol. 503645: CT of 250 healthy adults, 24.2 mm transverse x 23.7 mm
+#: sagittal x 22.0-24.8 mm axial; transverse 21-27 mm; no difference by sex, age or ethnicity)
+EYEBALL_TRANSVERSE_MM = (24.2, 21.0, 27.0)
+
+
+def eyeball_diameters(vertices: np.ndarray, regions: dict) -> np.ndarray:
+    """(N,) eyeball diameter (mm, mean of both eyes) of heads ``vertices`` (N, V, 3), metres: twice
+    the radius of the least-squares sphere through each ``sclera_l`` / ``sclera_r`` region (the
+    cornea, proud of it, is not in that region)."""
+    V = np.asarray(vertices, np.float64)
+    out = []
+    for s in "lr":
+        P = V[:, np.asarray(regions[f"sclera_{s}"])]  # (N, k, 3)
+        c0 = P.mean(axis=1, keepdims=True)
+        Q = P - c0
+        A = np.concatenate([2 * Q, np.ones(Q.shape[:2] + (1,))], axis=2)
+        b = (Q ** 2).sum(axis=2)
+        x = np.stack([np.linalg.lstsq(a, bb, rcond=None)[0] for a, bb in zip(A, b)])  # centre (3), r^2 - |c|^2
+        out.append(2.0 * np.sqrt(x[:, 3] + (x[:, :3] ** 2).sum(axis=1)))
+    return 1000.0 * np.mean(out, axis=0)
+
+
 def reference_range(name: str) -> tuple[float, float] | None:
     """The lowest and highest published mean of a measurement (:data:`REFERENCES`)."""
     means = [m[name][0] for _, _, m in REFERENCES if name in m]
@@ -103,9 +126,10 @@ def table(values: dict[str, np.ndarray]) -> list[dict]:
     return rows
 
 
-def eyes_table(args, ibug: np.ndarray, mrd: dict | None = None) -> dict:
+def eyes_table(args, ibug: np.ndarray, mrd: dict | None = None, eyeball: np.ndarray | None = None) -> dict:
     """Print and return the table for ``ibug`` (N, 68, 3), the planned identities of ``args``, and
-    their margin-reflex distances ``mrd`` (:func:`margin_reflex_distances`) if given."""
+    their margin-reflex distances ``mrd`` (:func:`margin_reflex_distances`) and eyeball diameters
+    ``eyeball`` (:func:`eyeball_diameters`) if given."""
     values = eye_measures(ibug)
     rows = table(values)
     print(f"\n### The eyes against published measurements ({args.identities} planned identities of seed "
@@ -125,4 +149,11 @@ def eyes_table(args, ibug: np.ndarray, mrd: dict | None = None) -> dict:
         for k, v in mrd.items():
             print(f"| {k} | {np.percentile(v, 5):.1f} / {np.median(v):.1f} / {np.percentile(v, 95):.1f} |")
         out["mrd"] = {k: [float(np.percentile(v, q)) for q in (5, 50, 95)] for k, v in mrd.items()}
+    if eyeball is not None:
+        mean, lo, hi = EYEBALL_TRANSVERSE_MM
+        q = [float(np.percentile(eyeball, p)) for p in (5, 50, 95)]
+        print(f"\nEyeball diameter (sphere fitted to the sclera, mean of both eyes), 5 % / median / 95 %: "
+              f"{q[0]:.1f} / {q[1]:.1f} / {q[2]:.1f} mm; adults (CT, Bekerman et al. 2014): {mean} mm "
+              f"transverse, {lo}-{hi} mm")
+        out["eyeball_mm"] = q
     return out

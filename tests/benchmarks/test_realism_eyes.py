@@ -70,3 +70,19 @@ def test_margin_reflex_distances_take_the_margin_above_and_below_the_pupil(E):
     m = E.margin_reflex_distances(heads, regions)
     np.testing.assert_allclose(m["MRD1"], [4.0, 4.0], atol=1e-9)
     np.testing.assert_allclose(m["MRD2"], [5.5, 5.5], atol=1e-9)
+
+
+def test_eyeball_diameter_of_known_spheres(E):
+    """Two heads whose scleras are caps of spheres of 24 and 30 mm diameter (different centres per
+    eye, points on less than a hemisphere, as the visible-and-hidden sclera region is not a whole
+    sphere) read those diameters."""
+    rng = np.random.default_rng(0)
+    V = np.zeros((2, 400, 3))
+    regions = {"sclera_l": np.arange(0, 200), "sclera_r": np.arange(200, 400)}
+    for n, d in enumerate((24.0, 30.0)):
+        for half, c in ((slice(0, 200), [0.03, -0.1, 1.6]), (slice(200, 400), [-0.03, -0.1, 1.6])):
+            u = rng.normal(size=(200, 3))
+            u /= np.linalg.norm(u, axis=1, keepdims=True)
+            u[:, 1] = -np.abs(u[:, 1])  # one side only
+            V[n, half] = np.asarray(c) + d / 2000 * u
+    np.testing.assert_allclose(E.eyeball_diameters(V, regions), [24.0, 30.0], atol=1e-6)
