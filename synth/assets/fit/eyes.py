@@ -109,7 +109,7 @@ def medial_canthi(data, vertices: np.ndarray) -> np.ndarray:
 
     V = np.asarray(vertices, np.float64)
     out = np.zeros((len(V), 3))
-    lm = getattr(data, "landmarks", {}).get("ibug68")
+    lm = data.landmarks.get("ibug68")
     if lm is None:
         return out
     tri, bary = lm
