@@ -89,19 +89,13 @@ EYEBALL_TRANSVERSE_MM = (24.2, 21.0, 27.0)
 
 def eyeball_diameters(vertices: np.ndarray, regions: dict) -> np.ndarray:
     """(N,) eyeball diameter (mm, mean of both eyes) of heads ``vertices`` (N, V, 3), metres: twice
-    the radius of the least-squares sphere through each ``sclera_l`` / ``sclera_r`` region (the
-    cornea, proud of it, is not in that region)."""
+    the radius of the least-squares sphere (:func:`synth.model.meshutil.fit_sphere`) through each
+    ``sclera_l`` / ``sclera_r`` region (the cornea, proud of it, is not in that region)."""
+    from synth.model.meshutil import fit_sphere
+
     V = np.asarray(vertices, np.float64)
-    out = []
-    for s in "lr":
-        P = V[:, np.asarray(regions[f"sclera_{s}"])]  # (N, k, 3)
-        c0 = P.mean(axis=1, keepdims=True)
-        Q = P - c0
-        A = np.concatenate([2 * Q, np.ones(Q.shape[:2] + (1,))], axis=2)
-        b = (Q ** 2).sum(axis=2)
-        x = np.stack([np.linalg.lstsq(a, bb, rcond=None)[0] for a, bb in zip(A, b)])  # centre (3), r^2 - |c|^2
-        out.append(2.0 * np.sqrt(x[:, 3] + (x[:, :3] ** 2).sum(axis=1)))
-    return 1000.0 * np.mean(out, axis=0)
+    d = [[2.0 * fit_sphere(head[np.asarray(regions[f"sclera_{s}"])])[1] for s in "lr"] for head in V]
+    return 1000.0 * np.mean(d, axis=1)
 
 
 def reference_range(name: str) -> tuple[float, float] | None:
