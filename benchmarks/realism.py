@@ -85,6 +85,33 @@ def _lab_table(lab: np.ndarray, ita: np.ndarray) -> None:
     print(f"| ITA | {ita.min():.1f} | {np.median(ita):.1f} | {ita.max():.1f} |\n")
 
 
+def _lips_table(assets, lab: np.ndarray, ita: np.ndarray) -> dict:
+    """The lips' albedo (synth.appearance.lips) against the skin's, by ITA category: CIELAB
+    lightness, chroma and hue differences (median, min..max)."""
+    from synth.appearance.lips import lip_albedo
+    from synth.appearance.skin import cielab, ita_category
+
+    lips = cielab(np.array([lip_albedo(a["skin"]["params"]["melanin"], a["skin"]["params"]["haemoglobin"])
+                            for a in assets]))
+
+    def lch(x):
+        return x[:, 0], np.hypot(x[:, 1], x[:, 2]), np.degrees(np.arctan2(x[:, 2], x[:, 1]))
+
+    (ls, cs, hs), (ll, cl, hl) = lch(lab), lch(lips)
+    d = {"dL": ll - ls, "dC": cl - cs, "dh": hl - hs}
+    cat = ita_category(ita)
+    print("Lips against the skin (lip albedo minus skin albedo, CIELAB; median, min..max):\n")
+    print("| ITA category | identities | lips L\\* | ΔL\\* | ΔC\\* | Δh, degrees |\n|---|---:|---:|---:|---:|---:|")
+    for k, name in enumerate(CATS):
+        m = cat == k
+        if not m.any():
+            continue
+        cells = [f"{np.median(v[m]):+.1f} ({v[m].min():+.1f}..{v[m].max():+.1f})" for v in d.values()]
+        print(f"| {name} | {int(m.sum())} | {np.median(ll[m]):.1f} | " + " | ".join(cells) + " |")
+    print()
+    return {"lab": lips.tolist(), **{k: v.tolist() for k, v in d.items()}}
+
+
 def skin(args) -> dict:
     from synth.appearance.skin import cielab, individual_typology_angle, skin_albedo
     from synth.assets.catalogue import load_catalogue
@@ -103,7 +130,7 @@ def skin(args) -> dict:
     lab, ita = cielab(alb), individual_typology_angle(alb)
     print(f"\n### Skin albedo of {len(ids)} planned identities (seed {args.seed})\n")
     _lab_table(lab, ita)
-    out = {"albedo": {"lab": lab.tolist(), "ita": ita.tolist()}}
+    out = {"albedo": {"lab": lab.tolist(), "ita": ita.tolist()}, "lips": _lips_table(assets, lab, ita)}
     if args.frames:
         rows = _skin_pixels(args.frames)
         if rows:

@@ -6,6 +6,7 @@ import bpy
 import numpy as np
 
 from blender_scripts.mesh import link_object, new_mesh, set_positions
+from synth.appearance.lips import vermilion_attribute
 from synth.appearance.teeth import arch_attribute
 from synth.dataset.segmentation import polygon_classes
 
@@ -30,6 +31,10 @@ def build_head_object(data, vertices: np.ndarray, materials: dict[int, "bpy.type
     if arch is not None:  # where the teeth's gaps lie (synth.appearance.teeth; the teeth material)
         attr = me.attributes.new("tooth_arch", "FLOAT", "POINT")
         attr.data.foreach_set("value", np.ascontiguousarray(arch, np.float32))
+    lips = vermilion_attribute(len(vertices), data.regions, data.triangles)
+    if lips is not None:  # where the lips' own colour lies (synth.appearance.lips; the skin material)
+        attr = me.attributes.new("vermilion", "FLOAT", "POINT")
+        attr.data.foreach_set("value", np.ascontiguousarray(lips, np.float32))
     return link_object(name, me, [materials[c] for c in slots])
 
 

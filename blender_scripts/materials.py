@@ -42,7 +42,7 @@ def _ridge(nodes, links, fac):
     return ab.outputs[0]
 
 
-def skin_material(albedo, params: dict | None = None, pixel_m: float | None = None):
+def skin_material(albedo, params: dict | None = None, pixel_m: float | None = None, lip_albedo=None):
     """Principled skin (``synth.appearance.skin_optics`` for the physics and the rules):
     random-walk subsurface with per-channel radii (red furthest), the broad specular lobe with
     the sampled roughness (varied with a low-frequency noise) and a sharp coat lobe, albedo
@@ -50,7 +50,10 @@ def skin_material(albedo, params: dict | None = None, pixel_m: float | None = No
     fine lines, each built only as far as the finest view of the identity resolves it
     (``pixel_m``: metres per pixel on the face; None = every layer at full strength); what is not
     resolved widens the broad lobe instead. All variation is procedural (noise seeded by the
-    plan's ``noise_seed``), so it follows any identity and expression."""
+    plan's ``noise_seed``), so it follows any identity and expression. ``lip_albedo`` (linear
+    sRGB, :func:`synth.appearance.lips.lip_albedo`): the lips' own colour and a smoother surface
+    over the ``vermilion`` point attribute (``blender_scripts.head``); None: none."""
+    from synth.appearance import lips as lp
     from synth.appearance import skin_optics as so
 
     p = dict(params or {})
@@ -125,6 +128,15 @@ def skin_material(albedo, params: dict | None = None, pixel_m: float | None = No
     bsdf.inputs["Subsurface Radius"].default_value = radius
     bsdf.inputs["Subsurface Scale"].default_value = scale
     bsdf.inputs["IOR"].default_value = 1.4
+    if lip_albedo is not None:  # the vermilion: its edge sharpened about the border loop's value
+        edge = nodes.new("ShaderNodeMapRange")
+        edge.interpolation_type = "SMOOTHSTEP"
+        edge.clamp = True
+        edge.inputs["From Min"].default_value = lp.BORDER_VALUE - 0.5 * lp.EDGE_WIDTH
+        edge.inputs["From Max"].default_value = lp.BORDER_VALUE + 0.5 * lp.EDGE_WIDTH
+        links.new(attribute(mat, "vermilion").outputs["Fac"], edge.inputs["Value"])
+        layer_over(mat, "Base Color", tuple(float(c) for c in lip_albedo), edge.outputs["Result"])
+        layer_over(mat, "Roughness", max(0.05, broad - lp.LIP_ROUGHNESS_DROP), edge.outputs["Result"])
     return mat
 
 
@@ -184,10 +196,12 @@ def tooth_gaps(mat) -> None:
     chain_bump(mat, ramp(f, 0.0, tt.ROUNDING, 0.0, 1.0), 0.5, 0.0004)
 
 
-def head_materials(skin_params: dict, albedo, pixel_m: float | None = None) -> dict[int, "bpy.types.Material"]:
-    """Material per segmentation class for the head mesh (``pixel_m``: see :func:`skin_material`)."""
+def head_materials(skin_params: dict, albedo, pixel_m: float | None = None,
+                   lip_albedo=None) -> dict[int, "bpy.types.Material"]:
+    """Material per segmentation class for the head mesh (``pixel_m``, ``lip_albedo``: see
+    :func:`skin_material`)."""
     return {
-        CLASSES["skin"]: skin_material(albedo, skin_params, pixel_m),
+        CLASSES["skin"]: skin_material(albedo, skin_params, pixel_m, lip_albedo),
         **{CLASSES[cls]: plain_material(name, cls, inputs) for name, cls, inputs in PLAIN_MATERIALS},
     }
 

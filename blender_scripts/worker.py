@@ -115,6 +115,7 @@ class IdentityScene:
         from blender_scripts import materials as bmat
         from blender_scripts import scene as bscene
         from blender_scripts.assets import HeadContext
+        from synth.appearance.lips import lip_albedo
         from synth.appearance.skin import skin_albedo
         from synth.appearance.skin_optics import pixel_footprint_m
 
@@ -126,10 +127,12 @@ class IdentityScene:
         self.effective = bscene.configure_render(render_cfg, self.width, self.height)
         self.env = _set_environment(ident, plan)
         skin = dict(ident.get("skin") or {})
-        albedo = skin_albedo(float(skin.get("melanin", 0.05)), float(skin.get("haemoglobin", 0.015)))
-        self.skin_record = {**skin, "albedo_linear_srgb": [round(a, 6) for a in albedo]}
+        mel, hb = float(skin.get("melanin", 0.05)), float(skin.get("haemoglobin", 0.015))
+        albedo, lips = skin_albedo(mel, hb), lip_albedo(mel, hb)
+        self.skin_record = {**skin, "albedo_linear_srgb": [round(a, 6) for a in albedo],
+                            "lip_albedo_linear_srgb": [round(a, 6) for a in lips]}
         pixel_m = pixel_footprint_m([f["camera"] for e in ident["expressions"] for f in e["frames"]])
-        self.materials = bmat.head_materials(skin, albedo, pixel_m)
+        self.materials = bmat.head_materials(skin, albedo, pixel_m, lips)
         self.beta = np.asarray(ident["identity_code"], np.float64)
         rest = self._evaluate(np.zeros(hm.data.expression_dims), np.zeros((hm.J, 3)))
         self.rest = rest[0]
