@@ -151,6 +151,19 @@ def _cat(ita):
     return ita_category(ita)
 
 
+def _polygon_mask(poly: np.ndarray, height: int, width: int) -> np.ndarray:
+    """(H, W) pixels whose centres (synth convention, +0.5) lie inside the polygon (pixels)."""
+    y, x = np.mgrid[0:height, 0:width] + 0.5
+    inside = np.zeros((height, width), bool)
+    p = np.asarray(poly, np.float64)
+    for (x0, y0), (x1, y1) in zip(p, np.roll(p, -1, axis=0)):  # even-odd rule, rays toward +x
+        crosses = (y0 > y) != (y1 > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xc = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+        inside ^= crosses & (x < xc)
+    return inside
+
+
 def _skin_pixels(sources) -> list:
     from synth.dataset.reader import iter_frames
 
@@ -161,8 +174,10 @@ def _skin_pixels(sources) -> list:
             if abs(c["azimuth_deg"]) > 30 or abs(c["elevation_deg"]) > 30 or fr.meta.get("skin") is None:
                 continue
             m = (fr.segmentation == 1) & (fr.alpha > 0.99)
+            lm = np.asarray(fr.meta["landmarks_2d"], np.float64)
+            m &= ~_polygon_mask(lm[48:60], fr.height, fr.width)  # the lips have their own colour
             # the face only: rows above the chin (ibug 8), so neck and bust do not count
-            chin = float(np.asarray(fr.meta["landmarks_2d"])[8, 1])
+            chin = float(lm[8, 1])
             m[int(np.clip(chin, 0, fr.height)):] = False
             if m.sum() < 20:
                 continue

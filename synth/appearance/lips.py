@@ -14,7 +14,7 @@ The model: the same melanin / haemoglobin reflectance model as the skin
 identity's skin and :data:`LIP_MELANIN_FACTOR` times its melanin. Those two numbers are chosen,
 not fitted: they are round values with which the model reproduces all three observations over
 the catalogue's ranges (ITA -55..70 degrees, skin blood fraction 0.005-0.05; docs/realism.md,
-"Lips"): hue 4-39 degrees redder, chroma within 4 CIELAB units, L* up to 12 lower on light
+"Lips"): hue 3-41 degrees redder, chroma within 4 CIELAB units, L* up to 12 lower on light
 skin and none lower on the darkest. (Scaling the skin's blood fraction instead, by 5, turned the
 lips of skin already rich in blood mauve: hue 4 degrees.) The lips' vertices (the model's
 ``lips`` region: the lip-contact loop out to the vermilion border) carry the ``vermilion`` point
@@ -47,9 +47,10 @@ def lip_albedo(melanin: float, haemoglobin: float) -> tuple[float, float, float]
 
 
 def vermilion_attribute(n_vertices: int, regions: dict, triangles) -> np.ndarray | None:
-    """(V,) the head's ``vermilion`` point attribute: 1 on the ``lips`` region, :data:`BORDER_VALUE`
-    on its outer loop (lips vertices that share a triangle edge with skin outside the lips and the
-    mouth interior), 0 elsewhere; None when the model names no lips."""
+    """(V,) the head's ``vermilion`` point attribute: 1 on the ``lips`` region and on the mouth
+    interior's vertices next to it, :data:`BORDER_VALUE` on the lips' outer loop (lips vertices
+    that share a triangle edge with skin outside the lips and the mouth interior), 0 elsewhere;
+    None when the model names no lips."""
     lips = regions.get("lips")
     if lips is None or len(lips) == 0:
         return None
@@ -67,4 +68,9 @@ def vermilion_attribute(n_vertices: int, regions: dict, triangles) -> np.ndarray
     edge = np.concatenate([edge, e[inside[e[:, 1]] & out[e[:, 0]]][:, 1]])
     a = inside.astype(np.float64)
     a[np.unique(edge)] = BORDER_VALUE
+    # the skin-class faces between the lips' inner loop and the mouth interior are the inner lip
+    # (its wet mucosa): their mouth-interior corners get the lips' value too (faces of the mouth
+    # interior's own class do not use the skin material, so nothing else reads it there)
+    a[e[inside[e[:, 0]] & mouth[e[:, 1]]][:, 1]] = 1.0
+    a[e[inside[e[:, 1]] & mouth[e[:, 0]]][:, 0]] = 1.0
     return a

@@ -40,34 +40,44 @@ def test_lip_albedo_stays_in_range_at_the_limits():
 
 def test_vermilion_attribute_marks_the_lips_with_the_border_on_their_outer_loop():
     from synth.model.default import load_default_model
+    from synth.model.meshutil import barycentric_points
 
     d = load_default_model()
     V = d.num_vertices
     a = vermilion_attribute(V, d.regions, d.triangles)
     lips = np.zeros(V, bool)
     lips[np.asarray(d.regions["lips"])] = True
-    assert a.shape == (V,) and np.all(a[~lips] == 0.0) and np.all(a[lips] > 0.0)
-    border = a == BORDER_VALUE
-    assert np.all(lips[border])
-    # the border is one closed loop of the lips' outermost vertices: each border vertex touches
-    # skin outside the lips, each other lips vertex does not
-    t = d.triangles.astype(np.int64)
-    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
     mouth = np.zeros(V, bool)
     mouth[np.asarray(d.regions["mouth_interior"])] = True
-    outside = ~lips & ~mouth
-    touches = np.zeros(V, bool)
-    touches[e[outside[e[:, 1]], 0]] = True
-    touches[e[outside[e[:, 0]], 1]] = True
-    assert np.array_equal(border, lips & touches)
-    nb = border.sum()
-    ring_edges = e[border[e[:, 0]] & border[e[:, 1]]]
-    deg = np.bincount(np.unique(np.sort(ring_edges, 1), axis=0).ravel(), minlength=V)[border]
-    assert nb >= 20 and np.all(deg >= 2), (nb, deg.min())
-    # it surrounds the mouth: the mouth corners (ibug 48, 54) lie inside its x extent
+    assert a.shape == (V,) and np.all(a[lips] > 0.0) and np.all(a[~lips & ~mouth] == 0.0)
+    t = d.triangles.astype(np.int64)
+    e = np.unique(np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), 1), axis=0)
+    # the inner lip: mouth-interior vertices next to the lips carry the lips' value, the rest 0
+    next_to = np.zeros(V, bool)
+    next_to[e[lips[e[:, 0]], 1]] = True
+    next_to[e[lips[e[:, 1]], 0]] = True
+    assert np.all(a[mouth & next_to] == 1.0) and np.all(a[mouth & ~next_to] == 0.0)
+    # the border value lies on one closed loop round the mouth: a single cycle of edges
+    border = np.nonzero(a == BORDER_VALUE)[0]
+    ring = e[(a[e[:, 0]] == BORDER_VALUE) & (a[e[:, 1]] == BORDER_VALUE)]
+    deg = np.bincount(ring.ravel(), minlength=V)[border]
+    assert len(border) >= 20 and np.all(deg == 2), (len(border), np.unique(deg))
+    seen, stack = {int(border[0])}, [int(border[0])]
+    while stack:
+        v = stack.pop()
+        for w in ring[(ring[:, 0] == v) | (ring[:, 1] == v)].ravel():
+            if int(w) not in seen:
+                seen.add(int(w))
+                stack.append(int(w))
+    assert len(seen) == len(border)  # connected, so one loop
+    # outside it nothing of the lips; it encloses the mouth corners (ibug 48 / 54) and the
+    # lips' middle (ibug 51 above, 57 below) in the frontal (x, z) plane
     T = d.template.astype(np.float64)
-    x = T[border, 0]
-    assert x.min() < -0.02 and x.max() > 0.02
+    tri, bary = d.landmarks["ibug68"]
+    lm = barycentric_points(T, d.triangles, tri, bary)
+    x, z = T[border, 0], T[border, 2]
+    assert x.min() <= lm[48, 0] and x.max() >= lm[54, 0]
+    assert z.max() >= lm[51, 2] and z.min() <= lm[57, 2]
 
 
 def test_no_vermilion_without_a_lips_region():
