@@ -51,6 +51,8 @@ def vermilion_attribute(n_vertices: int, regions: dict, triangles) -> np.ndarray
     interior's vertices next to it, :data:`BORDER_VALUE` on the lips' outer loop (lips vertices
     that share a triangle edge with skin outside the lips and the mouth interior), 0 elsewhere;
     None when the model names no lips."""
+    from synth.model.meshutil import adjacency, triangle_edges
+
     lips = regions.get("lips")
     if lips is None or len(lips) == 0:
         return None
@@ -60,17 +62,11 @@ def vermilion_attribute(n_vertices: int, regions: dict, triangles) -> np.ndarray
     for name in ("mouth_interior", "teeth"):
         if name in regions:
             mouth[np.asarray(regions[name], np.int64)] = True
-    t = np.asarray(triangles, np.int64).reshape(-1, 3)
-    e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
-    out = np.zeros(n_vertices, bool)  # skin beyond the lips
-    out[:] = ~inside & ~mouth
-    edge = e[inside[e[:, 0]] & out[e[:, 1]]][:, 0]
-    edge = np.concatenate([edge, e[inside[e[:, 1]] & out[e[:, 0]]][:, 1]])
+    A = adjacency(triangle_edges(triangles), n_vertices)
     a = inside.astype(np.float64)
-    a[np.unique(edge)] = BORDER_VALUE
+    a[inside & (A @ (~inside & ~mouth) > 0)] = BORDER_VALUE  # next to skin beyond the lips
     # the skin-class faces between the lips' inner loop and the mouth interior are the inner lip
     # (its wet mucosa): their mouth-interior corners get the lips' value too (faces of the mouth
     # interior's own class do not use the skin material, so nothing else reads it there)
-    a[e[inside[e[:, 0]] & mouth[e[:, 1]]][:, 1]] = 1.0
-    a[e[inside[e[:, 1]] & mouth[e[:, 0]]][:, 0]] = 1.0
+    a[mouth & (A @ inside > 0)] = 1.0
     return a

@@ -40,7 +40,7 @@ def test_lip_albedo_stays_in_range_at_the_limits():
 
 def test_vermilion_attribute_marks_the_lips_with_the_border_on_their_outer_loop():
     from synth.model.default import load_default_model
-    from synth.model.meshutil import barycentric_points
+    from synth.model.meshutil import barycentric_points, connected_components, triangle_edges
 
     d = load_default_model()
     V = d.num_vertices
@@ -50,8 +50,7 @@ def test_vermilion_attribute_marks_the_lips_with_the_border_on_their_outer_loop(
     mouth = np.zeros(V, bool)
     mouth[np.asarray(d.regions["mouth_interior"])] = True
     assert a.shape == (V,) and np.all(a[lips] > 0.0) and np.all(a[~lips & ~mouth] == 0.0)
-    t = d.triangles.astype(np.int64)
-    e = np.unique(np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), 1), axis=0)
+    e = np.unique(np.sort(triangle_edges(d.triangles), 1), axis=0)
     # the inner lip: mouth-interior vertices next to the lips carry the lips' value, the rest 0
     next_to = np.zeros(V, bool)
     next_to[e[lips[e[:, 0]], 1]] = True
@@ -62,14 +61,7 @@ def test_vermilion_attribute_marks_the_lips_with_the_border_on_their_outer_loop(
     ring = e[(a[e[:, 0]] == BORDER_VALUE) & (a[e[:, 1]] == BORDER_VALUE)]
     deg = np.bincount(ring.ravel(), minlength=V)[border]
     assert len(border) >= 20 and np.all(deg == 2), (len(border), np.unique(deg))
-    seen, stack = {int(border[0])}, [int(border[0])]
-    while stack:
-        v = stack.pop()
-        for w in ring[(ring[:, 0] == v) | (ring[:, 1] == v)].ravel():
-            if int(w) not in seen:
-                seen.add(int(w))
-                stack.append(int(w))
-    assert len(seen) == len(border)  # connected, so one loop
+    assert np.unique(connected_components(ring, V, subset=border)[border]).size == 1  # connected: one loop
     # outside it nothing of the lips; it encloses the mouth corners (ibug 48 / 54) and the
     # lips' middle (ibug 51 above, 57 below) in the frontal (x, z) plane
     T = d.template.astype(np.float64)

@@ -21,7 +21,7 @@ def test_caruncle_is_pink_at_the_medial_canthus_and_stays_when_the_eye_turns(tmp
     from blender_scripts import camera, passes, scene
     from blender_scripts import head as bhead
     from blender_scripts.assets import iris
-    from synth.conventions import gaze_axis_angle, intrinsics, invert_rigid, orbit_camera_to_world
+    from synth.conventions import gaze_axis_angle, intrinsics, invert_rigid, orbit_camera_to_world, project
     from synth.dataset.segmentation import CLASSES
     from synth.model.meshutil import barycentric_points
     from tests.support import asset_scene
@@ -51,8 +51,8 @@ def test_caruncle_is_pink_at_the_medial_canthus_and_stays_when_the_eye_turns(tmp
         rgb = r["rgba"][..., :3].astype(np.float64)
         redness = rgb[..., 0] / np.maximum(rgb[..., 1], 1e-6)
         p = barycentric_points(ctx.vertices, ctx.data.triangles, tri[[42]], bary[[42]])[0]
-        q = K @ (w2c[:3, :3] @ p + w2c[:3, 3])
-        d = np.hypot(u - q[0] / q[2], v - q[1] / q[2])
+        q = project(K, w2c, p[None])[0][0]
+        d = np.hypot(u - q[0], v - q[1])
         near, far = on_eye & (d < 4.0), on_eye & (d > 14.0)
         L = rgb @ np.array([0.2126, 0.7152, 0.0722])
         sclera = far & (L > np.percentile(L[on_eye], 60))  # the bright part: not the iris

@@ -28,7 +28,7 @@ def test_lips_are_redder_than_the_skin_around_them(tmp_path):
     from blender_scripts import materials as bmat
     from synth.appearance.lips import lip_albedo, vermilion_attribute
     from synth.appearance.skin import melanin_for_ita, skin_albedo
-    from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
+    from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world, project
     from synth.dataset.segmentation import CLASSES
     from synth.geometry import vertex_normals
     from tests.support import asset_scene
@@ -43,12 +43,13 @@ def test_lips_are_redder_than_the_skin_around_them(tmp_path):
     mouth = 0.5 * (lm[48] + lm[54])
     cam = camera.make_camera()
     K = intrinsics(W, H, 20.0, (0.0, 0.0))
-    w2c = invert_rigid(orbit_camera_to_world(0.0, 0.0, 0.25, mouth))
+    c2w = orbit_camera_to_world(0.0, 0.0, 0.25, mouth)
+    w2c = invert_rigid(c2w)
     camera.set_camera(cam, K, w2c, W, H, 0.05, 10.0)
     # vertices facing the camera: the lips' inside (attribute 1) and the skin 4-10 mm beyond them
     a = vermilion_attribute(len(V), d.regions, d.triangles)
     n = vertex_normals(V, d.triangles)
-    eye = -w2c[:3, :3].T @ w2c[:3, 3]
+    eye = c2w[:3, 3]
     facing = np.einsum("ij,ij->i", n, eye - V) / np.linalg.norm(eye - V, axis=1) > 0.5
     lips = np.nonzero((a == 1.0) & facing)[0]
     dist = cKDTree(V[a > 0]).query(V)[0]
@@ -56,8 +57,7 @@ def test_lips_are_redder_than_the_skin_around_them(tmp_path):
     slot = next(s for s in ctx.head.material_slots if s.material.name.startswith("skin"))
 
     def pixels(idx, r):
-        q = (K @ (w2c[:3, :3] @ V[idx].T + w2c[:3, 3:])).T
-        uv = np.floor(q[:, :2] / q[:, 2:]).astype(int)
+        uv = np.floor(project(K, w2c, V[idx])[0]).astype(int)
         ok = (uv >= 0).all(1) & (uv < W).all(1)
         uv = uv[ok]
         keep = r["segmentation"][uv[:, 1], uv[:, 0]] == CLASSES["skin"]
