@@ -21,6 +21,14 @@ from the horizontal axis through the centre and an elevation ``alpha`` about tha
    identity's sclera sphere plus the corneal bulge about the gaze, pitched but not turned
    sideways: a lid that moved with the gaze yaw, which nothing else shows, would let landmark fits
    trade gaze for blink), and no rig vertex stays closer to that surface than :data:`MARGIN_OFFSET_M`.
+   Toward the medial canthus (the lids' lacrimal part, within :data:`CANTHAL_HOLD_M`) a margin
+   may stand off that surface by up to :data:`LACRIMAL_GAP_M` at the canthus, tapering to 0:
+   the medial canthal tendon holds the canthus in front of the caruncle and the tear lake, off
+   the globe, so the canthus stays where shape blending puts it (pushed out if it would lie
+   inside the eyeball, pulled in only past the bound). Resting it on the sphere pulled it about
+   1 mm toward the eye's centre, sideways and back (docs/realism.md, "The medial canthus held off
+   the eyeball"). The move is a clamp of the margin's distance, so the step is idempotent: the
+   template, rested once at build time, is what zero codes evaluate to.
    The pitched cornea bends the margins (and ibug 36-47 on them) non-linearly with the pitch
    and blink, which landmarks see only weakly: ``prior.fit.landmarks_fit`` gives the solver
    the exact curvature of that block (docs/fitting.md, "Optimisation").
@@ -46,6 +54,12 @@ FALLOFF_LOWER_M = 0.007
 FALLOFF_RADIAL_M = 0.003
 #: a margin rests this far off the eyeball's surface (the tear film and lid margin thickness)
 MARGIN_OFFSET_M = 1.0e-4
+#: the lacrimal part: along the fissure this far (metres) from the medial canthus a margin may stand
+#: off the eyeball, by up to LACRIMAL_GAP_M at the canthus (smoothstep taper to 0 at CANTHAL_HOLD_M).
+#: On the builder-8 template the canthus stands 1.5 mm off (planned identities: median 1.6 mm,
+#: at most 3 mm); a caruncle is a few millimetres across.
+CANTHAL_HOLD_M = 0.004
+LACRIMAL_GAP_M = 0.003
 
 NUMPY_OPS = SimpleNamespace(atan2=np.arctan2, asin=np.arcsin, acos=np.arccos, sqrt=np.sqrt, sin=np.sin,
                             cos=np.cos, clip=np.clip, maximum=np.maximum, stack=np.stack, const=lambda a: a)
@@ -105,6 +119,8 @@ def build_eyelid_rig(template: np.ndarray, regions: dict, joint_rest: np.ndarray
         cand, w, is_up, d = cand[keep], w[keep], is_up[keep], d[keep]
         s = np.clip((x[cand] - x0) / (x1 - x0), 0.0, 1.0)
         taper = np.sin(np.pi * s) ** 0.5
+        medial = np.clip(((x1 - x[cand]) if c[0] < 0 else (x[cand] - x0)) / CANTHAL_HOLD_M, 0.0, 1.0)
+        lacrimal = LACRIMAL_GAP_M * (1.0 - medial * medial * (3.0 - 2.0 * medial))  # the nose side's end
         pos = {int(v): k for k, v in enumerate(cand)}
         ui = _lerp_table(x[up], x[cand])
         li = _lerp_table(x[lo], x[cand])
@@ -114,6 +130,7 @@ def build_eyelid_rig(template: np.ndarray, regions: dict, joint_rest: np.ndarray
             "vertices": cand.tolist(), "upper": is_up.tolist(),
             "weight": w.round(6).tolist(), "radial_weight": _cosine_falloff(d, FALLOFF_RADIAL_M).round(6).tolist(),
             "follow": (np.where(is_up, FOLLOW_UPPER, FOLLOW_LOWER) * w * taper).round(6).tolist(),
+            "lacrimal_gap": lacrimal.round(7).tolist(),
             # rig-local indices of the margin points each vertex refers to, and the blend
             "upper_ref": np.c_[[pos[int(v)] for v in up[ui[0]]], [pos[int(v)] for v in up[ui[1]]]].tolist(),
             "upper_t": ui[2].round(6).tolist(),
@@ -121,7 +138,7 @@ def build_eyelid_rig(template: np.ndarray, regions: dict, joint_rest: np.ndarray
             "lower_t": li[2].round(6).tolist(),
             "sclera_vertex": int(sclera[0]),
         })
-    return {"version": 1, "limbus_rad": float(np.deg2rad(limbus_deg)), "cornea_bulge": float(cornea_bulge),
+    return {"version": 2, "limbus_rad": float(np.deg2rad(limbus_deg)), "cornea_bulge": float(cornea_bulge),
             "margin_offset_m": MARGIN_OFFSET_M, "eyes": eyes}
 
 
@@ -139,6 +156,7 @@ class EyeRig:
     lower_ref: np.ndarray
     lower_t: np.ndarray
     sclera_vertex: int
+    lacrimal_gap: np.ndarray  # (n,) metres a margin may stand off the eyeball (0 in version-1 rigs)
 
 
 @dataclass
@@ -160,7 +178,8 @@ class EyelidRig:
                        *(np.asarray(r[k], np.float64) for k in ("weight", "radial_weight", "follow")),
                        np.asarray(r["upper_ref"], np.int64), np.asarray(r["upper_t"], np.float64),
                        np.asarray(r["lower_ref"], np.int64), np.asarray(r["lower_t"], np.float64),
-                       int(r["sclera_vertex"])) for r in e["eyes"]]
+                       int(r["sclera_vertex"]),
+                       np.asarray(r.get("lacrimal_gap", np.zeros(len(r["vertices"]))), np.float64)) for r in e["eyes"]]
         return cls(eyes, float(e["limbus_rad"]), float(e["cornea_bulge"]), float(e["margin_offset_m"]))
 
     def support(self) -> np.ndarray:
@@ -208,7 +227,10 @@ def apply_eyelids(rig: EyelidRig, shaped, joints, psi, eye_rot, ops=NUMPY_OPS):
         fwd = ops.stack([0.0 * pitch, -ops.cos(pitch), ops.sin(pitch)], -1)
         floor = _surface_radius(rig, dirs, fwd, radius, ops) + rig.offset
         up = k(e.upper.astype(np.float64))
-        need = up * _ref(floor - r, e.upper_ref, k(e.upper_t)) + (1 - up) * _ref(floor - r, e.lower_ref, k(e.lower_t))
+        # a margin point's move: onto the surface, or in the lacrimal part into [floor, floor + gap]
+        to = floor - r
+        to = ops.maximum(to, -ops.clip(-(to + k(e.lacrimal_gap)), 0.0, None))
+        need = up * _ref(to, e.upper_ref, k(e.upper_t)) + (1 - up) * _ref(to, e.lower_ref, k(e.lower_t))
         r2 = ops.maximum(r + k(e.radial_weight) * need, floor)
         out[e.joint] = (e.vertices, c + dirs * r2[..., None])
     return out

@@ -4,6 +4,9 @@
 - :func:`margin_gaps`: for every lid-margin vertex, its distance from the eyeball's surface
   (negative: inside). The surface radius along a direction is interpolated from the eyeball's
   own vertices by their angle from the eye's axis (sphere and corneal bulge alike).
+- :func:`medial_distances`: for every lid-margin vertex, its distance along the fissure (x on
+  the template) from the medial canthus: the lids' lacrimal part, which the rig leaves off the
+  eyeball (``synth.model.eyelids.CANTHAL_HOLD_M``), is the margin within a few millimetres of it.
 - :func:`lid_opening`: the largest distance from an upper-margin vertex to the lower margin
   (a polyline in the margin's order): the opening when open, ~0 when the upper margin lies on
   the lower one.
@@ -38,6 +41,18 @@ def margin_gaps(data, vertices, side: str) -> dict[str, np.ndarray]:
         r = np.linalg.norm(q, axis=1)
         t = np.arccos(np.clip(q @ f / r, -1.0, 1.0))
         out[lid] = r - np.interp(t, t_prof, r_prof)
+    return out
+
+
+def medial_distances(data, side: str) -> dict[str, np.ndarray]:
+    """{"upper": d, "lower": d}: each margin vertex's distance (metres, along x on the template)
+    from the medial canthus (the margin's end on the nose side) of eye ``side``, in the order of
+    :func:`margin_gaps`."""
+    T = np.asarray(data.template, np.float64)
+    out = {}
+    for lid in ("upper", "lower"):
+        x = T[np.asarray(data.regions[f"eyelid_{side}_{lid}"], np.int64), 0]
+        out[lid] = np.abs(x - x[np.argmin(np.abs(x))])
     return out
 
 
