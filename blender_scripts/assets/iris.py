@@ -25,7 +25,7 @@ edges, distorted) that grows toward the periphery (rho > ``SCLERA_VESSELS_FROM``
 **Caruncle.** At each eye's medial canthus the pink caruncle (a mucosa dotted with glands) and,
 lateral to it, the fainter plica semilunaris cover the eyeball (:func:`caruncle_layer`). Without
 them the white sclera ran into the inner corner, a doll's eye. Their centre is the canthus on the
-current mesh (``eye_canthus``: :func:`synth.assets.fit.eyes.medial_canthi`), so they stay with
+current mesh, projected onto the eyeball (``eye_canthus``: :func:`synth.assets.fit.eyes.medial_canthi`), so they stay with
 the lids while the eyeball turns under them.
 """
 

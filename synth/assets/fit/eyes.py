@@ -101,10 +101,13 @@ MEDIAL_CANTHI = (39, 42)
 
 def medial_canthi(data, vertices: np.ndarray) -> np.ndarray:
     """(V, 3) per-vertex position of the medial canthus (ibug68 point 39 / 42 on the *current*
-    vertices, so it follows the lids) of the eye a vertex belongs to, for the caruncle in the
-    iris shader (``blender_scripts/assets/iris.py``). Each eye takes the canthus nearer its
-    centre. Vertices off the eyes, and every vertex of a model without ibug68 landmarks, get
-    zeros: metres away from any eye, so the shader paints no caruncle there."""
+    vertices, so it follows the lids) of the eye a vertex belongs to, projected along its
+    direction from the eye's centre onto the eyeball's sphere (the canthus stands up to 3 mm in
+    front of the eyeball, ``synth.model.eyelids.LACRIMAL_GAP_M``; the caruncle lies on the globe
+    behind it), for the caruncle in the iris shader (``blender_scripts/assets/iris.py``). Each
+    eye takes the canthus nearer its centre. Vertices off the eyes, and every vertex of a model
+    without ibug68 landmarks, get zeros: metres away from any eye, so the shader paints no
+    caruncle there."""
     from synth.model.meshutil import barycentric_points
 
     V = np.asarray(vertices, np.float64)
@@ -119,8 +122,9 @@ def medial_canthi(data, vertices: np.ndarray) -> np.ndarray:
         fr = _eye_frame(data, V, side)
         if fr is None:
             continue
-        eye, c = fr[0], fr[1]
-        out[eye] = P[int(np.argmin(np.linalg.norm(P - c, axis=1)))]
+        eye, c, radius = fr[0], fr[1], fr[-1]
+        q = P[int(np.argmin(np.linalg.norm(P - c, axis=1)))] - c
+        out[eye] = c + q * (radius / np.linalg.norm(q))
     return out
 
 
