@@ -90,13 +90,15 @@ def test_the_medial_canthus_is_held_where_the_shape_puts_it(hm, default_model):
 @pytest.mark.parametrize("blink,pitch,yaw", [(0.0, 0.0, 20.0), (0.0, 15.0, 10.0), (0.0, -15.0, -20.0), (0.5, -10.0, 5.0)])
 def test_lid_margins_with_sideways_gaze(hm, sd, blink, pitch, yaw):
     """The rig places the cornea by the gaze pitch only (synth.model.eyelids), so with yaw the
-    cornea's side slides under the margins: measured -1.11..+1.26 mm at 20 degrees."""
+    cornea's side slides under the margins: measured -1.11..+1.26 mm at 20 degrees; the lacrimal
+    part, which stands off the eyeball anyway, -0.91..+3.10 mm."""
     V = _eval(hm, sd, blink, pitch, yaw)
     for side in "lr":
         med = medial_distances(hm.data, side)
         for lid, g in margin_gaps(hm.data, V, side).items():
-            g = g[med[lid] >= CANTHAL_HOLD_M]
-            assert -1.3e-3 <= g.min() and g.max() <= 1.3e-3, (side, lid, g.min(), g.max())
+            rest, lacrimal = g[med[lid] >= CANTHAL_HOLD_M], g[med[lid] < CANTHAL_HOLD_M]
+            assert -1.3e-3 <= rest.min() and rest.max() <= 1.3e-3, (side, lid, rest.min(), rest.max())
+            assert -1.3e-3 <= lacrimal.min() and lacrimal.max() <= MAX_LACRIMAL_GAP_M, (side, lid, lacrimal.min(), lacrimal.max())
 
 
 @pytest.mark.parametrize("sd", IDENTITIES)

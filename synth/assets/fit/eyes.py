@@ -122,7 +122,7 @@ def medial_canthi(data, vertices: np.ndarray) -> np.ndarray:
         fr = _eye_frame(data, V, side)
         if fr is None:
             continue
-        eye, c, radius = fr[0], fr[1], fr[-1]
+        eye, c, *_, radius = fr
         q = P[int(np.argmin(np.linalg.norm(P - c, axis=1)))] - c
         out[eye] = c + q * (radius / np.linalg.norm(q))
     return out
