@@ -25,7 +25,7 @@ def pytest_collection_modifyitems(config, items):
 
 @pytest.fixture(scope="session")
 def default_model():
-    """The embedded default head model (built on first use and cached; see docs/default-model.md)."""
+    """The embedded default head model (the file shipped in the package; docs/default-model.md)."""
     from synth.model.default import load_default_model
 
     return load_default_model()

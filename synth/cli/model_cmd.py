@@ -146,7 +146,7 @@ def import_flame_cmd(model_file: Path = typer.Argument(..., help="Your FLAME 202
 
 @app.command("path")
 def path_cmd() -> None:
-    """Print the path of the embedded default model (building it on first use)."""
+    """Print the path of the embedded default model (the file shipped in the package)."""
     from synth.model.default import default_model_path
 
     typer.echo(str(default_model_path()))

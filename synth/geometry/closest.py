@@ -81,7 +81,8 @@ class Closest(NamedTuple):
     distance: np.ndarray
 
 
-def nearest_on_candidates(points, vertices, triangles, candidates, by: str = "squared") -> Closest:
+def nearest_on_candidates(points, vertices, triangles, candidates, by: str = "squared",
+                          tie_m: float | None = None) -> Closest:
     """The closest point of each point's candidate triangles: ``candidates`` (N, K) indices into
     ``triangles`` (rows may repeat an index). Ties go to the first candidate of the row.
 
@@ -90,7 +91,11 @@ def nearest_on_candidates(points, vertices, triangles, candidates, by: str = "sq
     edge shared by two triangles) to a tie. Both give the same distance; the triangle (and so
     the barycentrics and a face normal) can differ in such near-ties. The strand rigs use
     ``"distance"``, everything else ``"squared"``, which keeps every rig's geometry as it was
-    before the two implementations became one."""
+    before the two implementations became one.
+
+    ``tie_m``: candidates within this distance (m) of the nearest count as a tie, which goes to
+    the lowest triangle index: a discrete choice that no rounding of the inputs can change
+    (what a model builder needs; a point on an edge is as near to both of its triangles)."""
     if by not in ("squared", "distance"):
         raise ValueError(f"by must be 'squared' or 'distance', not {by!r}")
     P = np.asarray(points, np.float64).reshape(-1, 3)
@@ -102,6 +107,9 @@ def nearest_on_candidates(points, vertices, triangles, candidates, by: str = "sq
     dist = np.sqrt(d2)
     best = np.argmin(d2 if by == "squared" else dist, axis=1)
     r = np.arange(len(P))
+    if tie_m is not None:
+        near = dist <= dist[r, best][:, None] + float(tie_m)
+        best = np.argmin(np.where(near, cand, np.iinfo(np.int64).max), axis=1)
     return Closest(q[r, best], cand[r, best], bary[r, best], dist[r, best])
 
 
@@ -111,16 +119,18 @@ class ClosestPoints:
     The candidates for a point are the ``k`` triangles whose centroids are nearest to it: exact
     whenever the closest triangle is among them, which holds for points near a surface whose
     triangles are of similar size (a point on a triangle is within its circumradius of the
-    centroid). Memory is bounded by answering ``chunk`` points at a time. ``by``: see
-    :func:`nearest_on_candidates`."""
+    centroid). Memory is bounded by answering ``chunk`` points at a time. ``by`` and ``tie_m``:
+    see :func:`nearest_on_candidates`."""
 
-    def __init__(self, vertices, triangles, faces=None, k: int = 16, chunk: int = 4096, by: str = "squared"):
+    def __init__(self, vertices, triangles, faces=None, k: int = 16, chunk: int = 4096, by: str = "squared",
+                 tie_m: float | None = None):
         self.V = np.asarray(vertices, np.float64)
         self.F = np.asarray(triangles, np.int64)
         self.faces = np.arange(len(self.F)) if faces is None else np.asarray(faces, np.int64)
         self.k = int(min(k, len(self.faces)))
         self.chunk = int(chunk)
         self.by = by
+        self.tie_m = tie_m
         t = self.V[self.F[self.faces]]
         self.tree = cKDTree((t[:, 0] + t[:, 1] + t[:, 2]) / 3.0)
 
@@ -136,4 +146,5 @@ class ClosestPoints:
     def _query(self, P) -> Closest:
         # threads pay off for large batches only (each query starts them anew); same answer
         _, cand = self.tree.query(P, k=self.k, workers=-1 if len(P) >= 1024 else 1)
-        return nearest_on_candidates(P, self.V, self.F, self.faces[np.asarray(cand).reshape(len(P), -1)], self.by)
+        return nearest_on_candidates(P, self.V, self.F, self.faces[np.asarray(cand).reshape(len(P), -1)], self.by,
+                                     self.tie_m)

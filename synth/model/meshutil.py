@@ -61,9 +61,11 @@ def fit_sphere_robust(points: np.ndarray, trim_sigma: float = 2.0,
 
 # --------------------------------------------------------------------------- sampling
 
-def farthest_point_sampling(points: np.ndarray, n: int, start: int = 0) -> np.ndarray:
+def farthest_point_sampling(points: np.ndarray, n: int, start: int = 0, tie_m: float = 0.0) -> np.ndarray:
     """Indices of ``n`` points picked greedily, each farthest (Euclidean) from those picked
-    so far, starting at index ``start``. Deterministic (ties go to the lowest index)."""
+    so far, starting at index ``start``. Deterministic: points within ``tie_m`` (m) of the
+    farthest distance tie, and ties go to the lowest index (a positive ``tie_m`` keeps the
+    picks the same under rounding noise of the points, e.g. on a mirror-symmetric mesh)."""
     p = np.asarray(points, np.float64)
     n = int(min(n, len(p)))
     out = np.empty(n, np.int64)
@@ -73,6 +75,8 @@ def farthest_point_sampling(points: np.ndarray, n: int, start: int = 0) -> np.nd
     d = np.sum((p - p[start]) ** 2, axis=1)
     for i in range(1, n):
         j = int(np.argmax(d))
+        if tie_m > 0.0:
+            j = int(np.argmax(np.sqrt(d) >= np.sqrt(d[j]) - tie_m))
         out[i] = j
         np.minimum(d, np.sum((p - p[j]) ** 2, axis=1), out=d)
     return out

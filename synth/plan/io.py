@@ -272,6 +272,8 @@ class Plan:
         return self.header["model"]["sha256"]
 
     def model_path(self) -> Path:
+        """Where the plan's model is: the recorded file, or (for the embedded default) the model
+        file shipped in the installed package."""
         p = self.header["model"]["path"]
         if p is None:
             from synth.model.default import default_model_path
@@ -280,20 +282,46 @@ class Plan:
         return Path(p)
 
     def checked_model_path(self) -> Path:
-        """The model file the plan was made with, refused if it is missing or changed since."""
+        """The model file the plan was made with, refused in one line if it is missing or its
+        sha256 is not the plan's. For the embedded default, a model with the plan's sha256 in this
+        node's cache (a plan made before the model shipped as package data) is used as well."""
+        import socket
+
+        want = self.model_sha256()
         path = self.model_path()
+        default = self.header["model"]["path"] is None
         if not path.is_file():
-            raise SynthError("the plan's model file is missing", str(path), "restore it or re-run 'synth plan'")
-        if sha256_file(path) != self.model_sha256():
-            raise SynthError("the model file changed since planning (sha256 mismatch)", str(path),
-                             "re-run 'synth plan' with this model")
-        return path
+            raise SynthError("the plan's model file is missing", str(path),
+                             "put it at that path on every node (shared storage) or re-run 'synth plan'")
+        have = sha256_file(path)
+        if have == want:
+            return path
+        if default:
+            cached = _cached_model(want)
+            if cached is not None:
+                return cached
+            fix = ("install the synth-faces version the plan was made with on this node, or re-run 'synth plan' "
+                   "here; a farm of mixed versions plans with --model FILE on shared storage (docs/farm.md)")
+        else:
+            fix = "restore the plan's model file, or re-run 'synth plan' with this model"
+        raise SynthError(f"the model differs from the plan's on node {socket.gethostname()}: plan sha256 "
+                         f"{want[:16]}..., this node's {have[:16]}...", str(path), fix)
 
     def model_data(self):
         """The head model the plan was made with (refused if the file changed since)."""
         from synth.model.format import read_model
 
         return read_model(self.checked_model_path())
+
+
+def _cached_model(sha256: str) -> Path | None:
+    """A default model built into this node's cache whose sha256 is ``sha256``, if any."""
+    from synth.io import cache_dir
+
+    for p in sorted((cache_dir() / "models").glob("makehuman-head-*.npz")):
+        if sha256_file(p) == sha256:
+            return p
+    return None
 
 
 def load_plan(root: str | os.PathLike) -> Plan:

@@ -3,6 +3,7 @@ dataset from another directory (the catalogue and schemas travel as package data
 
 from __future__ import annotations
 
+import hashlib
 import re
 import shutil
 import subprocess
@@ -20,6 +21,11 @@ PACKAGES = ("synth", "blender_scripts", "prior", "renderer_jobs")
 EXTRAS = {"render", "prior", "farm", "export", "fit"}
 
 
+def z_read(wheel: Path, name: str) -> bytes:
+    with zipfile.ZipFile(wheel) as z:
+        return z.read(name)
+
+
 def _name(req: str) -> str:
     return re.split(r"[<>=!~;\[ ]", req.strip(), maxsplit=1)[0].lower().replace("_", "-")
 
@@ -30,7 +36,9 @@ def test_project_metadata():
     assert proj["license"] == "MIT"  # an SPDX expression, not the deprecated table
     assert proj["scripts"] == {"synth": "synth.cli.main:main"}
     core = [_name(r) for r in proj["dependencies"]]
-    assert "anny" in core and len(core) == len(set(core))
+    # the default model ships as package data: the base install pulls no model source (anny would
+    # bring torch and warp-lang)
+    assert not {"anny", "torch", "warp-lang"} & set(core) and len(core) == len(set(core))
     extras = proj["optional-dependencies"]
     assert EXTRAS <= set(extras)
     for extra, reqs in extras.items():
@@ -73,9 +81,13 @@ def test_wheel_installs_and_plans_anywhere(tmp_path):
     assert "synth/schemas/frame.schema.json" in names and "prior/fit/data/" in " ".join(names)
     assert meta["Name"] == "synth-faces" and meta["License-Expression"] == "MIT"
     assert EXTRAS <= set(meta.get_all("Provides-Extra"))
-    assert "anny==0.6.2" in meta.get_all("Requires-Dist")
+    assert not [r for r in meta.get_all("Requires-Dist") if _name(r) in ("anny", "torch", "warp-lang")
+                and "extra ==" not in r]
+    from synth.model.default import PACKAGED_MODEL, PACKAGED_MODEL_SHA256
 
-    # a throwaway venv that sees this environment's packages (numpy, OpenEXR, anny...) but not
+    assert hashlib.sha256(z_read(wheel, f"synth/{PACKAGED_MODEL}")).hexdigest() == PACKAGED_MODEL_SHA256
+
+    # a throwaway venv that sees this environment's packages (numpy, OpenEXR...) but not
     # this checkout: the wheel is installed without dependencies, and nothing is on PYTHONPATH
     venv = tmp_path / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
@@ -102,3 +114,5 @@ def test_wheel_installs_and_plans_anywhere(tmp_path):
                            "-q"], capture_output=True, text=True, check=True, cwd=ROOT).stdout.strip()
     assert hashed == here and len(hashed) == 64  # the same plan, byte for byte, from the wheel
     assert "garment" in installed("assets", "list")
+    # the default model is the wheel's own file, not a build in a cache
+    assert Path(installed("model", "path").strip()).is_relative_to(venv)

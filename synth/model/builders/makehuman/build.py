@@ -21,13 +21,7 @@ from synth.model.eyelids import build_eyelid_rig, rest_lids
 from synth.model.format import HeadModelData
 from synth.model.identity_gmm import fit_gmm
 
-BUILDER_VERSION = "8"  # bump on every output change ("3": ibug68 landmarks on mesh edges name another
-# adjacent triangle since synth.geometry.closest places them; their evaluated positions are unchanged;
-# "4": the eyelid rig, extra["eyelids"], and a template whose lid margins rest on the eyeballs;
-# "5": the template's lid openings widened to measured eye fissures, EYE_OPENING; "6" was the
-# eyeballs lowered, built at ab312cf and reverted; "7": the identity components' signs chosen
-# the same way on every CPU, identity.canonical_signs; "8": the eyelid rig leaves the lids'
-# lacrimal part off the eyeball, eyelids.CANTHAL_HOLD_M)
+BUILDER_VERSION = "9"  # bump on every output change; what each version changed: CHANGELOG.md
 SEED = 20241128
 N_SAMPLES = 3000  # identity samples before mirroring (the PCA sees 2 * N_SAMPLES)
 GMM_COMPONENTS = 6

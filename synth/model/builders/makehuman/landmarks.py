@@ -23,6 +23,9 @@ DENSE_LANDMARKS = 600
 CHIN_NORMAL_DOWN = 0.8  # chin landmark: first midline point below the lip whose normal points down by >= asin(0.8)
 BROW_HEIGHT = (0.40, 0.53, 0.58, 0.55, 0.42)  # brow above the upper lid, in eye widths, medial -> lateral
 BROW_SPAN = (-0.10, 1.12)  # brow extent along the eye, in eye widths from the medial corner
+#: distances (m) this close count as equal where landmarks are chosen: a landmark as near to two skin
+#: triangles (on their shared edge) names the lower index
+LANDMARK_TIE_M = 1e-8
 _FORWARD = np.array([0.0, 1.0, 0.0])  # rays cast from in front of the face toward the back (+Y)
 
 
@@ -33,12 +36,15 @@ def regions_and_landmarks(mesh: Mesh, X: np.ndarray, tris: np.ndarray, family: n
     pts, tip = ibug68_points(f, X, tris, joint_rest)
     P68 = np.array([pts[i] for i in range(68)])
     skin_tri = np.nonzero(f.skin[tris].all(1))[0]
-    on_skin = ClosestPoints(X, tris, skin_tri)(P68)
+    on_skin = ClosestPoints(X, tris, skin_tri, tie_m=LANDMARK_TIE_M)(P68)
     tri68, bary68 = on_skin.face, on_skin.bary
     names68 = [f"{grp}_{i:02d}" for grp, n in IBUG_GROUPS for i in range(n)]
     landmark_regions(f, X, family, joint_rest, pts)
     face = f.reg["face"]
-    dense = face[mu.farthest_point_sampling(X[face], DENSE_LANDMARKS, int(np.nonzero(face == tip)[0][0]))]
+    # spread over the base mesh's face (read from text, so the same bits on every machine; the
+    # template's last bits depend on the BLAS kernels, and late picks are near ties)
+    dense = face[mu.farthest_point_sampling(mesh.base[face], DENSE_LANDMARKS, int(np.nonzero(face == tip)[0][0]),
+                                          tie_m=LANDMARK_TIE_M)]
     dtri, dbary = mu.vertex_landmarks(tris, dense)
     landmarks = {"ibug68": (tri68.astype(np.int32), bary68.astype(np.float32)),
                  "dense": (dtri.astype(np.int32), dbary.astype(np.float32))}
