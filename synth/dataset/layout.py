@@ -94,6 +94,27 @@ def parse_frame_key(key: str) -> tuple[int, int, int]:
     return int(m[1]), int(m[2]), int(m[3])
 
 
+def held_out(keys: list[str], n: int, setting: str, where: str) -> list[bool]:
+    """Which of the frames ``keys`` are held out for evaluation: the ``n`` highest view indices
+    of each (identity, expression), the split the prior trains with (``data.holdout_views``)
+    and the nerfstudio export writes (``--val-views``). A scene with ``n`` views or fewer is
+    refused (``setting`` names the option in the message)."""
+    scenes: dict[tuple[int, int], list[tuple[int, int]]] = {}
+    for pos, key in enumerate(keys):
+        i, e, v = parse_frame_key(key)
+        scenes.setdefault((i, e), []).append((v, pos))
+    out = [False] * len(keys)
+    if n <= 0:
+        return out
+    for (i, e), views in sorted(scenes.items()):
+        if len(views) <= n:
+            raise SynthError(f"identity {i} expression {e} has {len(views)} view(s), not more than {setting} = {n}",
+                             where, f"lower {setting} or render more views")
+        for _, pos in sorted(views)[-n:]:
+            out[pos] = True
+    return out
+
+
 def shard_name(index: int) -> str:
     """The shard id of shard ``index``: ``shard_{index:06d}``."""
     if not 0 <= index <= 999999:
