@@ -1,4 +1,4 @@
-"""``synth export nerfstudio|usd``: a rendered dataset in the formats other tools read (docs/export.md)."""
+"""``synth export nerfstudio|cafca|usd``: a rendered dataset in the formats other tools read (docs/export.md)."""
 
 from __future__ import annotations
 
@@ -35,6 +35,25 @@ def nerfstudio_cmd(
                f"{', '.join(f'({i}, {e})' for i, e in s['scenes'][:6])}{' ...' if len(s['scenes']) > 6 else ''}")
     if len(s["scenes"]) > 1:
         typer.echo("note: nerfstudio trains one static scene; select one with --identity and --expression", err=True)
+
+
+@export_app.command("cafca")
+def cafca_cmd(
+    directory: Path = typer.Argument(..., help="Dataset directory (its committed shards) or one shard directory."),
+    out: Path = typer.Option(..., "--out", "-o", help="Folder to create (new or empty)."),
+    identity: Optional[int] = typer.Option(None, "--identity", "-i", min=0, help="Only this identity index."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+) -> None:
+    """The Cafca release's layout: SUBJECT/EXP_ENV/{cameras_json,color_image,foreground_mask,
+    segmentation}/Cvv.{json,png} (OpenCV cameras with K, world2cam, cam2world, P, position,
+    orientation; 16-bit segmentation; environment.json), so code written for it reads ours."""
+    from synth.export.cafca import export_cafca
+
+    s = export_cafca(directory, out, identity=identity)
+    if as_json:
+        typer.echo(json.dumps(s, indent=1))
+        return
+    typer.echo(f"{s['out']}: {s['frames']} frames in {len(s['scenes'])} scene folder(s) (SUBJECT/EXP_ENV)")
 
 
 @export_app.command("usd")
