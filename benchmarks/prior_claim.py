@@ -370,7 +370,8 @@ def bf16_check(work: Path, p: dict, scale: float, device: str, times: Times) -> 
     auto = "bf16" if native_bf16(torch.device(device))[0] else "auto: float32"
     if a and b:
         print(f"| training | train s | PSNR dB | SSIM | LPIPS |\n|---|---|---|---|---|\n"
-              f"| {auto} | {times.data['train_ids001']['seconds']} | {a['psnr']:.2f} | {a['ssim']:.4f} | {a['lpips']:.4f} |\n"
+              f"| {auto} | {times.data['train_ids001']['seconds']} | {a['psnr']:.2f} | {a['ssim']:.4f} | "
+              f"{a['lpips']:.4f} |\n"
               f"| float32 | {times.data['train_ids001_fp32']['seconds']} | {b['psnr']:.2f} | {b['ssim']:.4f} | "
               f"{b['lpips']:.4f} |")
 

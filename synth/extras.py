@@ -34,6 +34,10 @@ EXTRAS = {
 }
 
 
+#: The distribution that installs a module, where their names differ.
+PACKAGES = {"pxr": "usd-core"}
+
+
 def importable(module: str) -> bool:
     """Whether ``module`` can be imported here, found without importing it. A module that is
     blocked (``sys.modules[name] = None``) or whose finder raises counts as missing."""
@@ -58,5 +62,6 @@ def require(extra: str, modules: tuple[str, ...], where: str) -> None:
     fix = f"install the {extra} extra: pip install 'synth-faces[{extra}]' (needs {needs})"
     if here not in ex.python:
         fix = f"use {needs} (this is Python {here}), then " + fix.replace(f" (needs {needs})", "")
-    raise SynthError(f"{where} needs {', '.join(missing)} (the '{extra}' extra), which is not installed "
-                     f"for this Python {here}", sys.executable, fix)
+    names = ", ".join(PACKAGES.get(m, m) for m in missing)
+    raise SynthError(f"{where} needs {names} (the '{extra}' extra), which is not installed for this Python {here}",
+                     sys.executable, fix)

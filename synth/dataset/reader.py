@@ -399,5 +399,5 @@ def rays(frame: Frame, *, pixels=None, dtype=np.float32) -> Rays:
     return camera_rays(frame.K, frame.camera_to_world, frame.width, frame.height, pixels=pixels, dtype=dtype)
 
 
-__all__ = ["Frame", "FrameRef", "Rays", "TarMembers", "by_worker", "camera_rays", "decode_frame", "decode_sample", "iter_frames",
-           "list_frames", "read_frame", "rays"]
+__all__ = ["Frame", "FrameRef", "Rays", "TarMembers", "by_worker", "camera_rays", "decode_frame", "decode_sample",
+           "iter_frames", "list_frames", "read_frame", "rays"]

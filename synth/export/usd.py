@@ -168,8 +168,9 @@ def export_usd(source, out, *, shard: str | None = None, model=None, assets: boo
     """Write shard ``shard`` (default: the first committed) of dataset ``source`` as a USD
     stage at ``out`` (.usdc binary, .usda text or .usd). Returns a summary."""
     if Usd is None:
-        raise SynthError("the USD export needs the usd-core package", "synth export usd",
-                         "install the export extra: pip install '.[export]' (usd-core)")
+        from synth.extras import require
+
+        require("export", ("pxr",), "synth export usd")
     from synth.model.head import HeadModel
 
     root, out = Path(source), Path(out)
