@@ -15,7 +15,8 @@ Stages (each resumable: finished outputs are kept and skipped):
    ``synth plan``'s identities, expressions, assets and lighting, with every expression's cameras
    replaced by fixed ones: views 0-2 the inputs (frontal, +45 and -45 degrees azimuth), views 3-8
    held-out views in the frontal hemisphere; rendered with ``synth render --plan``.
-2. train: one prior per rung (same steps and schedule for all; ``train.bf16`` on CPU).
+2. train: one prior per rung (same steps and schedule for all; ``train.bf16=auto``: bf16 autocast where the
+   device computes bf16 natively, float32 elsewhere; the run's log says which).
 3. fit: ``synth prior fit``'s pipeline on every test scene with 3 views for every rung and with no
    pre-training, and with 1 and 2 views for the largest rung; each fit evaluated on views 3-8
    (``synth prior eval``'s protocol).
@@ -58,17 +59,17 @@ PROFILES = {
                                               "train.pixels_per_view=32", "train.foreground_fraction=0.5",
                                               "train.warmup_steps=30", "train.background_steps=100",
                                               "train.log_every=50", "train.checkpoint_every=250",
-                                              "train.preview_every=0", "train.bf16=true",
+                                              "train.preview_every=0", "train.bf16=auto",
                                               "sampling.proposal_samples=[16,16]", "sampling.nerf_samples=24"],
                 fit_sets=["inversion.steps=30", "inversion.patches=1", "inversion.patch_size=16",
                           "finetune.steps=300", "finetune.rays_per_step=256", "finetune.warmup_steps=10",
-                          "finetune.normal_weight=0", "finetune.bf16=true", "landmarks.sigma_px=0.3"]),
+                          "finetune.normal_weight=0", "finetune.bf16=auto", "landmarks.sigma_px=0.3"]),
     # a few minutes end to end: checks the script, proves nothing
     "tiny": dict(rungs=[1, 2], expressions=1, views=6, res=32, test_ids=1, test_expressions=1, test_res=64,
                  train_steps=20, train_sets=["train.identities_per_batch=2", "train.views_per_identity=2",
                                              "train.pixels_per_view=64", "train.warmup_steps=2",
                                              "train.background_steps=4", "train.log_every=5",
-                                             "train.checkpoint_every=10", "train.preview_every=0", "train.bf16=true"],
+                                             "train.checkpoint_every=10", "train.preview_every=0", "train.bf16=auto"],
                  fit_sets=["inversion.steps=4", "inversion.patches=1", "inversion.patch_size=16",
                            "finetune.steps=6", "finetune.rays_per_step=256", "finetune.warmup_steps=2"]),
 }
@@ -361,10 +362,16 @@ def bf16_check(work: Path, p: dict, scale: float, device: str, times: Times) -> 
     """The 1-identity rung trained again in float32 (same steps), fitted on every test scene with 3 views."""
     train(work, p, scale, device, times, rungs=[1], extra=["train.bf16=false"], tag="_fp32")
     fit(work, p, scale, device, times, rows=[("ids1", 1, 3)], tag="_fp32")
+    import torch
+
+    from prior.precision import native_bf16
+
     a, b = collect(work, p).get("ids1"), collect(work, p, "_fp32").get("ids1")
+    auto = "bf16" if native_bf16(torch.device(device))[0] else "auto: float32"
     if a and b:
         print(f"| training | train s | PSNR dB | SSIM | LPIPS |\n|---|---|---|---|---|\n"
-              f"| bf16 | {times.data['train_ids001']['seconds']} | {a['psnr']:.2f} | {a['ssim']:.4f} | {a['lpips']:.4f} |\n"
+              f"| {auto} | {times.data['train_ids001']['seconds']} | {a['psnr']:.2f} | {a['ssim']:.4f} | "
+              f"{a['lpips']:.4f} |\n"
               f"| float32 | {times.data['train_ids001_fp32']['seconds']} | {b['psnr']:.2f} | {b['ssim']:.4f} | "
               f"{b['lpips']:.4f} |")
 

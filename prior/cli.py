@@ -31,12 +31,11 @@ app = typer.Typer(name="prior", help="Train the conditional NeRF face prior and 
 
 
 def _need_torch() -> None:
-    try:
-        import safetensors  # noqa: F401
-        import torch  # noqa: F401
-    except ImportError as e:
-        raise SynthError(f"the prior needs {e.name}, which is not installed", "synth prior",
-                         "install the prior extra: pip install -e '.[prior]'") from None
+    """Stop with one line (exit 2) before anything is read or written when the prior extra is
+    missing."""
+    from synth.extras import require
+
+    require("prior", ("torch", "safetensors"), "synth prior")
 
 
 @app.command("train")

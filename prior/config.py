@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from synth.configkit import Bounds, ConfigError, check_section, section
+from synth.configkit import Bounds, Choices, ConfigError, check_section, section
 from synth.seeds import MAX_SEED
 
 # The bounded types the prior's configs share (also prior.train.config and prior.fit.config):
@@ -32,6 +32,7 @@ NonNegative = Annotated[float, Bounds(0)]  #: a number, not negative
 Positive = Annotated[float, Bounds(gt=0.0)]  #: a number above 0 (learning rates, lengths)
 Decay = Annotated[float, Bounds(0.0, lt=1.0)]  #: a decay rate in [0, 1) (Adam's betas)
 Seed = Annotated[int, Bounds(0, MAX_SEED)]  #: a seed of the project's seed scheme (synth.seeds)
+Switch = Annotated[bool | str, Choices(False, True, "auto")]  #: on, off, or chosen per machine (prior.precision)
 
 
 @section

@@ -24,6 +24,7 @@ from pathlib import Path
 
 from renderer_jobs.backend import Backend, Batch, Job, Run
 from renderer_jobs.events import EXIT_DISK_FULL, EXIT_INPUT, BatchEnd, Error, Event, Frame, Rss
+from renderer_jobs.failures import Failure, group, report_lines
 from renderer_jobs.progress import Progress
 from synth.errors import DiskFull, Incomplete, SynthError, WorkerFailed
 
@@ -100,7 +101,8 @@ class RunStats:
     input_errors: list[str] = field(default_factory=list)  # error events of batches that exited EXIT_INPUT
     disk_full: list[str] = field(default_factory=list)  # error events of batches that ran out of space
     peak_rss_mb: float = 0.0
-    _errors: dict[str, str] = field(default_factory=dict)
+    _errors: dict[str, str] = field(default_factory=dict)  # shards (joined) -> the error they reported
+    _failed: list[tuple[tuple[str, ...], int, str]] = field(default_factory=list)  # shards, exit status, log tail
 
     def add(self, ev: Event) -> None:
         if isinstance(ev, Frame):
@@ -117,11 +119,28 @@ class RunStats:
                 self.failures.append(f"worker for {','.join(ev.shards)} exited with code {ev.returncode}:\n"
                                      f"{ev.log_tail}")
                 self.failed_shards.update(ev.shards)
+                self._failed.append((tuple(ev.shards), ev.returncode, ev.log_tail))
                 msg = self._errors.get(",".join(ev.shards))
                 if ev.returncode == EXIT_DISK_FULL:
                     self.disk_full.append(msg or f"out of disk space (worker for {','.join(ev.shards)})")
                 elif ev.returncode == EXIT_INPUT and msg:
                     self.input_errors.append(msg)
+
+
+    def failure_records(self) -> list[Failure]:
+        """Each failed batch with the error its worker reported (else its exit status and the
+        last line of its log), then the errors of workers that otherwise ended well."""
+        out, used = [], set()
+        for shards, rc, tail in self._failed:
+            key = ",".join(shards)
+            msg = self._errors.get(key)
+            if msg is None:
+                last = next((t.strip() for t in reversed(tail.splitlines()) if t.strip()), "")
+                msg = f"worker exited with code {rc}" + (f": {last}" if last else "")
+            used.add(key)
+            out.append(Failure(shards, msg, rc, tuple(tail.splitlines())))
+        out += [Failure(tuple(k.split(",")), m) for k, m in self._errors.items() if k not in used]
+        return out
 
 
 def tally(run: Run, stats: RunStats, progress: Progress) -> None:
@@ -136,26 +155,30 @@ def tally(run: Run, stats: RunStats, progress: Progress) -> None:
         raise
 
 
-def raise_on_failures(stats: RunStats) -> None:
-    """Print every failure to stderr and raise the one-line error of the gravest kind: out of
-    disk space (exit 4), a user-facing input error (2), a worker or task failure (3)."""
+def raise_on_failures(stats: RunStats, quiet: bool = False) -> None:
+    """Raise the one-line error of the gravest kind: out of disk space (exit 4), a user-facing
+    input error (2), a worker or task failure (3); before it, print each distinct failure once
+    to stderr, and without ``quiet`` the ends of the failed workers' logs, no line twice
+    (:mod:`renderer_jobs.failures`)."""
     if not stats.failures:
         return
     import sys
 
-    for f in stats.failures:
-        print(f, file=sys.stderr)
     if stats.disk_full:
-        raise DiskFull(stats.disk_full[0]) from None
-    if stats.input_errors:
-        raise SynthError(stats.input_errors[0]) from None
-    if stats.failed_shards:
-        first = next(f for f in stats.failures if f.startswith("worker for "))
-        what = f"{len(stats.failed_shards)} shard(s) failed after their retries; first: {first.splitlines()[0]}"
-    else:  # e.g. an event of another protocol version from a worker that otherwise finished
-        what = f"a worker reported an error: {stats.failures[0].splitlines()[0]}"
-    raise WorkerFailed(what.rstrip(":"), "render",
-                       "see the worker log above and in DIR/logs; rerun the same command to resume") from None
+        err: SynthError = DiskFull(stats.disk_full[0])
+    elif stats.input_errors:
+        err = SynthError(stats.input_errors[0])
+    else:
+        if stats.failed_shards:
+            first = next(f for f in stats.failures if f.startswith("worker for "))
+            what = f"{len(stats.failed_shards)} shard(s) failed after their retries; first: {first.splitlines()[0]}"
+        else:  # e.g. an event of another protocol version from a worker that otherwise finished
+            what = f"a worker reported an error: {stats.failures[0].splitlines()[0]}"
+        err = WorkerFailed(what.rstrip(":"), "render",
+                           "see the worker log above and in DIR/logs; rerun the same command to resume")
+    for line in report_lines(group(stats.failure_records()), str(err), quiet):
+        print(line, file=sys.stderr)
+    raise err from None
 
 
 def staged_frames(ds, shard_ids: Iterable[str]) -> int:
@@ -226,7 +249,7 @@ def render_plan(out: Path, plan_dir: Path, backend: Backend, shards_per_worker: 
         summary = ds.summary()
         progress.record({"event": "summary", **summary, "frames_rendered": stats.frames_rendered,
                          "failures": len(stats.failed_shards)})
-    raise_on_failures(stats)
+    raise_on_failures(stats, quiet=progress.mode == "none")
     if summary["shards_committed"] < summary["shards"]:
         left = ds.pending_shards()
         raise Incomplete(f"{len(left)} shard(s) not committed (first: {left[0]}) although no worker reported a failure",

@@ -172,10 +172,19 @@ def coerce(value: Any, tp, key: str, md: dict | None = None, where: str | None =
     def bad(what: str, fix: str):
         raise ConfigError(f"config value {key} = {value!r} {what}", where, fix)
 
-    if origin in (typing.Union, types.UnionType):
-        if value is None:
+    if origin in (typing.Union, types.UnionType):  # ``float | None``; ``bool | str`` with Choices(.., "auto")
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
             return None
-        return coerce(value, next(a for a in typing.get_args(tp) if a is not type(None)), key, md, where)
+        errors = []
+        for a in (a for a in args if a is not type(None)):
+            try:
+                return coerce(value, a, key, md, where)
+            except ConfigError as e:
+                errors.append(e)
+        if "choices" in md and len(errors) > 1:
+            bad("is not allowed", f"choose one of {_choices(md['choices'])}")
+        raise errors[0]
     if origin is tuple:
         args = typing.get_args(tp)
         if not isinstance(value, (list, tuple)):
@@ -208,9 +217,14 @@ def coerce(value: Any, tp, key: str, md: dict | None = None, where: str | None =
             bad("is not a string", "write it in quotes")
     if "range" in md and tp in (int, float) and not _in_bounds(value, md):
         bad(*_interval(md)[1:])
-    if "choices" in md and value not in md["choices"]:
-        bad("is not allowed", f"choose one of {', '.join(map(str, md['choices']))}")
+    if "choices" in md and not any(value == c and type(value) is type(c) for c in md["choices"]):
+        bad("is not allowed", f"choose one of {_choices(md['choices'])}")
     return value
+
+
+def _choices(values) -> str:
+    """Allowed values as they are written in TOML: ``false, true, auto``."""
+    return ", ".join(str(v).lower() if isinstance(v, bool) else str(v) for v in values)
 
 
 def check(cfg: Any, where: str | None) -> None:
@@ -370,7 +384,7 @@ def meaning(md) -> str:
     if "range" in md:
         doc += f" [{_interval(md)[0]}]"
     if "choices" in md:
-        doc += f" [one of: {', '.join(map(str, md['choices']))}]"
+        doc += f" [one of: {_choices(md['choices'])}]"
     return doc
 
 

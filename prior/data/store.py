@@ -24,6 +24,7 @@ import numpy as np
 
 from prior.data.bounds import bounding_sphere, foreground_points
 from prior.data.codes import CodeLayout
+from synth.dataset.layout import held_out
 from synth.dataset.reader import list_frames
 from synth.errors import SynthError
 
@@ -106,6 +107,8 @@ def load_store(dataset, *, joints: tuple[str, ...], holdout_views: int = 0, marg
     if not refs:
         raise SynthError("dataset has no committed frames", str(dataset),
                          "render it first (synth render ... --out DIR) or pass the --out directory of a render")
+    # checked before anything is decoded
+    train = ~np.array(held_out([r.key for r in refs], holdout_views, "data.holdout_views", str(dataset)), bool)
     dt = np.dtype(pixel_dtype)
     layout = head_model = None
     rgba = K = c2w = None
@@ -149,17 +152,6 @@ def load_store(dataset, *, joints: tuple[str, ...], holdout_views: int = 0, marg
             raise SynthError(f"identity {ident} has no foreground depth pixel in any frame", str(dataset),
                              "check the renders (synth preview): the head must be visible")
         centre[m], radius[m] = bounding_sphere(pts, margin)
-
-    train = np.ones(len(refs), bool)
-    if holdout_views:
-        for m in range(len(uniq)):
-            for e in np.unique(exprs_a[latent == m]):
-                sel = np.nonzero((latent == m) & (exprs_a == e))[0]
-                if len(sel) <= holdout_views:
-                    raise SynthError(f"identity {uniq[m]} expression {e} has {len(sel)} views, not more than "
-                                     f"data.holdout_views = {holdout_views}", str(dataset),
-                                     "lower data.holdout_views or render more views")
-                train[sel[np.argsort(views_a[sel])[-holdout_views:]]] = False
 
     codes_a = np.stack(codes)
     pairs, first = np.unique(np.stack([latent, exprs_a], 1), axis=0, return_index=True)

@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated, Any
 
-from prior.config import Count, Decay, NonNegative, Positive, Seed, Size
+from prior.config import Count, Decay, NonNegative, Positive, Seed, Size, Switch
 from prior.train.config import TrainConfig
 from synth import configkit
 from synth.configkit import Bounds, Choices, ConfigError, section
@@ -99,8 +99,9 @@ class FinetuneConfig:
     """weight of the L2 penalty on the view-dependent colour branch"""
     distortion_weight: NonNegative = 1e-2
     """weight of the distortion loss"""
-    bf16: bool = False
-    """bf16 autocast for the MLPs (compositing and losses stay float32)"""
+    bf16: Switch = "auto"
+    """bf16 autocast for the MLPs (compositing and losses stay float32); auto: on where the device computes
+    bf16 natively, as train.bf16"""
 
 
 @section

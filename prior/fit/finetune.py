@@ -27,6 +27,7 @@ from prior import losses
 from prior.fit.config import FinetuneConfig
 from prior.fit.invert import step_seed
 from prior.fit.views import ViewSet
+from prior.precision import resolve_bf16
 from prior.train.optim import clip_per_group, learning_rate, set_learning_rate
 from synth.errors import SynthError
 
@@ -70,6 +71,7 @@ def finetune(model, views: ViewSet, w0: torch.Tensor, cfg: FinetuneConfig, *, se
             p.requires_grad_(True)
     opt = torch.optim.Adam(groups, lr=cfg.lr_init, betas=(cfg.adam_beta1, cfg.adam_beta2), eps=cfg.adam_eps)
     normals = cfg.normal_weight > 0
+    bf16, _ = resolve_bf16(cfg.bf16, dev, "finetune.bf16")
     history = []
     model.train()
     for step in range(cfg.steps):
@@ -77,7 +79,7 @@ def finetune(model, views: ViewSet, w0: torch.Tensor, cfg: FinetuneConfig, *, se
         vi, pix = draw_rays(views, step, seed, cfg.rays_per_step)
         b = views.rays(vi, pix, dev)
         gen = torch.Generator(device=dev).manual_seed(step_seed(FINETUNE_STREAM, seed, step))
-        amp = torch.autocast(dev.type, dtype=torch.bfloat16) if cfg.bf16 else contextlib.nullcontext()
+        amp = torch.autocast(dev.type, dtype=torch.bfloat16) if bf16 else contextlib.nullcontext()
         with amp:
             out = model(b.origins, b.directions, b.near, b.far, b.codes, latents=w.expand(len(pix), -1),
                         radii=b.radii, randomized=True, generator=gen, compute_normals=normals)

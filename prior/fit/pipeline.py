@@ -28,6 +28,7 @@ from prior.fit.finetune import finetune
 from prior.fit.inputs import observations, read_inputs, resolve_source
 from prior.fit.invert import check_patch_size, invert_latent
 from prior.fit.views import ViewSet, prior_resolution
+from prior.precision import resolve_bf16
 from synth.errors import SynthError
 from synth.io import atomic_dir, atomic_write_bytes, atomic_write_json
 
@@ -160,6 +161,8 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
     w, inv_hist = invert_latent(net, low, w0, cfg.inversion, seed=cfg.fit.seed, device=dev, progress=report)
     times["inversion_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    bf16, bf16_line = resolve_bf16(cfg.finetune.bf16, dev, "finetune.bf16")
+    log(bf16_line)
     w, ft_hist = finetune(net, views, w, cfg.finetune, seed=cfg.fit.seed, device=dev, progress=report)
     times["finetune_s"] = time.perf_counter() - t0
 
@@ -180,7 +183,7 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
             "inversion_size": [low.size[1], low.size[0]]}
     rep = {"landmarks": {"source": source, "rmse_px": fit.rmse_px.tolist(), "converged": fit.converged,
                          "iterations": fit.iterations, "energy": fit.energy, "focal_px": float(fit.K[0, 0, 0])},
-           "inversion": inv_hist, "finetune": ft_hist, "times": times}
+           "inversion": inv_hist, "finetune": ft_hist, "finetune_bf16": bf16, "times": times}
     weights = fitdir.weights_bytes(net, w, ck.config, ck.layout)
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_dir(out) as tmp:

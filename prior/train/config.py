@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Annotated, Any
 
-from prior.config import Count, Decay, ModelConfig, NonNegative, Positive, SamplingConfig, Seed, Size
+from prior.config import Count, Decay, ModelConfig, NonNegative, Positive, SamplingConfig, Seed, Size, Switch
 from prior.config import preset as model_preset
 from synth import configkit
 from synth.configkit import Bounds, Choices, ConfigError, section
@@ -92,9 +92,10 @@ class TrainConfig:
     """side of the preview images in pixels"""
     keep_checkpoints: Size = 3
     """checkpoints kept in RUN/checkpoints (the newest ones)"""
-    bf16: bool = False
-    """bf16 autocast for the MLPs (CUDA, or a CPU with native bf16: 1.7x here); compositing and losses stay
-    float32"""
+    bf16: Switch = "auto"
+    """bf16 autocast for the MLPs (compositing and losses stay float32); auto: on where the device computes
+    bf16 natively (a CUDA GPU of compute capability 8.0 or later, a CPU with avx512_bf16, amx_bf16 or Arm's
+    bf16), where it is faster (1.7x on such a CPU), off elsewhere (slower than float32 there)"""
     compile: bool = False
     """torch.compile the model (first steps are slow while it compiles)"""
     render_chunk: Size = 4096

@@ -28,6 +28,7 @@ import torch
 
 from prior import losses
 from prior.data.sampler import RaySampler
+from prior.precision import resolve_bf16
 from prior.render_views import render_image, scaled_camera, to_srgb8
 from prior.train import checkpoint as ckpt
 from prior.train.logs import RunLog
@@ -101,13 +102,15 @@ class Trainer:
                                       find_unused_parameters=True)
         if t.compile:
             self.fwd = torch.compile(self.fwd)
+        self.bf16, bf16_line = resolve_bf16(t.bf16, device, "train.bf16")
         self.bg = torch.tensor(t.background, dtype=torch.float32, device=device)
         self.last_saved = setup.resume_from.step if setup.resume_from is not None else None
         self.losses: dict = {}
         if dist.main:
-            write_run_files(setup, dist.world)
+            write_run_files(setup, dist.world, self.bf16)
         self.log = RunLog(setup.run_dir, total=t.steps, start=self.start, enabled=dist.main, tty=tty,
                           tensorboard=tensorboard)
+        self.log.message(bf16_line)
 
     # ------------------------------------------------------------------ one step
     def _tensors(self, b):
@@ -130,7 +133,7 @@ class Trainer:
             gen = torch.Generator(device=self.dev).manual_seed(jitter_seed(t.seed, step, micro, self.dist.rank))
             sync = self.ddp.no_sync() if (self.dist.enabled and micro < acc_n - 1) else contextlib.nullcontext()
             with sync:
-                with torch.autocast(self.dev.type, dtype=torch.bfloat16, enabled=t.bf16):
+                with torch.autocast(self.dev.type, dtype=torch.bfloat16, enabled=self.bf16):
                     out = self.fwd(o, d, near, far, codes, ids, radii=radii, train_frac=frac,
                                    randomized=True, generator=gen)
                 alpha = rgba[:, 3]
@@ -249,7 +252,8 @@ class Trainer:
                 size = t.preview_size
                 K = scaled_camera(st.K[n], W, H, size)
                 img = render_image(self.model, K, st.c2w[n], size, size, st.codes[n], m, st.identities.centre[m],
-                                   float(st.identities.radius[m]), chunk=t.render_chunk, device=self.dev, bf16=t.bf16)
+                                   float(st.identities.radius[m]), chunk=t.render_chunk, device=self.dev,
+                                   bf16=self.bf16)
                 gt = Image.fromarray(to_srgb8(st.rgba[n, ..., :3].astype(np.float32))).resize((size, size))
                 self.log.image(f"preview/identity_{int(st.identities.identity_index[m])}",
                                np.concatenate([to_srgb8(img["rgb"]), np.asarray(gt)], axis=1), done)

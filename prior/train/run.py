@@ -88,8 +88,9 @@ def prepare(dataset, run_dir, *, preset: str | None = None, config_path=None, se
     return RunSetup(run_dir, dataset, cfg, store, resumed)
 
 
-def write_run_files(s: RunSetup, world: int) -> None:
-    """``config.toml`` and ``run.json`` of a run (rank 0, after every check passed)."""
+def write_run_files(s: RunSetup, world: int, bf16: bool | None = None) -> None:
+    """``config.toml`` and ``run.json`` of a run (rank 0, after every check passed); ``bf16``:
+    whether bf16 autocast is on (what ``train.bf16`` resolved to on this machine)."""
     s.run_dir.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(s.run_dir / CONFIG_FILE, run_config.to_toml(s.cfg).encode("utf-8"))
     st, t = s.store, s.cfg.train
@@ -99,4 +100,4 @@ def write_run_files(s: RunSetup, world: int) -> None:
         "training_frames": int(st.train.sum()), "image_size": list(st.size), "ranks": world,
         "rays_per_step": s.cfg.rays_per_step, "batch": [t.identities_per_batch, t.views_per_identity,
                                                         t.pixels_per_view], "grad_accum": t.grad_accum,
-        "memory_bytes": st.nbytes})
+        "memory_bytes": st.nbytes, "bf16": t.bf16 if bf16 is None else bf16})

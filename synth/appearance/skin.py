@@ -23,8 +23,9 @@ and brown skin and falls towards very light and dark skin); they are effective v
 measured tissue properties.
 
 The reflectance spectrum is integrated under D65 with the CIE 1931 observer (colour-science's
-``sd_to_XYZ``, which is linear in the spectrum: its weights are taken once, per wavelength)
-and converted to linear sRGB (Rec.709 primaries), the renderer's working space.
+``sd_to_XYZ``, which is linear in the spectrum: its weights per wavelength are precomputed in
+:mod:`synth.appearance.cie_srgb`, so nothing imports colour-science at run time) and converted
+to linear sRGB (Rec.709 primaries), the renderer's working space.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from functools import lru_cache
 
 import numpy as np
 
-WAVELENGTHS = np.arange(380.0, 781.0, 5.0)
+from synth.appearance.cie_srgb import SPECTRUM_TO_LINEAR_SRGB, WAVELENGTHS
 EPIDERMIS_CM = 0.006
 PACKAGING_CM = 0.0015
 CAROTENOID_PER_CM = 45.0
@@ -88,19 +89,11 @@ def reflectance(melanin, haemoglobin, lam: np.ndarray = WAVELENGTHS) -> np.ndarr
     return _with_epidermis(melanin, _dermis(haemoglobin, lam), lam)
 
 
-@lru_cache(maxsize=1)
 def _spectrum_to_rgb() -> np.ndarray:
     """(3, len(WAVELENGTHS)) linear map spectrum -> linear sRGB: colour-science's D65 / CIE 1931
-    integration (linear in the spectrum) applied to each unit impulse, then XYZ -> sRGB."""
-    import colour
-
-    cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
-    ill = colour.SDS_ILLUMINANTS["D65"]
-    lam = WAVELENGTHS.tolist()
-    cols = [colour.sd_to_XYZ(colour.SpectralDistribution(dict(zip(lam, row.tolist()))), cmfs=cmfs,
-                             illuminant=ill) / 100.0 for row in np.eye(len(lam))]
-    xyz = np.stack(cols, axis=1)
-    return np.asarray(colour.RGB_COLOURSPACES["sRGB"].matrix_XYZ_to_RGB, np.float64) @ xyz
+    integration (linear in the spectrum) of each unit impulse, then XYZ -> sRGB, precomputed
+    (:mod:`synth.appearance.cie_srgb`)."""
+    return SPECTRUM_TO_LINEAR_SRGB
 
 
 def albedos(melanin, haemoglobin) -> np.ndarray:

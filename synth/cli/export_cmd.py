@@ -1,4 +1,4 @@
-"""``synth export nerfstudio|usd``: a rendered dataset in the formats other tools read (docs/export.md)."""
+"""``synth export nerfstudio|cafca|usd``: a rendered dataset in the formats other tools read (docs/export.md)."""
 
 from __future__ import annotations
 
@@ -17,21 +17,43 @@ def nerfstudio_cmd(
     out: Path = typer.Option(..., "--out", "-o", help="nerfstudio data folder to create (new or empty)."),
     identity: Optional[int] = typer.Option(None, "--identity", "-i", min=0, help="Only this identity index."),
     expression: Optional[int] = typer.Option(None, "--expression", "-e", min=0, help="Only this expression index."),
+    val_views: int = typer.Option(1, "--val-views", min=0, help="Views per scene held out as validation and test "
+                                  "images (the highest view indices, as the prior holds out); 0: no split."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
 ) -> None:
-    """transforms.json (OpenGL cameras, fl_x fl_y cx cy w h), 8-bit sRGB PNGs with straight alpha,
-    masks, and 16-bit depth PNGs in millimetres. nerfstudio trains one static scene: pick one
-    identity and expression (`ns-train nerfacto --data OUT`)."""
+    """transforms.json (OpenGL cameras, fl_x fl_y cx cy w h, the train/val/test split), 8-bit sRGB
+    PNGs with straight alpha, masks, and 16-bit depth PNGs in millimetres. nerfstudio trains one
+    static scene: pick one identity and expression (`ns-train nerfacto --data OUT`)."""
     from synth.export.nerfstudio import export_nerfstudio
 
-    s = export_nerfstudio(directory, out, identity=identity, expression=expression)
+    s = export_nerfstudio(directory, out, identity=identity, expression=expression, val_views=val_views)
     if as_json:
         typer.echo(json.dumps(s, indent=1))
         return
-    typer.echo(f"{s['out']}: {s['frames']} frames of {len(s['scenes'])} scene(s) (identity, expression) "
+    typer.echo(f"{s['out']}: {s['frames']} frames ({len(s['val'])} held out for val/test) of {len(s['scenes'])} "
+               f"scene(s) (identity, expression) "
                f"{', '.join(f'({i}, {e})' for i, e in s['scenes'][:6])}{' ...' if len(s['scenes']) > 6 else ''}")
     if len(s["scenes"]) > 1:
         typer.echo("note: nerfstudio trains one static scene; select one with --identity and --expression", err=True)
+
+
+@export_app.command("cafca")
+def cafca_cmd(
+    directory: Path = typer.Argument(..., help="Dataset directory (its committed shards) or one shard directory."),
+    out: Path = typer.Option(..., "--out", "-o", help="Folder to create (new or empty)."),
+    identity: Optional[int] = typer.Option(None, "--identity", "-i", min=0, help="Only this identity index."),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+) -> None:
+    """The Cafca release's layout: SUBJECT/EXP_ENV/{cameras_json,color_image,foreground_mask,
+    segmentation}/Cvv.{json,png} (OpenCV cameras with K, world2cam, cam2world, P, position,
+    orientation; 16-bit segmentation; environment.json), so code written for it reads ours."""
+    from synth.export.cafca import export_cafca
+
+    s = export_cafca(directory, out, identity=identity)
+    if as_json:
+        typer.echo(json.dumps(s, indent=1))
+        return
+    typer.echo(f"{s['out']}: {s['frames']} frames in {len(s['scenes'])} scene folder(s) (SUBJECT/EXP_ENV)")
 
 
 @export_app.command("usd")

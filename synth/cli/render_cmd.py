@@ -11,7 +11,10 @@ plan instead of planning.
 
 This module parses arguments and prints; planning, resuming and running the workers live
 in ``renderer_jobs`` (``submit``: plan-or-resume and the render loop; ``backends``: local
-processes, Ray tasks or a Slurm job array; docs/farm.md).
+processes, Ray tasks or a Slurm job array; docs/farm.md). Before anything is planned or
+written, the extras the run needs are checked (:mod:`synth.extras`): ``bpy`` where workers
+run from this Python (local, or a Ray runtime started here; a Slurm job or a Ray cluster runs
+them on its nodes), ``ray`` or ``submitit`` for those backends.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ from typing import Optional
 import typer
 
 from synth.errors import SynthError
+from synth.extras import require
 from synth.seeds import MAX_SEED
 
 
@@ -95,6 +99,11 @@ def render_cmd(
 
     if backend not in NAMES:
         raise SynthError(f"unknown backend {backend!r}", "--backend", f"use one of {', '.join(NAMES)}")
+    if backend == "local" or (backend == "ray" and ray_address is None):  # workers run from this Python
+        require("render", ("bpy",), "synth render")
+    be = make_backend(backend, workers=workers, stall_timeout=stall_timeout, ray_address=ray_address,
+                      partition=slurm_partition, time_min=slurm_time, cpus_per_task=cpus_per_task,
+                      gpus_per_task=gpus_per_task, array_parallelism=array_parallelism)  # starts nothing
     previous = signal.getsignal(signal.SIGTERM)
     try:
         if plan_dir is not None:
@@ -108,9 +117,6 @@ def render_cmd(
                 raise SynthError("missing --identities", "synth render", "pass --identities N (or --plan PLAN_DIR)")
             pdir = prepare_plan(out, identities, config, _overrides(expressions, views, preset, device, set_), seed,
                                 model)
-        be = make_backend(backend, workers=workers, stall_timeout=stall_timeout, ray_address=ray_address,
-                          partition=slurm_partition, time_min=slurm_time, cpus_per_task=cpus_per_task,
-                          gpus_per_task=gpus_per_task, array_parallelism=array_parallelism)
         progress = Progress(0, 0, auto_mode(quiet), progress_every, log_json,
                             workers=be.workers if backend == "local" else None)
         signal.signal(signal.SIGTERM, _interrupt)  # not before: the planner's forked children keep the default

@@ -31,6 +31,7 @@ is at (i + 0.5, j + 0.5)). :func:`rays` shoots through pixel centres.
 from __future__ import annotations
 
 import os
+import sys
 import tarfile
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -336,6 +337,23 @@ def decode_sample(sample: dict, *, validate: bool = False) -> Frame:
                         where=f"{url or '<samples>'}:{key}")
 
 
+def by_worker(items: Iterable) -> Iterator:
+    """This ``torch.utils.data.DataLoader`` worker's share of ``items``: every ``num_workers``-th
+    item, from the worker's id on, so that the workers together yield each item exactly once
+    whatever the number of shards (all items outside a worker). Split before decoding, e.g.
+    ``WebDataset(urls, shardshuffle=False, workersplitter=None, empty_check=False)
+    .compose(by_worker).map(decode_sample)``, or ``by_worker(list_frames(DIR))`` in an
+    ``IterableDataset`` (docs/reading.md, "DataLoader workers")."""
+    torch = sys.modules.get("torch")  # a DataLoader worker has imported torch; nothing else needs it
+    info = torch.utils.data.get_worker_info() if torch is not None else None
+    if info is None or info.num_workers <= 1:
+        yield from items
+        return
+    for n, item in enumerate(items):
+        if n % info.num_workers == info.id:
+            yield item
+
+
 # --------------------------------------------------------------------------- rays
 
 
@@ -381,5 +399,5 @@ def rays(frame: Frame, *, pixels=None, dtype=np.float32) -> Rays:
     return camera_rays(frame.K, frame.camera_to_world, frame.width, frame.height, pixels=pixels, dtype=dtype)
 
 
-__all__ = ["Frame", "FrameRef", "Rays", "TarMembers", "camera_rays", "decode_frame", "decode_sample", "iter_frames",
-           "list_frames", "read_frame", "rays"]
+__all__ = ["Frame", "FrameRef", "Rays", "TarMembers", "by_worker", "camera_rays", "decode_frame", "decode_sample",
+           "iter_frames", "list_frames", "read_frame", "rays"]

@@ -4,7 +4,8 @@
 
     NS/transforms.json        camera_model OPENCV, w, h (+ fl_x fl_y cx cy when all frames share
                               them), one entry per frame: file_path, mask_path,
-                              depth_file_path, transform_matrix (+ per-frame intrinsics)
+                              depth_file_path, transform_matrix (+ per-frame intrinsics);
+                              train_filenames, val_filenames, test_filenames (the split)
     NS/images/KEY.png         8-bit sRGB colour with straight (un-premultiplied) alpha, RGBA
     NS/masks/KEY.png          8-bit: 255 where alpha >= 0.5 (the head), 0 elsewhere
     NS/depth/KEY.png          16-bit planar depth (z along the optical axis) in millimetres;
@@ -17,6 +18,13 @@ dataset's own convention (:func:`synth.conventions.nerfstudio_camera`). nerfstud
 depth PNGs with ``depth_unit_scale_factor = 1e-3`` (millimetres) and treats them as planar
 depth unless told ``is_euclidean_depth``; masks mark the pixels it may sample (0 = ignore).
 The folder is written under a temporary name and renamed when complete.
+
+The split: nerfstudio's dataparser reads ``train_filenames`` / ``val_filenames`` /
+``test_filenames`` (the ``file_path`` values of each split) when the file has them, else it
+trains on a fraction (0.9, rounded up: 6 views give no validation image). The export writes
+them: the ``val_views`` highest view indices of each (identity, expression) are held out, the
+views the prior holds out (``data.holdout_views``, :func:`synth.dataset.layout.held_out`),
+and are both the validation and the test images; ``val_views = 0`` writes no split.
 """
 
 from __future__ import annotations
@@ -27,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from synth.conventions import nerfstudio_camera
-from synth.dataset.layout import parse_frame_key
+from synth.dataset.layout import held_out, parse_frame_key
 from synth.dataset.preview import linear_to_srgb
 from synth.errors import SynthError
 from synth.export.select import check_new_output, select_frames
@@ -83,28 +91,37 @@ def frame_entry(frame, where: str) -> dict:
             "synth_key": frame.key, "identity_index": ident, "expression_index": expr, "view_index": view}
 
 
-def transforms(entries: list[dict]) -> dict:
+def transforms(entries: list[dict], held: list[bool] | None = None) -> dict:
     """``transforms.json``: what every frame shares goes to the top (nerfstudio reads a frame's
-    own value first, then the top level)."""
+    own value first, then the top level); with ``held`` (one flag per entry), the split."""
     shared = {}
     for k in ("w", "h", *INTRINSICS):
         values = {e[k] for e in entries}
         if len(values) == 1:
             shared[k] = values.pop()
     frames = [{k: v for k, v in e.items() if k not in shared} for e in entries]
-    return {"camera_model": "OPENCV", **shared, "frames": frames,
+    split = {}
+    if held is not None and any(held):
+        val = [e["file_path"] for e, h in zip(entries, held) if h]
+        split = {"train_filenames": [e["file_path"] for e, h in zip(entries, held) if not h],
+                 "val_filenames": val, "test_filenames": list(val)}
+    return {"camera_model": "OPENCV", **shared, **split, "frames": frames,
             "synth": {"format": "synth-nerfstudio/1", "world": "metres, Z up (Blender world)",
                       "depth_unit_scale_factor": 1.0 / DEPTH_UNITS_PER_M, "depth": "planar z (is_euclidean_depth false)",
                       "mask": f"255 where alpha >= {MASK_ALPHA}", "colour": "8-bit sRGB, straight alpha"}}
 
 
 def export_nerfstudio(source, out, *, identity: int | None = None, expression: int | None = None,
-                      progress=None) -> dict:
+                      val_views: int = 1, progress=None) -> dict:
     """Write the selected committed frames of ``source`` as a nerfstudio folder ``out`` (new or
-    empty). Returns a summary: frames, scenes ((identity, expression) pairs), out."""
+    empty), holding out the ``val_views`` highest views of each scene. Returns a summary:
+    frames, scenes ((identity, expression) pairs), val (held-out frame keys), out."""
     out = Path(out)
     check_new_output(out, "nerfstudio")
+    if val_views < 0:
+        raise SynthError(f"--val-views {val_views} is negative", "--val-views", "pass 0 or more")
     refs = select_frames(source, identity=identity, expression=expression)
+    held = held_out([r.key for r in refs], val_views, "--val-views", str(source))
     entries = []
     with atomic_dir(out) as tmp:
         for d in ("images", "masks", "depth"):
@@ -118,6 +135,7 @@ def export_nerfstudio(source, out, *, identity: int | None = None, expression: i
             (tmp / "depth" / f"{frame.key}.png").write_bytes(depth_png(frame, where))
             if progress:
                 progress(frame.key)
-        atomic_write_json(tmp / "transforms.json", transforms(entries), indent=1)
+        atomic_write_json(tmp / "transforms.json", transforms(entries, held), indent=1)
     scenes = sorted({(e["identity_index"], e["expression_index"]) for e in entries})
-    return {"out": str(out), "frames": len(entries), "scenes": [list(s) for s in scenes]}
+    return {"out": str(out), "frames": len(entries), "scenes": [list(s) for s in scenes],
+            "val": [e["synth_key"] for e, h in zip(entries, held) if h]}

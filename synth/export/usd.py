@@ -10,8 +10,9 @@
                                          uniform int primvar synth:segmentationId
         landmarks_ibug68                 Points: the 68 landmarks per expression
         assets/<name>                    Mesh per built shell asset (garment, headwear, glasses),
-                                         points and topology time-sampled, constant
-                                         synth:segmentationId
+                                         topology as default values, points time-sampled,
+                                         constant synth:segmentationId
+        cameras                          Scope
         cameras/v07                      Camera per view index: at time code e, the camera of
                                          frame (identity, e, view 7)
 
@@ -167,8 +168,9 @@ def export_usd(source, out, *, shard: str | None = None, model=None, assets: boo
     """Write shard ``shard`` (default: the first committed) of dataset ``source`` as a USD
     stage at ``out`` (.usdc binary, .usda text or .usd). Returns a summary."""
     if Usd is None:
-        raise SynthError("the USD export needs the usd-core package", "synth export usd",
-                         "install the export extra: pip install '.[export]' (usd-core)")
+        from synth.extras import require
+
+        require("export", ("pxr",), "synth export usd")
     from synth.model.head import HeadModel
 
     root, out = Path(source), Path(out)
@@ -227,6 +229,7 @@ def _identity(stage, hm, data, ident: int, exprs_of: dict, run_seed, assets: boo
         _set_points(head, pose.vertices, t)
         _set_points(lms, pose.landmarks["ibug68"], t)
     cams = {}
+    UsdGeom.Scope.Define(stage, f"{base}/cameras")  # typed, so importers (Blender) keep it as the cameras' parent
     for e, views in sorted(exprs_of.items()):
         for v, meta in sorted(views.items()):
             if v not in cams:
@@ -240,8 +243,11 @@ def _identity(stage, hm, data, ident: int, exprs_of: dict, run_seed, assets: boo
         UsdGeom.Scope.Define(stage, f"{base}/assets")
         for m in meshes:
             mesh = _new_mesh(stage, f"{base}/assets/{m.name}", m.segmentation_id)
+            _set_mesh(mesh, np.full(len(m.faces[0]), 3), m.faces[0].reshape(-1))  # topology: a default value
+            varies = any(not np.array_equal(f, m.faces[0]) for f in m.faces[1:])
             for e, pts, faces in zip(order, m.points, m.faces):
-                _set_mesh(mesh, np.full(len(faces), 3), faces.reshape(-1), Usd.TimeCode(e))
+                if varies:  # (glasses whose parts differ between expressions) and time samples where it changes
+                    _set_mesh(mesh, np.full(len(faces), 3), faces.reshape(-1), Usd.TimeCode(e))
                 _set_points(mesh, pts, Usd.TimeCode(e))
             record["assets"].append(m.name)
         record["skipped"] = skipped

@@ -86,6 +86,46 @@ def look_at_targets(model: HeadModelData, codes: np.ndarray, mode: str, offset) 
 _NOT_HEAD = ("neck", "shoulders")
 
 
+#: Version of the extreme-vertex search, part of its cache file's name (change it with the search).
+_EXTREMES_VERSION = 1
+_extremes_memo: dict[str, np.ndarray] = {}
+
+
+def extreme_vertices(model: HeadModelData, model_sha256: str | None = None) -> np.ndarray:
+    """:func:`_extreme_vertices` of ``model``, computed once per model: with the sha256 of the
+    model's file it is kept in memory and in the user cache (``SYNTH_CACHE_DIR``;
+    ``plan-extremes/<sha256>-v1.npy``, written atomically, recomputed when unreadable), since
+    the hull search (~97 convex hulls, half a second) is the same for every plan of a model."""
+    if model_sha256 is None:
+        return _extreme_vertices(model)
+    if model_sha256 in _extremes_memo:
+        return _extremes_memo[model_sha256]
+    from synth.io import atomic_write_bytes, cache_dir
+
+    path = cache_dir() / "plan-extremes" / f"{model_sha256}-v{_EXTREMES_VERSION}.npy"
+    v = None
+    try:
+        got = np.load(path, allow_pickle=False)
+        if got.dtype == np.int64 and got.ndim == 1 and got.size and 0 <= got.min() and \
+                got.max() < model.template.shape[0]:
+            v = got
+    except (OSError, ValueError):
+        pass
+    if v is None:
+        import io
+
+        v = _extreme_vertices(model)
+        buf = io.BytesIO()
+        np.save(buf, v, allow_pickle=False)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(path, buf.getvalue(), durable=False)
+        except OSError:  # a cache that cannot be written costs time, never the plan
+            pass
+    _extremes_memo[model_sha256] = v
+    return v
+
+
 def _extreme_vertices(model: HeadModelData) -> np.ndarray:
     """Indices of head vertices on the convex hull of the template or of the template moved by
     +-3 SD along any one identity direction: the candidates for a head's extreme points."""
@@ -105,12 +145,14 @@ def _extreme_vertices(model: HeadModelData) -> np.ndarray:
     return idx[np.array(sorted(keep), np.int64)]
 
 
-def head_spheres(model: HeadModelData, codes: np.ndarray, margin_m: float) -> tuple[np.ndarray, np.ndarray]:
+def head_spheres(model: HeadModelData, codes: np.ndarray, margin_m: float,
+                 extremes: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per identity, the neutral head's bounding sphere: centres (N, 3) = the centre of the
-    axis-aligned box of its extreme vertices, radii (N,) = their largest distance from it plus
-    ``margin_m`` (room for hair volume, expressions and the jaw)."""
+    axis-aligned box of its extreme vertices (``extremes``, default: searched now), radii (N,) =
+    their largest distance from it plus ``margin_m`` (room for hair volume, expressions and the
+    jaw)."""
     codes = np.atleast_2d(np.asarray(codes, np.float64))
-    v = _extreme_vertices(model)
+    v = _extreme_vertices(model) if extremes is None else extremes
     t = model.template[v].astype(np.float64)
     B = model.identity_basis[:, v].astype(np.float64) * model.identity_scale.astype(np.float64)[:, None, None]
     pts = t[None] + np.einsum("nk,kvc->nvc", codes, B)  # (N, n, 3)

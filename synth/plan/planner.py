@@ -18,7 +18,7 @@ from synth import seeds
 from synth.assets.catalogue import Catalogue, load_catalogue
 from synth.config import Config
 from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
-from synth.dataset.layout import frame_key, shard_name
+from synth.dataset.layout import frame_keys, shard_name
 from synth.errors import SynthError
 from synth.model.format import HeadModelData
 from synth.plan import assets as assets_mod
@@ -62,8 +62,9 @@ class PlanArrays:
 
 
 def sample_plan(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: int,
-                first_identity: int, n_identities: int) -> PlanArrays:
-    """Sample identities [first_identity, first_identity + n_identities) (vectorised)."""
+                first_identity: int, n_identities: int, extremes: np.ndarray | None = None) -> PlanArrays:
+    """Sample identities [first_identity, first_identity + n_identities) (vectorised);
+    ``extremes``: the model's :func:`identities.extreme_vertices` (default: searched here)."""
     cfg = cfg.resolved()
     d, cam = cfg.dataset, cfg.camera
     E, V = d.expressions_per_identity, d.views_per_expression
@@ -74,7 +75,7 @@ def sample_plan(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: i
     assets = assets_mod.sample_assets_batch(seed, ids, catalogue, cfg.assets.disabled_classes)
     skin.apply_skin_tones(seed, ids, assets, cfg.skin)
     if cam.target == "head" or cam.distance == "fit":  # one hull search for both
-        head_c, head_r = identities.head_spheres(model, codes, cam.head_margin_m)
+        head_c, head_r = identities.head_spheres(model, codes, cam.head_margin_m, extremes)
         head_r = head_r + assets_mod.hair_reach_m(assets)
     if cam.target == "head":
         targets = head_c + np.asarray(cam.target_offset_m, np.float64)
@@ -158,8 +159,9 @@ class ShardSpecs:
                     p = n * E + e
                     Kp, w2cp, c2wp = self.K[p], self.w2c[p], self.c2w[p]
                     azp, elp, radp, sp = self.az[p], self.el[p], self.rad[p], self.fseeds[p]
+                    keys = frame_keys(i, e, V)
                     frames = [{
-                        "frame_id": frame_key(i, e, v), "identity_index": i, "expression_index": e,
+                        "frame_id": keys[v], "identity_index": i, "expression_index": e,
                         "view_index": v, "seed": sp[v],
                         "camera": {"K": Kp[v], "world_to_camera": w2cp[v], "camera_to_world": c2wp[v],
                                    "width": W, "height": H, "near": near, "far": far, "azimuth_deg": azp[v],
@@ -242,11 +244,14 @@ def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first
     S = d.identities_per_shard
     n_shards = -(-n_identities // S)
     jobs = parallel.default_jobs() if jobs is None else max(1, int(jobs))
+    extremes = None  # searched once here (cached per model), not in every forked chunk
+    if cfg.camera.target == "head" or cfg.camera.distance == "fit":
+        extremes = identities.extreme_vertices(model, model_rec["sha256"])
 
     def produce(tmp: Path | None) -> tuple[list[dict], dict]:
         def chunk(r: tuple[int, int]):
             lo, hi = first_identity + r[0] * S, min(first_identity + r[1] * S, first_identity + n_identities)
-            arr = sample_plan(cfg, model, cat, seed, lo, hi - lo)
+            arr = sample_plan(cfg, model, cat, seed, lo, hi - lo, extremes)
             listing = io.write_shards(tmp, ShardSpecs(cfg, arr, seed).specs())
             return listing, stats.partial(arr)
 

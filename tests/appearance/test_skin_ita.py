@@ -92,3 +92,20 @@ def test_ita_categories():
 
     got = ita_category(np.array([70.0, 55.0, 54.9, 41.0, 30.0, 28.0, 10.0, 0.0, -30.0, -30.1, -60.0]))
     assert got.tolist() == [0, 1, 1, 2, 2, 3, 4, 4, 5, 5, 5]
+
+
+def test_precomputed_spectrum_to_srgb_is_colour_sciences_value_for_value():
+    """synth.appearance.cie_srgb (so planning never imports colour-science) is exactly the
+    matrix colour-science's integration gives."""
+    from synth.appearance.cie_srgb import SPECTRUM_TO_LINEAR_SRGB, from_colour_science
+
+    assert np.array_equal(SPECTRUM_TO_LINEAR_SRGB, from_colour_science())
+
+
+def test_planning_does_not_import_colour_science():
+    import subprocess
+    import sys
+
+    code = ("import sys; from synth.plan.skin import *; from synth.appearance.skin import melanin_for_ita;"
+            "melanin_for_ita([20.0], [0.02]); print('colour' in sys.modules)")
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout == "False\n"

@@ -16,7 +16,7 @@ from PIL import Image
 from synth.errors import SynthError
 from synth.export.nerfstudio import export_nerfstudio
 from tests.support.datasets import GREY, marked_dataset, marked_pixels
-from tests.support.export_oracles import ns_project, ns_ray, ns_value
+from tests.support.export_oracles import ns_project, ns_ray, ns_split, ns_value
 
 
 def test_oracle_projection_inverts_its_rays():
@@ -39,7 +39,7 @@ def exported(tmp_path_factory):
     root = tmp_path_factory.mktemp("ns")
     ds = marked_dataset(root / "ds")
     out = root / "ns"
-    summary = export_nerfstudio(ds, out)
+    summary = export_nerfstudio(ds, out, val_views=0)  # scenes of one view: no split
     return ds, out, summary
 
 
@@ -128,6 +128,43 @@ def test_cli_one_line_error_and_json(exported, tmp_path):
     p = subprocess.run([*cmd, str(ds), "--out", str(out)], capture_output=True, text=True)
     assert p.returncode == 2 and p.stderr.startswith("synth: error: nerfstudio output directory is not empty")
     assert len(p.stderr.strip().splitlines()) == 1
-    p = subprocess.run([*cmd, str(ds), "--out", str(tmp_path / "j"), "-i", "1", "--json"], capture_output=True,
-                       text=True, check=True)
+    p = subprocess.run([*cmd, str(ds), "--out", str(tmp_path / "j"), "-i", "1", "--val-views", "0", "--json"],
+                       capture_output=True, text=True, check=True)
     assert json.loads(p.stdout)["scenes"] == [[1, 0]]
+
+
+# ----------------------------------------------------------------------------- the split
+
+
+def test_split_gives_nerfstudio_a_validation_set(tmp_path):
+    """Read as nerfstudio's dataparser reads transforms.json (tests/support/export_oracles.py):
+    without a split, 6 views give 6 training and no validation image; the export's split holds
+    out the highest view indices for val and test (the prior's data.holdout_views picks them with
+    the same function, synth.dataset.layout.held_out; tests/prior/test_data.py checks its split)."""
+    ds = marked_dataset(tmp_path / "ds", views=6)
+    export_nerfstudio(ds, tmp_path / "none", identity=0, expression=0, val_views=0)
+    meta = json.loads((tmp_path / "none" / "transforms.json").read_text())
+    assert len(ns_split(meta, "train")) == 6 and ns_split(meta, "val") == []  # what nerfstudio did before
+
+    for n in (1, 2):
+        s = export_nerfstudio(ds, tmp_path / f"v{n}", identity=0, expression=0, val_views=n)
+        meta = json.loads((tmp_path / f"v{n}" / "transforms.json").read_text())
+        train, val, test = (ns_split(meta, k) for k in ("train", "val", "test"))
+        want = [f"images/id000000_ex00_v{v:02d}.png" for v in range(6 - n, 6)]
+        assert val == test == want and s["val"] == [p[7:-4] for p in want]
+        assert len(train) == 6 - n and not set(train) & set(val)
+        assert all((tmp_path / f"v{n}" / p).is_file() for p in train + val)
+
+
+def test_split_refuses_scenes_without_enough_views(tmp_path):
+    ds = marked_dataset(tmp_path / "ds")  # (0, 1) and (1, 0) have one view each
+    with pytest.raises(SynthError, match=r"identity 0 expression 1 has 1 view\(s\), not more than --val-views = 1"):
+        export_nerfstudio(ds, tmp_path / "ns")
+    assert not (tmp_path / "ns").exists()
+    s = export_nerfstudio(ds, tmp_path / "ns", val_views=0)
+    assert s["val"] == [] and "val_filenames" not in json.loads((tmp_path / "ns" / "transforms.json").read_text())
+    p = subprocess.run([sys.executable, "-m", "synth.cli.main", "export", "nerfstudio", str(ds), "--out",
+                        str(tmp_path / "cli"), "-i", "0", "-e", "0", "--val-views", "2"],
+                       capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    assert "(2 held out for val/test)" in p.stdout

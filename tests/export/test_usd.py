@@ -108,3 +108,45 @@ def test_cli_json(exported, tmp_path):
                         "--model", str(model), "--json"], capture_output=True, text=True, check=True)
     s = json.loads(p.stdout)
     assert s["shard"] == "shard_000000" and s["frames"] == 12 and (tmp_path / "s.usda").is_file()
+
+
+def test_every_prim_is_typed_and_cameras_sit_in_a_scope(exported):
+    """A typeless ``def`` is dropped by importers (Blender's, with its children's parent)."""
+    _, _, out, _ = exported
+    stage = Usd.Stage.Open(str(out))
+    untyped = [str(p.GetPath()) for p in stage.Traverse() if not p.GetTypeName()]
+    assert untyped == []
+    cams = stage.GetPrimAtPath("/World/id000000/cameras")
+    assert cams.IsA(UsdGeom.Scope) and all(c.IsA(UsdGeom.Camera) for c in cams.GetChildren())
+
+
+def test_topology_is_a_default_value_and_points_are_time_samples(exported, tmp_path, monkeypatch):
+    """Face counts and indices are default values (read at any time, also by tools that ignore
+    time samples); points vary per expression. An asset whose topology changes between
+    expressions (glasses parts) gets time samples of it on top of the default."""
+    import synth.export.usd as usd
+    from synth.export.usd_assets import AssetMesh
+
+    ds, model, out, _ = exported
+    stage = Usd.Stage.Open(str(out))
+    head = UsdGeom.Mesh(stage.GetPrimAtPath("/World/id000000/head"))
+    for attr in (head.GetFaceVertexCountsAttr(), head.GetFaceVertexIndicesAttr()):
+        assert attr.GetTimeSamples() == [] and len(attr.Get()) > 0
+    assert head.GetPointsAttr().GetTimeSamples() == [0.0, 1.0, 2.0]
+
+    tri = np.array([[0, 1, 2], [0, 2, 3]])
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    fixed = AssetMesh("garment", "fixed", 5, [quad + e for e in range(3)], [tri] * 3)
+    varying = AssetMesh("glasses", "varying", 7, [quad, quad, quad[:3]], [tri, tri, tri[:1]])
+    monkeypatch.setattr(usd, "asset_meshes", lambda *a: ([fixed, varying], {}))
+    export_usd(ds, tmp_path / "a.usda", model=model)
+    stage = Usd.Stage.Open(str(tmp_path / "a.usda"))
+    m = UsdGeom.Mesh(stage.GetPrimAtPath("/World/id000000/assets/fixed"))
+    assert m.GetFaceVertexCountsAttr().GetTimeSamples() == m.GetFaceVertexIndicesAttr().GetTimeSamples() == []
+    assert list(m.GetFaceVertexIndicesAttr().Get()) == tri.reshape(-1).tolist()
+    assert m.GetPointsAttr().GetTimeSamples() == [0.0, 1.0, 2.0]
+    assert np.asarray(m.GetPointsAttr().Get(2))[1].tolist() == [3.0, 2.0, 2.0]
+    v = UsdGeom.Mesh(stage.GetPrimAtPath("/World/id000000/assets/varying"))
+    idx = v.GetFaceVertexIndicesAttr()
+    assert list(idx.Get(Usd.TimeCode.Default())) == tri.reshape(-1).tolist()
+    assert idx.GetTimeSamples() == [0.0, 1.0, 2.0] and list(idx.Get(2)) == [0, 1, 2]

@@ -86,3 +86,29 @@ def check_stage(stage, frames: dict[str, dict], data) -> float:
         err = np.abs(uv - np.asarray(fj["landmarks_2d"])).max()
         worst = max(worst, float(err))
     return worst
+
+
+def ns_split(meta: dict, split: str, data_dir: str = "data") -> list[str]:
+    """The ``file_path`` values of the images nerfstudio's own dataparser (``nerfstudio-data``,
+    1.1) puts in ``split`` ("train", "val" or "test"), as it documents and does: with
+    ``{split}_filenames`` in the file, the frames whose path is listed (a listed path that is no
+    frame's is an error, and so is a file that lists some splits but not this one); without any,
+    a fraction split: ``ceil(0.9 n)`` training images at ``linspace(0, n - 1, num_train)``
+    (integer indices), the rest for both val and test."""
+    import math
+    import posixpath
+
+    paths = [posixpath.normpath(posixpath.join(data_dir, f["file_path"])) for f in meta["frames"]]
+    listed = {s: meta[f"{s}_filenames"] for s in ("train", "val", "test") if f"{s}_filenames" in meta}
+    if split in listed:
+        wanted = {posixpath.normpath(posixpath.join(data_dir, p)) for p in listed[split]}
+        if wanted - set(paths):
+            raise RuntimeError(f"some filenames of split {split} are not frames: {sorted(wanted - set(paths))}")
+        idx = [i for i, p in enumerate(paths) if p in wanted]
+    elif listed:
+        raise RuntimeError(f"the list of filenames of split {split} is missing")
+    else:
+        n = len(paths)
+        train = set(np.linspace(0, n - 1, math.ceil(n * 0.9), dtype=int).tolist())
+        idx = sorted(train) if split == "train" else [i for i in range(n) if i not in train]
+    return [meta["frames"][i]["file_path"] for i in idx]

@@ -9,6 +9,8 @@
 - ``crash``: a line on stderr, exit 1; ``crash_once``: the same the first time only
   (``DIR/<shard>.crashed`` marks it), then ``ok``;
 - ``error``: an ``error`` event and exit 2, as the real worker does on a SynthError;
+- ``disk_full``: a frame, then the real worker's stderr and ``error`` event on a full disk
+  (``out of disk space writing DIR/.staging/<shard>/...``), exit 4;
 - ``bad_event``: a line of another protocol version, then ``ok``;
 - ``hang``: start a ``sleep`` child in the same process group (its pid in
   ``DIR/<shard>.child``), then wait for a signal; ``stubborn``: the same, ignoring SIGTERM;
@@ -76,6 +78,14 @@ def main() -> int:
             emit(Error(shard=args.shards, message=f"bad input for {shard}"))
             print(f"synth worker: error: bad input for {shard}", file=sys.stderr, flush=True)
             return 2
+        if b == "disk_full":
+            emit(Frame(shard=shard, key=f"{shard}_v0", render_seconds=0.5))
+            msg = (f"out of disk space writing {root}/.staging/{shard}/{shard}_v1.exr (0.0 MiB left on {root}); "
+                   "free some space (or choose another --out) and rerun the same command to resume")
+            print(f"worker: {shard}: 1 frames in 0.5 s", file=sys.stderr, flush=True)
+            emit(Error(shard=args.shards, message=msg))
+            print(f"synth worker: error: {msg}", file=sys.stderr, flush=True)
+            return 4
         if b in ("hang", "stubborn"):
             child = subprocess.Popen(["sleep", "600"], preexec_fn=guard.unblock_signals)
             _publish(root / f"{shard}.child", str(child.pid))
