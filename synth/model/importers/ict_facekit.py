@@ -34,6 +34,7 @@ from synth.model.format import HeadModelData
 from synth.model.importers import ict_rig as ir
 from synth.model.importers import regions as rg
 from synth.model.importers.assemble import imported_model
+from synth.model.importers.derived import derived_regions
 from synth.model.importers.obj import read_obj, read_obj_vertices
 
 IMPORTER_VERSION = 1
@@ -198,6 +199,7 @@ def import_ict_facekit(directory: str | Path) -> HeadModelData:
 
     d, _ = cKDTree(v[lashes]).query(v[ir.rng(ir.FACE)])
     regions["eyelash_lines"] = np.nonzero(d < 2e-4)[0].astype(np.int32)  # skin where lash strips are rooted
+    regions = derived_regions(v, regions, lm, float(joints[ir.JOINT_NAMES.index("neck"), 2]))
 
     landmarks = {"ibug68": mu.vertex_landmarks(mesh.triangles, lm_ids),
                  "dense": rg.dense_landmarks(v, mesh.triangles, regions["face"], int(lm_ids[30]), 600)}
