@@ -120,8 +120,8 @@ def test_landmarks_and_regions(ict):
     assert lms[36, 0] < 0 < lms[45, 0]  # iBUG 36 = subject's right outer eye corner
     assert 500 <= len(m.landmarks["dense"][0]) <= 700
     skin = set(range(*ir.SKIN))
-    parts = [set(m.regions[k].tolist()) for k in ("face", "scalp", "ears", "neck")]
-    assert sum(len(p) for p in parts) == len(skin) and set().union(*parts) == skin
+    parts = [set(m.regions[k].tolist()) for k in ("face", "scalp", "ears", "neck", "shoulders")]
+    assert sum(len(p) for p in parts) == len(skin) and set().union(*parts) == skin == set(m.regions["skin"].tolist())
     for k in ("face", "scalp", "ears", "eyes", "teeth", "mouth_interior", "eyelash_lines", "neck", "brow",
               "beard", "iris", "sclera", "eye_l", "eye_r", "lips"):
         assert len(m.regions[k]) > 0, k
@@ -130,6 +130,22 @@ def test_landmarks_and_regions(ict):
     assert np.all(np.abs(ears[:, 0]) > 0.05)
     assert v[m.regions["scalp"], 2].mean() > v[m.regions["face"], 2].mean() > v[m.regions["neck"], 2].mean()
     assert np.all(np.isin(m.regions["brow"], m.regions["face"]))
+    # derived (synth/model/importers/derived.py): shoulders below the root joint, sides by x
+    assert v[m.regions["shoulders"], 2].max() < m.joint_rest[0, 2] <= v[m.regions["neck"], 2].min()
+    for k in ("ear", "brow", "iris", "sclera"):
+        assert np.all(v[m.regions[f"{k}_l"], 0] > 0) and np.all(v[m.regions[f"{k}_r"], 0] < 0), k
+    for side in ("l", "r"):  # the iris is the corneal cap of the eye's outer shell, in front
+        c, r = mu.fit_sphere(v[m.regions[f"sclera_{side}"]])
+        q = v[m.regions[f"iris_{side}"]] - c
+        cos = -q[:, 1] / np.linalg.norm(q, axis=1)
+        assert 150 <= len(q) <= 300 and cos.min() > np.cos(np.radians(30.0))
+        assert np.linalg.norm(q, axis=1).mean() > r + 2e-4  # proud of the sclera
+    assert set(m.regions["eye_interior"].tolist()) == set(range(*ir.IRIS["l"])) | set(range(*ir.IRIS["r"]))
+    for side, (inner, outer) in (("l", (42, 45)), ("r", (39, 36))):
+        up, lo = (v[m.regions[f"eyelid_{side}_{lid}"]] for lid in ("upper", "lower"))
+        assert len(up) >= 10 and len(lo) >= 10  # ICT roots ~18 lashes a lid
+        assert up[:, 2].mean() > lms[[inner, outer], 2].mean() > lo[:, 2].mean()
+        assert len(np.intersect1d(m.regions[f"eyelid_{side}_upper"], m.regions[f"eyelid_{side}_lower"])) == 0
 
 
 def test_generic_ear_rule_agrees_with_topology(ict):
