@@ -1,11 +1,10 @@
 """ICT-FaceKit importer against the real 10-identity sample in shared/ict-facekit (skipped
-when it is absent; override its location with SYNTH_ICT_FACEKIT_DIR), plus unit tests of
+when it is absent; override its location with SYNTH_ICT_FACEKIT_DIR; tests.support.models), plus unit tests of
 the OBJ reader and mesh utilities that need no data."""
 
 from __future__ import annotations
 
 import json
-import os
 import time
 from pathlib import Path
 
@@ -18,15 +17,10 @@ from synth.model.format import read_model, validate_model, write_model
 from synth.model.head import HeadModel
 from synth.model.importers import ict_rig as ir
 from synth.model.importers.obj import read_obj, read_obj_vertices
-
-ICT_DIR = Path(os.environ.get("SYNTH_ICT_FACEKIT_DIR")
-               or Path(__file__).resolve().parents[3] / "shared" / "ict-facekit")
-
+from tests.support.models import ict_dir
 
 def _ict_dir() -> Path:
-    if not (ICT_DIR / "FaceXModel" / "generic_neutral_mesh.obj").is_file():
-        pytest.skip(f"ICT-FaceKit sample not found at {ICT_DIR} (set SYNTH_ICT_FACEKIT_DIR)")
-    return ICT_DIR
+    return ict_dir()
 
 
 def _plain_obj_vertices(path: Path) -> np.ndarray:
@@ -54,7 +48,7 @@ def test_imports_and_validates(ict):
     assert seconds < 30, f"import took {seconds:.1f} s"
     assert m.num_vertices == 26719 and m.identity_dims == 10
     assert m.expression_dims >= 53 and "jawOpen" in m.expression_names
-    listed = json.loads((ICT_DIR / "FaceXModel" / "vertex_indices.json").read_text())["expressions"]
+    listed = json.loads((_ict_dir() / "FaceXModel" / "vertex_indices.json").read_text())["expressions"]
     assert m.expression_names[:len(listed)] == listed
     assert {"cheekRaiser_L", "PupilDilate_R"} <= set(m.expression_names)
     assert "MIT License" in m.license and "USC Institute for Creative Technologies" in m.license
@@ -66,18 +60,18 @@ def test_imports_and_validates(ict):
 def test_zero_codes_reproduce_neutral_and_identity_code_reproduces_file(ict):
     m, _ = ict
     hm = HeadModel(m, dtype=np.float64)
-    neutral = _plain_obj_vertices(ICT_DIR / "FaceXModel" / "generic_neutral_mesh.obj")
+    neutral = _plain_obj_vertices(_ict_dir() / "FaceXModel" / "generic_neutral_mesh.obj")
     v0 = hm.vertices(np.zeros(m.identity_dims), np.zeros(m.expression_dims))[0]
     np.testing.assert_allclose(v0, neutral, atol=1e-7)
     for k in (0, 3, 9):
         beta = np.zeros(m.identity_dims)
         beta[k] = 1.0
         vk = hm.vertices(beta, np.zeros(m.expression_dims))[0]
-        np.testing.assert_allclose(vk, _plain_obj_vertices(ICT_DIR / "FaceXModel" / f"identity{k:03d}.obj"), atol=2e-7)
+        np.testing.assert_allclose(vk, _plain_obj_vertices(_ict_dir() / "FaceXModel" / f"identity{k:03d}.obj"), atol=2e-7)
     e = np.zeros(m.expression_dims)
     e[m.expression_names.index("eyeBlink_L")] = 1.0
     np.testing.assert_allclose(hm.vertices(np.zeros(m.identity_dims), e)[0],
-                               _plain_obj_vertices(ICT_DIR / "FaceXModel" / "eyeBlink_L.obj"), atol=2e-7)
+                               _plain_obj_vertices(_ict_dir() / "FaceXModel" / "eyeBlink_L.obj"), atol=2e-7)
 
 
 def test_eye_joints_are_inside_the_eyeballs_and_follow_identity(ict):
