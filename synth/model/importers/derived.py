@@ -1,6 +1,6 @@
 """Regions the asset rigs read that an importer derives from the ones it already has
 (docs/importers.md, "Derived regions"); shared by every importer, so an imported model carries
-what the asset classes need (``synth.assets.requirements``) whatever its topology.
+what the asset classes need (``needs`` in ``synth.assets.classes``) whatever its topology.
 
 Axes are synth's (metres, Z up, face toward -Y, +X the subject's left): ``_l`` is +X.
 
@@ -62,7 +62,10 @@ def derived_regions(vertices: np.ndarray, regions: dict, lm: np.ndarray, root_z:
     v = np.asarray(vertices, np.float64)
     lm = np.asarray(lm, np.float64)
     out = dict(regions)
-    get = lambda name: np.asarray(regions.get(name, ()), np.int64)  # noqa: E731
+
+    def get(name: str) -> np.ndarray:
+        return np.asarray(regions.get(name, ()), np.int64)
+
     if "shoulders" not in regions:
         out["neck"], out["shoulders"] = shoulders_split(v, get("neck"), root_z)
     if "skin" not in regions:
