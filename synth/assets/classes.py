@@ -26,6 +26,13 @@ Three orders, each fixed by an integer per class (never by the table's layout):
     The key order of the frame JSON's ``assets`` object (hair ... skin); changing it
     changes the bytes of every frame JSON.
 
+``needs`` is what a class's rig reads from the head model: regions that must be present and
+non-empty (``synth model info`` lists them per model; :func:`unavailable` and
+:func:`check_model` compare a model against them, and ``synth plan`` / ``synth render`` refuse a
+model that lacks what an enabled class needs, before any worker starts). Every class also needs
+the ``ibug68`` landmark set (:data:`LANDMARKS_NEEDED`). The importers derive these regions from
+any topology (``synth/model/importers/derived.py``, docs/importers.md).
+
 Segmentation ids are data and fixed forever (``synth/dataset/segmentation.py`` owns the table;
 a test checks the ids here against it). Shader-layer classes (skin, iris, makeup) create no
 objects: they edit the head's own materials, so their pixels carry the host's id
@@ -55,6 +62,7 @@ class AssetClass:
     rig: str  # rig module: blender_scripts.assets.<rig>
     generators: tuple[str, ...]  # procedural generator names its rig builds ("procedural:<name>")
     pack_anchor: str | None  # default anchor of an external pack; None: packs cannot provide it
+    needs: tuple[str, ...] = ()  # model regions its rig reads (present and non-empty)
 
     @property
     def shader_layer(self) -> bool:
@@ -63,17 +71,31 @@ class AssetClass:
 
 
 _TABLE = (
-    AssetClass("skin", 0, 0, 9, "skin", 1, "skin_detail", ("skin_shader",), None),
-    AssetClass("iris", 1, 1, 8, "eyes", 2, "iris", ("iris_shader",), None),
-    AssetClass("hair", 2, 6, 0, "hair", 5, "hair", ("hair_strands",), "head"),
-    AssetClass("eyebrows", 3, 4, 2, "eyebrows", 7, "eyebrows", ("eyebrow_strands",), "head"),
-    AssetClass("eyelashes", 4, 3, 3, "eyelashes", 8, "eyelashes", ("eyelash_cards",), "head"),
-    AssetClass("beard", 5, 5, 1, "beard", 6, "beard", ("beard_strands",), "head"),
-    AssetClass("makeup", 6, 2, 7, "skin", 1, "makeup", ("makeup_layer",), None),
-    AssetClass("garment", 7, 7, 4, "clothing", 9, "garment", ("garment_shell",), "neck"),
-    AssetClass("glasses", 8, 9, 5, "glasses", 10, "glasses", ("glasses_frame",), "nose_bridge"),
-    AssetClass("headwear", 9, 8, 6, "headwear", 11, "headwear", ("headwear_shell",), "head"),
+    AssetClass("skin", 0, 0, 9, "skin", 1, "skin_detail", ("skin_shader",), None,
+               ("skin", "face")),
+    AssetClass("iris", 1, 1, 8, "eyes", 2, "iris", ("iris_shader",), None,
+               ("eye_l", "eye_r", "iris_l", "iris_r")),
+    AssetClass("hair", 2, 6, 0, "hair", 5, "hair", ("hair_strands",), "head",
+               ("scalp",)),
+    AssetClass("eyebrows", 3, 4, 2, "eyebrows", 7, "eyebrows", ("eyebrow_strands",), "head",
+               ("face", "brow")),
+    AssetClass("eyelashes", 4, 3, 3, "eyelashes", 8, "eyelashes", ("eyelash_cards",), "head",
+               ("eye_l", "eye_r", "eyelid_l_upper", "eyelid_l_lower", "eyelid_r_upper", "eyelid_r_lower")),
+    AssetClass("beard", 5, 5, 1, "beard", 6, "beard", ("beard_strands",), "head",
+               ("beard",)),
+    AssetClass("makeup", 6, 2, 7, "skin", 1, "makeup", ("makeup_layer",), None,
+               ("skin", "face", "lips")),
+    AssetClass("garment", 7, 7, 4, "clothing", 9, "garment", ("garment_shell",), "neck",
+               ("skin", "neck", "shoulders")),
+    AssetClass("glasses", 8, 9, 5, "glasses", 10, "glasses", ("glasses_frame",), "nose_bridge",
+               ("eyes", "ears")),
+    AssetClass("headwear", 9, 8, 6, "headwear", 11, "headwear", ("headwear_shell",), "head",
+               ("skin", "scalp")),
 )
+
+
+#: landmark sets every class reads
+LANDMARKS_NEEDED = ("ibug68",)
 
 
 def _check(table: tuple[AssetClass, ...]) -> None:
@@ -112,3 +134,29 @@ def rig_rng(run_seed: int, identity: int, cls: str) -> np.random.Generator:
     """The one generator a rig of class ``cls`` draws its geometry randomness from (strand
     roots, jitter, wrinkles), derived from (run seed, identity index, the class's slot)."""
     return seeds.generator(run_seed, seeds.Stream.ASSET_GEOMETRY, identity, expression=CLASSES[cls].slot)
+
+
+def unavailable(model, cls: str) -> str | None:
+    """Why ``model`` (a HeadModelData) cannot carry class ``cls``, or None if it can: the first
+    missing (absent or empty) region or landmark set of the class's ``needs``."""
+    for name in LANDMARKS_NEEDED:
+        if name not in model.landmarks:
+            return f"the model has no {name} landmarks"
+    for r in CLASSES[cls].needs:
+        if len(model.regions.get(r, ())) == 0:
+            return f"the model has no {r} region"
+    return None
+
+
+def check_model(model, classes, where: str) -> None:
+    """Refuse (one-line SynthError) a model that cannot carry one of the enabled ``classes``."""
+    from synth.errors import SynthError
+
+    bad = [(c, why) for c in classes if (why := unavailable(model, c))]
+    if bad:
+        cls, why = bad[0]
+        others = f" (also: {', '.join(c for c, _ in bad[1:])})" if len(bad) > 1 else ""
+        names = ",".join(f'"{c}"' for c, _ in bad)
+        raise SynthError(f"head model {model.name!r} cannot carry asset class {cls}{others}: {why}", where,
+                         f"leave them out with --set 'assets.disabled_classes=[{names}]', or re-import the model "
+                         "with this synth ('synth model import' derives the regions the classes need)")

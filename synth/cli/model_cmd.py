@@ -18,6 +18,8 @@ ModelOpt = typer.Option(None, "--model", "-m", help="Model file (.npz). Default:
 
 
 def model_summary(data, path: Path | None) -> dict:
+    from synth.assets.classes import NAMES, unavailable
+
     return {
         "name": data.name,
         "path": str(path) if path else None,
@@ -34,6 +36,8 @@ def model_summary(data, path: Path | None) -> dict:
         "expression_names": list(data.expression_names),
         "license": data.license,
         "provenance": data.provenance,
+        # per asset class: None if the model carries it, else why not (synth.assets.classes.needs)
+        "asset_classes": {c: unavailable(data, c) for c in NAMES},
     }
 
 
@@ -48,7 +52,8 @@ def _load(model: Optional[Path]):
 @app.command("info")
 def info(model: Optional[Path] = ModelOpt,
          as_json: bool = typer.Option(False, "--json", help="Print one JSON object.")) -> None:
-    """Describe a model: dimensions, joints, regions, landmark sets, licence."""
+    """Describe a model: dimensions, joints, regions, landmark sets, licence, and which asset
+    classes it can carry (or why not)."""
     data, path = _load(model)
     s = model_summary(data, path)
     if as_json:
@@ -64,6 +69,8 @@ def info(model: Optional[Path] = ModelOpt,
     t.add_row("joints", ", ".join(s["joints"]))
     t.add_row("landmarks", ", ".join(f"{k} ({v})" for k, v in s["landmarks"].items()))
     t.add_row("regions", ", ".join(f"{k} ({v})" for k, v in s["regions"].items()))
+    t.add_row("asset classes", "\n".join(f"{c}: {'available' if why is None else 'unavailable, ' + why}"
+                                          for c, why in s["asset_classes"].items()))
     t.add_row("license", s["license"].strip().splitlines()[0] if s["license"].strip() else "")
     Console().print(t)
 

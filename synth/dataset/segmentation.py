@@ -35,8 +35,13 @@ PALETTE: dict[int, tuple[int, int, int]] = {
 
 #: Region -> segmentation class, in priority order (first match wins for a polygon).
 REGION_CLASSES = (("teeth", "teeth"), ("eyes", "eyes"), ("mouth_interior", "mouth_interior"))
-#: Regions whose polygons are not rendered (vertices are kept so indices stay the model's).
-HIDDEN_REGIONS = ("lash_helper_l_upper", "lash_helper_l_lower", "lash_helper_r_upper", "lash_helper_r_lower")
+#: Regions whose polygons are not rendered (vertices are kept so indices stay the model's): the
+#: default model's lash placement strips, and an imported model's own lash cards and eye shading
+#: helpers (ICT-FaceKit's ``eyelashes``, ``eye_fluids``: lacrimal fluid, eye blend and occlusion
+#: meshes made for a game engine's blending, which drawn opaque cover the eyeballs; and
+#: ``eye_interior``, the inner eyeball behind its transparent outer shell).
+HIDDEN_REGIONS = ("lash_helper_l_upper", "lash_helper_l_lower", "lash_helper_r_upper", "lash_helper_r_lower",
+                  "eyelashes", "eye_fluids", "eye_interior")
 
 
 def polygon_classes(data) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

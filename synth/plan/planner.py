@@ -16,6 +16,7 @@ import numpy as np
 
 from synth import seeds
 from synth.assets.catalogue import Catalogue, load_catalogue
+from synth.assets.classes import NAMES, check_model
 from synth.config import Config
 from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
 from synth.dataset.layout import frame_keys, shard_name
@@ -239,6 +240,8 @@ def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first
     if out is not None:
         io.check_out_dir(Path(out))  # fail fast, before the sampling
     model, model_rec = model_record(model_path)
+    check_model(model, [c for c in NAMES if c not in cfg.assets.disabled_classes],
+                str(model_path) if model_path is not None else "the embedded default model")
     cat = load_catalogue(cfg.assets.manifest_dir or None)
     d = cfg.dataset
     S = d.identities_per_shard

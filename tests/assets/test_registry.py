@@ -102,3 +102,29 @@ def test_no_other_module_lists_the_classes():
 def test_the_check_catches_a_list():
     line = 'ORDER = ("hair", "beard", "skin")'
     assert len(set(re.findall(rf"[\"']({'|'.join(NAMES)})[\"']", line))) == 3
+
+
+def test_every_class_declares_what_it_reads_and_a_model_without_it_is_refused():
+    """``needs``: regions present and non-empty on the default model and the importers' output
+    (tests/blender/test_assets_contract.py builds every class on those). A model lacking one
+    is refused in one line naming the model, the class, the missing region and the fix."""
+    from synth.errors import SynthError
+    from tests.support.toy_model import make_toy_model
+
+    model = make_toy_model()
+    assert all(CLASSES[c].needs for c in NAMES)
+    assert {c: classes.unavailable(model, c) for c in NAMES} == dict.fromkeys(NAMES)
+    classes.check_model(model, NAMES, "toy.npz")
+    del model.regions["shoulders"]
+    model.regions["eyelid_r_lower"] = np.zeros(0, np.int32)  # empty counts as missing
+    assert classes.unavailable(model, "garment") == "the model has no shoulders region"
+    assert classes.unavailable(model, "eyelashes") == "the model has no eyelid_r_lower region"
+    classes.check_model(model, [c for c in NAMES if c not in ("garment", "eyelashes")], "toy.npz")
+    with pytest.raises(SynthError) as e:
+        classes.check_model(model, NAMES, "toy.npz")
+    msg = str(e.value)
+    assert "\n" not in msg and "'toy-ellipsoid'" in msg and "(toy.npz)" in msg
+    assert "asset class eyelashes (also: garment): the model has no eyelid_r_lower region" in msg
+    assert """--set 'assets.disabled_classes=["eyelashes","garment"]'""" in msg
+    del model.landmarks["ibug68"]
+    assert classes.unavailable(model, "hair") == "the model has no ibug68 landmarks"

@@ -1,6 +1,11 @@
 """The contract every registered asset class keeps (one parametrized test over the registry):
 
-1. **builds** on the default head from a plan entry the planner would write (the first identity
+Each class is checked on three models: the embedded default, the ICT-FaceKit sample
+(imported from ``shared/ict-facekit``; skipped when absent) and the default remeshed (1-to-4
+subdivided and shuffled: :func:`tests.support.models.remeshed`), so that no rig leans on one
+model's vertex order, density or topology.
+
+1. **builds** on the head from a plan entry the planner would write (the first identity
    of a fixed run seed whose sampled assets include the class);
 2. **records**: ``rig.record()`` is strict JSON (no NaN), before and after an update, and the
    worker's frame record ``{**entry, "build": record}`` serialises;
@@ -18,6 +23,7 @@
 
 from __future__ import annotations
 
+import functools
 import json
 
 import numpy as np
@@ -31,6 +37,28 @@ pytestmark = [pytest.mark.blender, pytest.mark.slow]
 
 SIZE, SAMPLES, FOV = 64, 4, 30.0
 CHANGED_PIXELS, CHANGE = 5, 0.01
+
+
+MODELS = ("default", "ict-facekit", "remeshed")
+
+
+def _model(name: str):
+    """The HeadModelData of a MODELS name (None: the embedded default)."""
+    from tests.support import models
+
+    if name == "ict-facekit":
+        return models.ict_model()
+    if name == "remeshed":
+        return _remeshed_default()
+    return None
+
+
+@functools.lru_cache(maxsize=1)
+def _remeshed_default():
+    from synth.model.default import load_default_model
+    from tests.support.models import remeshed
+
+    return remeshed(load_default_model(), seed=3)
 
 
 @pytest.fixture(scope="module")
@@ -85,14 +113,16 @@ def _strict_json(obj) -> str:
     return json.dumps(obj, allow_nan=False)
 
 
+@pytest.mark.parametrize("model", MODELS)
 @pytest.mark.parametrize("cls", NAMES)
-def test_asset_class_contract(cls, entries, tmp_path):
+def test_asset_class_contract(cls, model, entries, tmp_path):
     from tests.support import asset_scene
     from blender_scripts.assets import dress, update
 
     spec = CLASSES[cls]
     entry = entries[cls]
-    ctx, hm = asset_scene.head_context("neutral", resolution=SIZE, identity_index=5, run_seed=11)
+    ctx, hm = asset_scene.head_context("neutral", resolution=SIZE, identity_index=5, run_seed=11,
+                                       model=_model(model))
     before = _render(ctx, tmp_path, *_face_view(ctx)) if spec.shader_layer else None
     rigs = dress(ctx, {cls: entry})
     assert set(rigs) == {cls}

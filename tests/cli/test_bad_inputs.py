@@ -170,6 +170,15 @@ def m(d: Path, fx: Fixtures) -> Path:
     return fx.model
 
 
+def lidless(d: Path, fx: Fixtures) -> Path:
+    """The toy model without its upper-lid lines: no eyelashes can be rooted on it."""
+    from synth.model.format import read_model, write_model
+
+    data = read_model(fx.model)
+    del data.regions["eyelid_l_upper"]
+    return write_model(data, d / "lidless.npz")
+
+
 def user_dir(d: Path, fx: Fixtures) -> Path:
     write(d, "out/notes.txt", "mine")
     return d / "out"
@@ -222,6 +231,10 @@ CASES = [
     # synth plan
     Case("plan-seed-negative", a("plan", "-n", "1", "--seed", "-1", "--out", p("out")), 2, "--seed"),
     Case("plan-out-is-a-file", a("plan", "-n", "1", "--model", m, "--out", f("out", "x")), 2, "not a directory"),
+    Case("plan-model-cannot-carry-class", a("plan", "-n", "1", "--model", lidless, "--out", p("out")), 2,
+         "cannot carry asset class eyelashes: the model has no eyelid_l_upper region"),
+    Case("render-model-cannot-carry-class", a("render", "-n", "1", "--model", lidless, "--out", p("out")), 2,
+         "assets.disabled_classes=[\"eyelashes\"]"),
     Case("plan-identities-zero", a("plan", "-n", "0", "--model", m, "--out", p("out")), 2, "at least 1"),
     Case("plan-start-negative", a("plan", "-n", "1", "--start", "-1", "--model", m, "--out", p("out")), 2,
          "identity indices"),

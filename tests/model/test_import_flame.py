@@ -226,6 +226,17 @@ def test_import_converts_axes_bases_and_joints(flame_files, tmp_path):
     assert int(np.argmin(lms[:, 1])) == 30  # nose tip is the most forward landmark
     assert "licence" in m.license and "non-commercial" in m.license
     assert "posedirs" in m.extra["dropped"][0]
+    # the regions the asset classes read are derived (synth/model/importers/derived.py)
+    from synth.assets.classes import NAMES, unavailable
+
+    parts = [m.regions[k] for k in ("face", "scalp", "ears", "neck", "shoulders")]
+    assert sorted(np.concatenate(parts).tolist()) == m.regions["skin"].tolist()
+    for side in ("l", "r"):
+        assert len(m.regions[f"eyelid_{side}_upper"]) and len(m.regions[f"eyelid_{side}_lower"])
+        assert np.all(np.isin(m.regions[f"iris_{side}"], m.regions[f"eye_{side}"]))
+    # this synthetic FLAME is spheres: no ears, no lips; the classes that need them say so
+    assert {c for c in NAMES if unavailable(m, c)} == {"glasses", "makeup"}
+    assert unavailable(m, "glasses") == "the model has no ears region"
     out = write_model(m, tmp_path / "flame.npz")
     back = read_model(out)
     np.testing.assert_array_equal(back.identity_basis, m.identity_basis)

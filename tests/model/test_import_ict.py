@@ -1,11 +1,10 @@
 """ICT-FaceKit importer against the real 10-identity sample in shared/ict-facekit (skipped
-when it is absent; override its location with SYNTH_ICT_FACEKIT_DIR), plus unit tests of
+when it is absent; override its location with SYNTH_ICT_FACEKIT_DIR; tests.support.models), plus unit tests of
 the OBJ reader and mesh utilities that need no data."""
 
 from __future__ import annotations
 
 import json
-import os
 import time
 from pathlib import Path
 
@@ -18,15 +17,10 @@ from synth.model.format import read_model, validate_model, write_model
 from synth.model.head import HeadModel
 from synth.model.importers import ict_rig as ir
 from synth.model.importers.obj import read_obj, read_obj_vertices
-
-ICT_DIR = Path(os.environ.get("SYNTH_ICT_FACEKIT_DIR")
-               or Path(__file__).resolve().parents[3] / "shared" / "ict-facekit")
-
+from tests.support.models import ict_dir
 
 def _ict_dir() -> Path:
-    if not (ICT_DIR / "FaceXModel" / "generic_neutral_mesh.obj").is_file():
-        pytest.skip(f"ICT-FaceKit sample not found at {ICT_DIR} (set SYNTH_ICT_FACEKIT_DIR)")
-    return ICT_DIR
+    return ict_dir()
 
 
 def _plain_obj_vertices(path: Path) -> np.ndarray:
@@ -54,7 +48,7 @@ def test_imports_and_validates(ict):
     assert seconds < 30, f"import took {seconds:.1f} s"
     assert m.num_vertices == 26719 and m.identity_dims == 10
     assert m.expression_dims >= 53 and "jawOpen" in m.expression_names
-    listed = json.loads((ICT_DIR / "FaceXModel" / "vertex_indices.json").read_text())["expressions"]
+    listed = json.loads((_ict_dir() / "FaceXModel" / "vertex_indices.json").read_text())["expressions"]
     assert m.expression_names[:len(listed)] == listed
     assert {"cheekRaiser_L", "PupilDilate_R"} <= set(m.expression_names)
     assert "MIT License" in m.license and "USC Institute for Creative Technologies" in m.license
@@ -66,18 +60,18 @@ def test_imports_and_validates(ict):
 def test_zero_codes_reproduce_neutral_and_identity_code_reproduces_file(ict):
     m, _ = ict
     hm = HeadModel(m, dtype=np.float64)
-    neutral = _plain_obj_vertices(ICT_DIR / "FaceXModel" / "generic_neutral_mesh.obj")
+    neutral = _plain_obj_vertices(_ict_dir() / "FaceXModel" / "generic_neutral_mesh.obj")
     v0 = hm.vertices(np.zeros(m.identity_dims), np.zeros(m.expression_dims))[0]
     np.testing.assert_allclose(v0, neutral, atol=1e-7)
     for k in (0, 3, 9):
         beta = np.zeros(m.identity_dims)
         beta[k] = 1.0
         vk = hm.vertices(beta, np.zeros(m.expression_dims))[0]
-        np.testing.assert_allclose(vk, _plain_obj_vertices(ICT_DIR / "FaceXModel" / f"identity{k:03d}.obj"), atol=2e-7)
+        np.testing.assert_allclose(vk, _plain_obj_vertices(_ict_dir() / "FaceXModel" / f"identity{k:03d}.obj"), atol=2e-7)
     e = np.zeros(m.expression_dims)
     e[m.expression_names.index("eyeBlink_L")] = 1.0
     np.testing.assert_allclose(hm.vertices(np.zeros(m.identity_dims), e)[0],
-                               _plain_obj_vertices(ICT_DIR / "FaceXModel" / "eyeBlink_L.obj"), atol=2e-7)
+                               _plain_obj_vertices(_ict_dir() / "FaceXModel" / "eyeBlink_L.obj"), atol=2e-7)
 
 
 def test_eye_joints_are_inside_the_eyeballs_and_follow_identity(ict):
@@ -120,8 +114,8 @@ def test_landmarks_and_regions(ict):
     assert lms[36, 0] < 0 < lms[45, 0]  # iBUG 36 = subject's right outer eye corner
     assert 500 <= len(m.landmarks["dense"][0]) <= 700
     skin = set(range(*ir.SKIN))
-    parts = [set(m.regions[k].tolist()) for k in ("face", "scalp", "ears", "neck")]
-    assert sum(len(p) for p in parts) == len(skin) and set().union(*parts) == skin
+    parts = [set(m.regions[k].tolist()) for k in ("face", "scalp", "ears", "neck", "shoulders")]
+    assert sum(len(p) for p in parts) == len(skin) and set().union(*parts) == skin == set(m.regions["skin"].tolist())
     for k in ("face", "scalp", "ears", "eyes", "teeth", "mouth_interior", "eyelash_lines", "neck", "brow",
               "beard", "iris", "sclera", "eye_l", "eye_r", "lips"):
         assert len(m.regions[k]) > 0, k
@@ -130,6 +124,22 @@ def test_landmarks_and_regions(ict):
     assert np.all(np.abs(ears[:, 0]) > 0.05)
     assert v[m.regions["scalp"], 2].mean() > v[m.regions["face"], 2].mean() > v[m.regions["neck"], 2].mean()
     assert np.all(np.isin(m.regions["brow"], m.regions["face"]))
+    # derived (synth/model/importers/derived.py): shoulders below the root joint, sides by x
+    assert v[m.regions["shoulders"], 2].max() < m.joint_rest[0, 2] <= v[m.regions["neck"], 2].min()
+    for k in ("ear", "brow", "iris", "sclera"):
+        assert np.all(v[m.regions[f"{k}_l"], 0] > 0) and np.all(v[m.regions[f"{k}_r"], 0] < 0), k
+    for side in ("l", "r"):  # the iris is the corneal cap of the eye's outer shell, in front
+        c, r = mu.fit_sphere(v[m.regions[f"sclera_{side}"]])
+        q = v[m.regions[f"iris_{side}"]] - c
+        cos = -q[:, 1] / np.linalg.norm(q, axis=1)
+        assert 150 <= len(q) <= 300 and cos.min() > np.cos(np.radians(30.0))
+        assert np.linalg.norm(q, axis=1).mean() > r + 2e-4  # proud of the sclera
+    assert set(m.regions["eye_interior"].tolist()) == set(range(*ir.IRIS["l"])) | set(range(*ir.IRIS["r"]))
+    for side, (inner, outer) in (("l", (42, 45)), ("r", (39, 36))):
+        up, lo = (v[m.regions[f"eyelid_{side}_{lid}"]] for lid in ("upper", "lower"))
+        assert len(up) >= 10 and len(lo) >= 10  # ICT roots ~18 lashes a lid
+        assert up[:, 2].mean() > lms[[inner, outer], 2].mean() > lo[:, 2].mean()
+        assert len(np.intersect1d(m.regions[f"eyelid_{side}_upper"], m.regions[f"eyelid_{side}_lower"])) == 0
 
 
 def test_generic_ear_rule_agrees_with_topology(ict):

@@ -63,8 +63,10 @@ def set_case_arrays(ctx, hm, case: str) -> None:
     ctx.rest_vertices, ctx.vertices, ctx.joint_transforms, ctx.landmarks = _ctx_arrays(hm, beta, psi, rot)
 
 
-def head_context(case: str = "neutral", resolution: int = 64, identity_index: int = 0, run_seed: int = 0):
-    """Fresh scene with the default head at ``case``; returns (HeadContext, HeadModel)."""
+def head_context(case: str = "neutral", resolution: int = 64, identity_index: int = 0, run_seed: int = 0,
+                 model=None):
+    """Fresh scene with a head at ``case`` (``model``: a HeadModelData, default the embedded
+    model); returns (HeadContext, HeadModel)."""
     from blender_scripts import head as bhead
     from blender_scripts import materials as bmat
     from blender_scripts import scene as bscene
@@ -72,7 +74,7 @@ def head_context(case: str = "neutral", resolution: int = 64, identity_index: in
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
 
-    hm = HeadModel(load_default_model())
+    hm = HeadModel(load_default_model() if model is None else model)
     bscene.reset()
     ctx = head_arrays(hm, case, resolution, identity_index, run_seed)
     ctx.materials = bmat.head_materials({}, skin_albedo(0.1, 0.015))

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from synth.model.importers.derived import derived_regions
 from synth.model.format import REQUIRED_REGIONS, HeadModelData, validate_model, write_model
 
 EXPRESSION_NAMES = ["jawOpen", "mouthSmileLeft", "mouthSmileRight", "browInnerUp", "eyeBlinkLeft",
@@ -137,8 +138,15 @@ def make_toy_model(name: str = "toy-ellipsoid", identity_dims: int = 8) -> HeadM
         "ears": idx[np.abs(x) > 0.9], "eyes": idx[(eye_l > 0.6) | (eye_r > 0.6)],
         "teeth": idx[(mouth_t := np.exp(-((x / 0.2) ** 2 + ((z + 0.3) / 0.06) ** 2)) * front) > 0.5],
         "mouth_interior": idx[mouth_t > 0.3], "eyelash_lines": idx[(eye_l > 0.3) | (eye_r > 0.3)],
-        "neck": idx[z < -0.85],
+        "neck": idx[z < -0.85], "brow": idx[brow > 0.5], "lips": idx[(mouth_t > 0.3) & (mouth_t <= 0.5)],
+        "beard": idx[front & (z < -0.4) & (z > -0.85)],
     }
+    regions["eye_l"], regions["eye_r"] = idx[eye_l > 0.6], idx[eye_r > 0.6]
+    regions["iris"] = regions["sclera"] = regions["eyes"]  # one vertex per eye: coarse
+    for s, e in (("l", eye_l), ("r", eye_r)):  # the toy's lid lines: a ring around each eye, split at its centre
+        ring = idx[(e > 0.15) & (e <= 0.6)]
+        regions[f"eyelid_{s}_upper"] = ring[z[ring] >= np.median(z[ring])]
+        regions[f"eyelid_{s}_lower"] = ring[z[ring] < np.median(z[ring])]
     for r in REQUIRED_REGIONS:
         if regions[r].size == 0:
             regions[r] = idx[:3]
@@ -158,6 +166,9 @@ def make_toy_model(name: str = "toy-ellipsoid", identity_dims: int = 8) -> HeadM
     bary = np.zeros((68, 3), np.float32)
     for k in range(68):
         bary[k, list(tris[lm_tri[k]]).index(lm_v[k])] = 1.0
+
+    # the regions the asset classes read, derived as the importers derive them
+    regions = {k: np.asarray(val, np.int32) for k, val in derived_regions(v, regions, v[lm_v], joint_rest[0, 2]).items()}
 
     # prior: two components, correlated, in code units
     D = identity_dims

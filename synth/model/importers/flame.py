@@ -36,6 +36,7 @@ from synth.model import meshutil as mu
 from synth.model.format import HeadModelData
 from synth.model.importers import regions as rg
 from synth.model.importers.assemble import imported_model
+from synth.model.importers.derived import derived_regions
 from synth.model.importers.safe_pickle import load_npy_object, load_pickle, to_plain
 
 IMPORTER_VERSION = 1
@@ -208,6 +209,7 @@ def import_flame(model_file: str | Path, landmark_embedding: str | Path | None =
     regions["mouth_interior"] = _mouth_interior(v, skin, an)
     for k in ("face", "lips", "beard"):  # the mouth bag is skin in FLAME: keep it out of the surface regions
         regions[k] = np.setdiff1d(regions[k], regions["mouth_interior"]).astype(np.int32)
+    regions = derived_regions(v, regions, lm, float(joints[0, 2]))
     for k, a in user_masks.items():
         regions[f"flame_{k}"] = a
 

@@ -34,6 +34,7 @@ from synth.model.format import HeadModelData
 from synth.model.importers import ict_rig as ir
 from synth.model.importers import regions as rg
 from synth.model.importers.assemble import imported_model
+from synth.model.importers.derived import derived_regions
 from synth.model.importers.obj import read_obj, read_obj_vertices
 
 IMPORTER_VERSION = 1
@@ -186,8 +187,11 @@ def import_ict_facekit(directory: str | Path) -> HeadModelData:
     for s in ("l", "r"):
         regions[f"eye_{side[s]}"] = ir.rng(ir.EYEBALL[s]).astype(np.int32)
     regions["eyes"] = ir.rng(ir.EYEBALL["l"], ir.EYEBALL["r"]).astype(np.int32)
-    regions["iris"] = ir.rng(ir.IRIS["l"], ir.IRIS["r"]).astype(np.int32)
-    regions["sclera"] = ir.rng(ir.SCLERA["l"], ir.SCLERA["r"]).astype(np.int32)
+    # the outer shell is the eye's surface (cornea included); the inner eyeball is hidden
+    shells = ir.rng(ir.SCLERA["l"], ir.SCLERA["r"])
+    regions["iris"] = np.concatenate([ir.cornea(v, ir.rng(ir.SCLERA[s])) for s in ("l", "r")]).astype(np.int32)
+    regions["sclera"] = np.setdiff1d(shells, regions["iris"]).astype(np.int32)
+    regions["eye_interior"] = ir.rng(ir.IRIS["l"], ir.IRIS["r"]).astype(np.int32)
     regions["teeth"] = ir.rng(ir.TEETH).astype(np.int32)
     regions["mouth_interior"] = ir.rng(ir.MOUTH_SOCKET, ir.GUMS_TONGUE).astype(np.int32)
     regions["eye_sockets"] = ir.rng(ir.EYE_SOCKET["l"], ir.EYE_SOCKET["r"]).astype(np.int32)
@@ -198,6 +202,7 @@ def import_ict_facekit(directory: str | Path) -> HeadModelData:
 
     d, _ = cKDTree(v[lashes]).query(v[ir.rng(ir.FACE)])
     regions["eyelash_lines"] = np.nonzero(d < 2e-4)[0].astype(np.int32)  # skin where lash strips are rooted
+    regions = derived_regions(v, regions, lm, float(joints[ir.JOINT_NAMES.index("neck"), 2]))
 
     landmarks = {"ibug68": mu.vertex_landmarks(mesh.triangles, lm_ids),
                  "dense": rg.dense_landmarks(v, mesh.triangles, regions["face"], int(lm_ids[30]), 600)}

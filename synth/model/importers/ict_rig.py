@@ -31,12 +31,35 @@ EYE_FLUIDS = {"l": [(24591, 24795), (24999, 25023), (25047, 25199)],  # lacrimal
               "r": [(24795, 24999), (25023, 25047), (25199, 25351)]}
 LASHES = {"l": (25351, 26035), "r": (26035, 26719)}
 
+#: a cornea vertex stands this far (m) proud of the eyeball's fitted sphere (:func:`cornea`)
+CORNEA_RISE_M = 2e-4
+
 JOINT_NAMES = ["neck", "head", "jaw", "eye_l", "eye_r"]
 JOINT_PARENTS = np.array([-1, 0, 1, 1, 1], np.int32)
 
 
 def rng(*ranges: tuple[int, int]) -> np.ndarray:
     return np.concatenate([np.arange(a, b) for a, b in ranges]).astype(np.int64)
+
+
+def cornea(v: np.ndarray, shell: np.ndarray) -> np.ndarray:
+    """The corneal cap of an eyeball's outer shell ``shell`` (ICT's "sclera" range: the whole
+    eye surface, cornea included; ICT's "iris" range is an inner eyeball behind it). The
+    vertices standing more than CORNEA_RISE_M proud of the shell's robust sphere fit within 45
+    degrees of -Y give the optical axis (their mean direction) and the limbus (their largest
+    angle from it); the cap is every shell vertex within that angle. Returns sorted indices."""
+    shell = np.asarray(shell, np.int64)
+    c, r, _ = mu.fit_sphere_robust(v[shell])
+    q = v[shell] - c
+    d = np.linalg.norm(q, axis=1)
+    u = q / d[:, None]
+    raised = (d > r + CORNEA_RISE_M) & (-u[:, 1] > np.cos(np.radians(45.0)))
+    if not raised.any():
+        return np.zeros(0, np.int64)
+    axis = u[raised].mean(0)
+    axis /= np.linalg.norm(axis)
+    cos_limbus = float((u[raised] @ axis).min())
+    return np.sort(shell[u @ axis >= cos_limbus - 1e-9])
 
 
 @dataclass
