@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import math
 import signal
+import sys
 import time
 
 import numpy as np
@@ -28,6 +29,7 @@ import torch
 
 from prior import losses
 from prior.data.sampler import RaySampler
+from prior.data.stream import Loader
 from prior.render_views import render_image, scaled_camera, to_srgb8
 from prior.train import checkpoint as ckpt
 from prior.train.logs import RunLog
@@ -73,17 +75,23 @@ class Trainer:
                  tensorboard: bool = True):
         dist = dist or Dist()
         self.s, self.cfg, self.dev, self.dist = setup, setup.cfg, device, dist
-        t, st = self.cfg.train, setup.store
+        t, tb, d = self.cfg.train, setup.table, self.cfg.data
         per = dist.world * t.grad_accum
         if t.identities_per_batch % per:
             raise SynthError(f"train.identities_per_batch = {t.identities_per_batch} is not a multiple of ranks x "
                              f"grad_accum = {per}", "config", "change identities_per_batch or grad_accum")
-        self.sampler = RaySampler(st, seed=t.seed, identities=t.identities_per_batch // per,
+        self.loader = Loader(setup.source, tb, seed=t.seed, rank=dist.rank, world=dist.world,
+                             buffer_identities=d.buffer_identities, views_per_load=d.views_per_load,
+                             read_ahead=d.read_ahead, refresh_steps=d.refresh_steps, holdout_views=d.holdout_views,
+                             pixel_dtype=d.pixel_dtype, prepare_dir=setup.prepare_dir, margin=d.bounds_margin,
+                             warn=self._warn)
+        self.sampler = RaySampler(self.loader, seed=t.seed, identities=t.identities_per_batch // per,
                                   views=t.views_per_identity, pixels=t.pixels_per_view,
-                                  foreground_fraction=t.foreground_fraction, rank=dist.rank, world=dist.world)
-        self.model = build_model(self.cfg, st.layout.size, len(st.identities.identity_index), device)
+                                  foreground_fraction=t.foreground_fraction, rank=dist.rank)
+        self.model = build_model(self.cfg, tb.layout.size, len(tb.info.identity_index), device)
         self.opt = build_optimizer(self.model, t)
         self.start, self.collapse_count = 0, 0
+        loader_state = None
         if setup.resume_from is not None:
             rf = setup.resume_from
             self.model.load_state_dict(rf.model_state)
@@ -92,6 +100,16 @@ class Trainer:
             self.start = int(state["step"])
             self.collapse_count = int(state["trainer"].get("collapse_count", 0))
             torch.set_rng_state(state["torch_rng"])
+            saved = state["trainer"].get("loader") or []
+            if len(saved) == dist.world:
+                loader_state = saved[dist.rank]
+            elif dist.main:
+                self._warn(f"the checkpoint's data order is of {len(saved) or 'another number of'} rank(s), this run "
+                           f"has {dist.world}: the buffer starts afresh (batches differ from an uninterrupted run)")
+        if loader_state is not None:
+            self.loader.load_state_dict(loader_state)
+        else:
+            self.loader.start()
         self.fwd = self.ddp = self.model
         if dist.enabled:
             from torch.nn.parallel import DistributedDataParallel as DDP
@@ -153,7 +171,7 @@ class Trainer:
         ``stop_at`` or at the first step that ends after ``deadline`` (``time.perf_counter()``
         seconds; benchmarks). Returns 0, or 130 when interrupted by SIGINT."""
         t = self.cfg.train
-        if self.start == 0 and self.dist.main and self.last_saved is None:
+        if self.start == 0 and self.last_saved is None:
             self._save(0)  # a good checkpoint to fall back to from the first step on
         window = (time.perf_counter(), self.start)
         rays_step = self.cfg.rays_per_step
@@ -162,6 +180,7 @@ class Trainer:
                 for step in range(self.start, t.steps):
                     set_learning_rate(self.opt, learning_rate(step, t))
                     stats = self.step(step)
+                    self.sampler.step_done()
                     norms = clip_per_group(self.opt, t.grad_clip)
                     flags = torch.stack([(~torch.isfinite(torch.stack([stats[0], *norms.values()]))).any().float(),
                                          torch.tensor(float(stop.hit), device=self.dev)])
@@ -188,8 +207,7 @@ class Trainer:
                         late = bool(late_t.item())
                     stopping = bool(interrupted) or done == stop_at or late
                     if done % t.checkpoint_every == 0 or done == t.steps or stopping:
-                        if self.dist.main:
-                            self._save(done)
+                        self._save(done)
                     if stopping:
                         if interrupted:
                             self.log.message(f"interrupted: checkpoint of step {done} written; "
@@ -198,14 +216,15 @@ class Trainer:
                         return 0
             finally:
                 self.log.close()
+                self.loader.close()
         return 0
 
     def _log(self, done: int, stats, norms, window, rays_step):
-        s = stats.clone()
+        s = torch.cat([stats, torch.tensor([float(len(self.loader.skipped))], device=stats.device)])
         if self.dist.enabled:
             torch.distributed.all_reduce(s)
             s[:3] /= self.dist.world
-        loss, l1, prop, se, acc_sum, fg_n, valid_n = s.tolist()
+        loss, l1, prop, se, acc_sum, fg_n, valid_n, skipped = s.tolist()
         mse = se / max(valid_n, 1)
         acc_fg = acc_sum / fg_n if fg_n > 0 else float("nan")
         now = time.perf_counter()
@@ -216,6 +235,7 @@ class Trainer:
                        "psnr": -10 * math.log10(max(mse, 1e-12)), "acc_fg": acc_fg}
         metrics = {**self.losses, "lr": self.opt.param_groups[0]["lr"], "rays_per_s": rate,
                    "samples_per_s": rate * sum(self.cfg.sampling.samples_per_level), "stage": stage,
+                   "skipped_shards": int(skipped), "epoch": self.loader.epoch,
                    **{f"grad_norm_{k}": float(v) for k, v in norms.items()}}
         metrics.pop("step")
         self.log.log(done, metrics)
@@ -229,29 +249,46 @@ class Trainer:
                                                       "background stage (train.background_steps) or a lower lr_init")
         return time.perf_counter(), done
 
+    def _warn(self, line: str) -> None:
+        """One warning line (a skipped shard): in the run's log on rank 0, on stderr elsewhere."""
+        text = f"synth: warning: {line}"
+        if self.dist.main and getattr(self, "log", None) is not None:
+            self.log.message(text)
+        else:
+            print(text, file=sys.stderr, flush=True)
+
     def _save(self, done: int) -> None:
-        t = self.cfg.train
-        ckpt.save(self.s.run_dir, done, self.model, self.opt, self.cfg, self.s.store.layout, self.s.store.identities,
-                  losses=self.losses, trainer_state={"collapse_count": self.collapse_count},
-                  dataset=str(self.s.dataset), keep=t.keep_checkpoints, head_model=self.s.store.head_model)
+        """Every rank: its loader state to rank 0; rank 0 writes the checkpoint."""
+        states = [self.loader.state_dict()]
+        if self.dist.enabled:
+            states = [None] * self.dist.world
+            torch.distributed.all_gather_object(states, self.loader.state_dict())
+        if not self.dist.main:
+            self.last_saved = done
+            return
+        t, tb = self.cfg.train, self.loader.table
+        ckpt.save(self.s.run_dir, done, self.model, self.opt, self.cfg, tb.layout, tb.info,
+                  losses=self.losses, trainer_state={"collapse_count": self.collapse_count, "loader": states},
+                  dataset=str(self.s.dataset), keep=t.keep_checkpoints, head_model=tb.head_model)
         self.last_saved = done
 
     def _preview(self, done: int) -> None:
         """Prediction | ground truth of the first training view of up to 3 identities."""
         from PIL import Image
 
-        st, t = self.s.store, self.cfg.train
-        H, W = st.size
+        tb, t = self.loader.table, self.cfg.train
+        H, W = tb.size
         self.model.eval()
         try:
-            for m in range(min(3, len(st.identities.identity_index))):
-                n = int(np.nonzero((st.latent == m) & st.train)[0][0])
+            for m in self.loader.slots[:3].tolist():
+                d = self.loader.held[m]
+                n = int(d.train_frames[0])
                 size = t.preview_size
-                K = scaled_camera(st.K[n], W, H, size)
-                img = render_image(self.model, K, st.c2w[n], size, size, st.codes[n], m, st.identities.centre[m],
-                                   float(st.identities.radius[m]), chunk=t.render_chunk, device=self.dev, bf16=t.bf16)
-                gt = Image.fromarray(to_srgb8(st.rgba[n, ..., :3].astype(np.float32))).resize((size, size))
-                self.log.image(f"preview/identity_{int(st.identities.identity_index[m])}",
+                K = scaled_camera(d.K[n], W, H, size)
+                img = render_image(self.model, K, d.c2w[n], size, size, d.codes[n], m, tb.info.centre[m],
+                                   float(tb.info.radius[m]), chunk=t.render_chunk, device=self.dev, bf16=t.bf16)
+                gt = Image.fromarray(to_srgb8(d.rgba[n, ..., :3].astype(np.float32))).resize((size, size))
+                self.log.image(f"preview/identity_{int(tb.info.identity_index[m])}",
                                np.concatenate([to_srgb8(img["rgb"]), np.asarray(gt)], axis=1), done)
         finally:
             self.model.train()

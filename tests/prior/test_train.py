@@ -39,7 +39,9 @@ def _state(run):
     return ckpt.load(ckpt.latest(run))
 
 
-@pytest.mark.parametrize("sets", [[], ["train.grad_accum=2", "train.foreground_fraction=0.5"]])
+@pytest.mark.parametrize("sets", [[], ["train.grad_accum=2", "train.foreground_fraction=0.5"],
+                                  # streaming: a buffer of 1 of the 2 identities, swapped every 2 steps
+                                  ["data.buffer_identities=1", "data.views_per_load=0.5", "data.read_ahead=1"]])
 def test_resume_is_exact(ds, tmp_path, sets):
     assert _train(ds, tmp_path / "a", sets, steps=6) == 0
     assert _train(ds, tmp_path / "b", sets, steps=6, stop_at=3) == 0
