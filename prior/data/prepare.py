@@ -141,11 +141,14 @@ def record_meta(rec: dict) -> dict:
 
 
 def _read_record(path: Path) -> dict | None:
+    """A record, or None when it cannot be read (cut short, foreign): it is then computed again."""
+    import zipfile
+
     try:
         with np.load(path, allow_pickle=False) as z:
             rec = {k: z[k] for k in z.files}
         return rec if record_meta(rec).get("format") == FORMAT else None
-    except (OSError, ValueError, KeyError, json.JSONDecodeError):
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
         return None
 
 

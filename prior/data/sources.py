@@ -88,6 +88,11 @@ class Source:
     planned: dict[int, list[str]] | None = None
     plan_hash: str | None = None
 
+    @property
+    def planned_identities(self) -> list[int] | None:
+        """Every identity index of the plan, sorted (None without a plan)."""
+        return sorted(self.planned) if self.planned is not None else None
+
     def describe(self) -> str:
         if self.root is not None:
             return str(self.root)

@@ -221,7 +221,14 @@ class Trainer:
 
     def _log(self, done: int, stats, norms, window, rays_step):
         s = torch.cat([stats, torch.tensor([float(len(self.loader.skipped))], device=stats.device)])
-        if self.dist.enabled:
+        spread = 0.0
+        if self.dist.enabled:  # ranks must hold the same parameters (DDP): the spread of their sums
+            with torch.no_grad():
+                total = torch.stack([p.detach().double().sum() for p in self.model.parameters()]).sum().reshape(1)
+            lo, hi = total.clone(), total.clone()
+            torch.distributed.all_reduce(lo, op=torch.distributed.ReduceOp.MIN)
+            torch.distributed.all_reduce(hi, op=torch.distributed.ReduceOp.MAX)
+            spread = float(hi - lo)
             torch.distributed.all_reduce(s)
             s[:3] /= self.dist.world
         loss, l1, prop, se, acc_sum, fg_n, valid_n, skipped = s.tolist()
@@ -235,7 +242,7 @@ class Trainer:
                        "psnr": -10 * math.log10(max(mse, 1e-12)), "acc_fg": acc_fg}
         metrics = {**self.losses, "lr": self.opt.param_groups[0]["lr"], "rays_per_s": rate,
                    "samples_per_s": rate * sum(self.cfg.sampling.samples_per_level), "stage": stage,
-                   "skipped_shards": int(skipped), "epoch": self.loader.epoch,
+                   "skipped_shards": int(skipped), "epoch": self.loader.epoch, "param_spread": spread,
                    **{f"grad_norm_{k}": float(v) for k, v in norms.items()}}
         metrics.pop("step")
         self.log.log(done, metrics)

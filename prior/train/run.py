@@ -87,7 +87,7 @@ def prepare(dataset, run_dir, *, preset: str | None = None, config_path=None, se
     prep_dir = _prepare_dir(source, run_dir)
     res = _prepare_all(source, prep_dir, dist or Dist(), progress)
     table = build_table(res, joints=tuple(d.joints), margin=d.bounds_margin, holdout_views=d.holdout_views,
-                        planned=sorted(source.planned) if source.planned else None, where=source.describe())
+                        planned=source.planned_identities, where=source.describe())
     if resumed is not None:
         if table.layout != resumed.layout:
             raise SynthError(f"dataset codes {table.layout.to_dict()} differ from the checkpoint's "
