@@ -21,6 +21,7 @@ Multi-GPU / multi-node: ``torchrun --nproc-per-node G -m prior.cli train ...``.
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Optional
@@ -52,6 +53,7 @@ def prepare_cmd(
     dataset: list[str] = typer.Argument(..., help=_DATASET_HELP),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Where the records go (default DATASET/.prior/"
                                                                     "prepare)."),
+    workers: int = typer.Option(0, "--workers", "-j", help="Processes reading shards (0: one per CPU core)."),
 ) -> None:
     """The prepare pass over the committed shards (train runs it too): identity table, codes,
     bounds; only shards without a record are read."""
@@ -59,11 +61,11 @@ def prepare_cmd(
 
     from prior.data.prepare import build_table, prepare
     from prior.data.sources import open_source
-    from prior.train.run import _warn
+    from prior.train.run import warn_line
 
     src = open_source(dataset)
     t0 = time.perf_counter()
-    res = prepare(src, out or src.default_prepare_dir(), warn=_warn)
+    res = prepare(src, out or src.default_prepare_dir(), warn=warn_line, workers=workers or os.cpu_count() or 1)
     tb = build_table(res, joints=(), margin=0.0, planned=src.planned_identities,
                      where=src.describe())
     print(f"prepared {len(res.records)} shards ({res.written} read now, {res.reused} unchanged, "

@@ -4,19 +4,20 @@ Per committed shard, one record ``<prepare dir>/<shard>.npz`` (default ``DATASET
 written atomically, keyed by the sha256 of the shard's manifest) holds, per identity in it:
 frame count, views per expression, the conditioning code parts of each (identity, expression)
 (its first frame's identity and expression codes and joint rotations), the front camera (the
-frame nearest azimuth 0 / elevation 0) and the **convex-hull vertices** of its foreground depth
+frame nearest azimuth 0 / elevation 0), and the box and tight sphere of its foreground depth
 points (:mod:`prior.data.bounds`). Plus the shard's head model (name, sha256), image size and
 code sizes.
 
-The hull is what makes the bounds incremental and exact: the bounding sphere of a point set
-(centre = middle of the axis-aligned box, radius = farthest point) only depends on extreme
-points, and every extreme point of a set is a vertex of its hull, so the sphere of an
-identity's hull vertices (merged over its shards) equals the sphere of all its points.
+Bounds: an identity whose frames are all in one shard (``synth render`` writes one shard per
+identity) gets exactly the sphere of all its points. One spread over several shards gets the
+centre of the merged box (exact) and the smallest radius the per-shard spheres guarantee
+(``max |c - c_s| + r_s``: conservative, it holds every point).
 
 :func:`prepare` writes the records of shards that have none (or whose manifest changed), and
-nothing else: a rerun with nothing new writes nothing. Memory: one shard's points at a time,
-reduced to hull vertices every :data:`REDUCE_AT` points; records are a few kB per identity.
-:func:`build_table` merges records into the run's :class:`Table`.
+nothing else: a rerun with nothing new writes nothing. Memory: one identity's points of one
+shard at a time, reduced to their convex-hull vertices (which keep the box and the farthest
+point from any centre: exact) beyond :data:`REDUCE_AT` points; records are a few kB per
+identity. :func:`build_table` merges records into the run's :class:`Table`.
 """
 
 from __future__ import annotations
@@ -30,22 +31,22 @@ from typing import Callable
 
 import numpy as np
 
-from prior.data.bounds import bounding_sphere, foreground_points
+from prior.data.bounds import foreground_points, grow, tight_sphere
 from prior.data.codes import CodeLayout
 from prior.data.identities import IdentityInfo
-from prior.data.sources import ShardDamaged, ShardRef, Source, frame_meta, read_shard
+from prior.data.sources import ShardDamaged, ShardRef, Source, read_shard
 from synth.dataset.reader import decode_frame
 from synth.errors import SynthError
 from synth.io import atomic_write_bytes, sha256_bytes
 
 FORMAT = "synth-prior-prepare/1"
-REDUCE_AT = 200_000
+REDUCE_AT = 2_000_000
 
 
 def _hull(points: np.ndarray) -> np.ndarray:
     """The vertices of the convex hull of ``points`` (float32, (n, 3)); every point when the set
     is too small or flat for a hull (Qhull refuses it)."""
-    if len(points) < 32:
+    if len(points) < 64:
         return points
     from scipy.spatial import ConvexHull, QhullError
 
@@ -78,9 +79,9 @@ def summarise_shard(ref: ShardRef, signature: str) -> dict[str, np.ndarray]:
     head = size = sizes = joints_seen = None
     n = 0
     for key, jb, eb in read_shard(ref):
-        meta = frame_meta(jb, key)
         try:
             f = decode_frame(jb, eb, key=key, shard=ref.shard, where=f"{ref.path}:{key}")
+            meta = f.meta
             ident, expr, view = f.identity_index, f.expression_index, f.view_index
             beta, ex = f.identity_code.reshape(-1), f.expression_code.reshape(-1)
             rots = f.joint_rotations
@@ -112,7 +113,11 @@ def summarise_shard(ref: ShardRef, signature: str) -> dict[str, np.ndarray]:
     if n == 0:
         raise ShardDamaged("it has no frames")
     ids = sorted(per)
-    hulls = [_hull(np.concatenate(per[i]["pts"])) if per[i]["npts"] else np.zeros((0, 3), np.float32) for i in ids]
+    boxes, spheres = [], []
+    for i in ids:
+        pts = np.concatenate(per[i]["pts"]) if per[i]["npts"] else np.zeros((1, 3), np.float32)
+        boxes.append(np.stack([pts.min(0), pts.max(0)]))
+        spheres.append(tight_sphere(pts))
     keys = sorted(pairs)
     jn = sorted({j for q in pairs.values() for j in q["joints"]})
     joints = np.full((len(keys), len(jn), 3), np.nan, np.float32)
@@ -128,8 +133,8 @@ def summarise_shard(ref: ShardRef, signature: str) -> dict[str, np.ndarray]:
             "front_score": np.array([per[i]["front"][0] for i in ids]),
             "front_K": np.stack([per[i]["front"][1] if per[i]["front"][1] is not None else np.eye(3) for i in ids]),
             "front_c2w": np.stack([per[i]["front"][2] if per[i]["front"][2] is not None else np.eye(4) for i in ids]),
-            "hull": np.concatenate(hulls).astype(np.float32),
-            "hull_offsets": np.concatenate([[0], np.cumsum([len(h) for h in hulls])]).astype(np.int64),
+            "box": np.stack(boxes).astype(np.float64),
+            "centre": np.stack([c for c, _ in spheres]), "radius": np.array([r for _, r in spheres]),
             "pairs": np.array(keys, np.int64).reshape(-1, 2), "views": np.array([pairs[k]["views"] for k in keys]),
             "beta": np.stack([pairs[k]["beta"] for k in keys]).astype(np.float32),
             "expr": np.stack([pairs[k]["expr"] for k in keys]).astype(np.float32),
@@ -161,38 +166,68 @@ class PrepareResult:
     skipped: list[str] = field(default_factory=list)  # damaged shards, one line each
 
 
+def _compute(ref: ShardRef, out_dir: Path) -> tuple[dict | None, str | None]:
+    """Summarise one shard and write its record (atomically): (record, None) or (None, warning)."""
+    try:
+        rec = summarise_shard(ref, shard_signature(ref))
+        buf = io.BytesIO()
+        np.savez(buf, **rec)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(out_dir / f"{ref.shard}.npz", buf.getvalue(), durable=False)
+        return rec, None
+    except (ShardDamaged, OSError) as e:
+        return None, f"skipping damaged shard {ref.shard} ({ref.path}): {e}"
+
+
 def prepare(source: Source, out_dir: Path, *, refs: list[ShardRef] | None = None,
-            warn: Callable[[str], None] | None = None, progress=None) -> PrepareResult:
+            warn: Callable[[str], None] | None = None, progress=None, workers: int = 1) -> PrepareResult:
     """Records of every committed shard of ``source`` (or of ``refs``), computing and writing
-    only those missing or stale; a damaged shard is skipped with one line to ``warn``."""
+    only those missing or stale (in ``workers`` processes); a damaged shard is skipped with one
+    line to ``warn``."""
     out_dir = Path(out_dir)
     refs = source.committed() if refs is None else refs
-    res = PrepareResult([], [])
+    got: dict[int, dict] = {}
+    todo = []
     for i, ref in enumerate(refs):
         path = out_dir / f"{ref.shard}.npz"
         try:
-            sig = shard_signature(ref)
             rec = _read_record(path) if path.is_file() else None
-            if rec is None or record_meta(rec).get("signature") != sig:
-                rec = summarise_shard(ref, sig)
-                buf = io.BytesIO()
-                np.savez(buf, **rec)
-                out_dir.mkdir(parents=True, exist_ok=True)
-                atomic_write_bytes(path, buf.getvalue(), durable=False)
-                res.written += 1
-            else:
-                res.reused += 1
-        except (ShardDamaged, OSError) as e:
-            line = f"skipping damaged shard {ref.shard} ({ref.path}): {e}"
+            fresh = rec is not None and record_meta(rec).get("signature") == shard_signature(ref)
+        except OSError:
+            fresh = False
+        if fresh:
+            got[i] = rec
+        else:
+            todo.append(i)
+    res = PrepareResult([], [], reused=len(got))
+    if len(todo) > 1 and workers > 1:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(workers, mp_context=mp.get_context("fork")) as pool:
+            done = pool.map(_compute, [refs[i] for i in todo], [out_dir] * len(todo), chunksize=4)
+            results = list(_progress(done, progress, len(todo)))
+    else:
+        results = list(_progress((_compute(refs[i], out_dir) for i in todo), progress, len(todo)))
+    for i, (rec, line) in zip(todo, results):
+        if rec is None:
             res.skipped.append(line)
             if warn is not None:
                 warn(line)
-            continue
-        res.records.append(rec)
-        res.refs.append(ref)
-        if progress is not None:
-            progress(i + 1, len(refs))
+        else:
+            got[i] = rec
+            res.written += 1
+    for i in sorted(got):
+        res.records.append(got[i])
+        res.refs.append(refs[i])
     return res
+
+
+def _progress(it, progress, total):
+    for n, x in enumerate(it):
+        if progress is not None:
+            progress(n + 1, total)
+        yield x
 
 
 @dataclass
@@ -237,7 +272,7 @@ def build_table(result: PrepareResult, *, joints: tuple[str, ...], margin: float
     M = len(uniq)
     frames = np.zeros(M, np.int64)
     fg = np.zeros(M, np.int64)
-    hulls: dict[int, list[np.ndarray]] = {}
+    spheres: dict[int, list[tuple]] = {}  # latent id -> (box, centre, radius) per shard
     front_score = np.full(M, np.nan)  # nan: no front camera yet
     front_K, front_c2w = np.tile(np.eye(3), (M, 1, 1)), np.tile(np.eye(4), (M, 1, 1))
     shards_of: dict[int, list[ShardRef]] = {}
@@ -248,7 +283,8 @@ def build_table(result: PrepareResult, *, joints: tuple[str, ...], margin: float
         for a, m in enumerate(lat.tolist()):
             frames[m] += rec["frames"][a]
             fg[m] += rec["fg_points"][a]
-            hulls.setdefault(m, []).append(rec["hull"][rec["hull_offsets"][a]:rec["hull_offsets"][a + 1]])
+            if rec["fg_points"][a]:
+                spheres.setdefault(m, []).append((rec["box"][a], rec["centre"][a], float(rec["radius"][a])))
             shards_of.setdefault(m, []).append(ref)
             if np.isnan(front_score[m]) or rec["front_score"][a] < front_score[m]:
                 front_score[m], front_K[m], front_c2w[m] = rec["front_score"][a], rec["front_K"][a], rec["front_c2w"][a]
@@ -265,12 +301,18 @@ def build_table(result: PrepareResult, *, joints: tuple[str, ...], margin: float
                 parts = [rec["beta"][q], rec["expr"][q]] + [rec["joints"][q, jn.index(j)] for j in joints]
                 code_parts[key] = np.concatenate(parts).astype(np.float32)
     centre, radius = np.zeros((M, 3)), np.zeros(M)
-    for m, hs in hulls.items():
-        pts = np.concatenate(hs)
-        if fg[m] == 0 or len(pts) == 0:
+    for m in np.nonzero(frames)[0].tolist():
+        parts = spheres.get(m)
+        if not parts:
             raise SynthError(f"identity {uniq[m]} has no foreground depth pixel in any frame", where,
                              "check the renders (synth preview): the head must be visible")
-        centre[m], radius[m] = bounding_sphere(pts, margin)
+        if len(parts) == 1:
+            c, r = parts[0][1], parts[0][2]
+        else:  # the merged box's centre; a radius that holds every shard's sphere
+            box = np.stack([p[0] for p in parts])
+            c = 0.5 * (box[:, 0].min(0) + box[:, 1].max(0))
+            r = max(float(np.linalg.norm(c - p[1])) + p[2] for p in parts)
+        centre[m], radius[m] = c, grow(r, margin)
     if holdout_views:
         for (m, e), v in sorted(views.items()):
             if v <= holdout_views:

@@ -132,7 +132,7 @@ def open_source(args) -> Source:
     if len(args) == 1 and "{" not in args[0]:
         p = Path(args[0])
         if not os.path.lexists(p):
-            raise SynthError("dataset not found", str(p), "pass the --out directory of synth render")
+            raise SynthError("not a dataset (no such path)", str(p), "pass the --out directory of synth render")
         if p.is_dir() and (p / SHARDS_DIR).is_dir():
             planned, plan_hash = None, None
             if (p / DATASET_FILE).is_file():

@@ -119,14 +119,14 @@ def _check_like_run(source: Source, resumed: ckpt.Checkpoint) -> None:
             continue
         hm = {k: meta.get("model", {}).get(k) for k in ("name", "sha256")}
         if resumed.head_model and hm != resumed.head_model:
-            raise SynthError(f"dataset frames are of head model {hm.get('name')!r}, the run was trained on "
-                             f"{resumed.head_model.get('name')!r}", source.describe(),
+            raise SynthError(f"dataset frames are of head model {hm.get('name')!r}, which differs from the "
+                             f"checkpoint's {resumed.head_model.get('name')!r}", source.describe(),
                              "resume with the dataset the run was trained on (or start a new run)")
         img = meta.get("image") or {}
         trained = resumed.identities.front_size[resumed.identities.radius > 0]
         if len(trained) and [img.get("width"), img.get("height")] != trained[0].tolist():
-            raise SynthError(f"dataset frames are {img.get('width')}x{img.get('height')}, the run's "
-                             f"{trained[0][0]}x{trained[0][1]}", source.describe(),
+            raise SynthError(f"dataset frames are {img.get('width')}x{img.get('height')}, which differs from the "
+                             f"checkpoint's {trained[0][0]}x{trained[0][1]}", source.describe(),
                              "resume with the dataset the run was trained on (or start a new run)")
         return
 
@@ -145,7 +145,7 @@ def _prepare_all(source: Source, prep_dir: Path, dist: Dist, progress):
     err = None
     if dist.main:
         try:
-            res = prepare_pass(source, prep_dir, warn=_warn, progress=progress)
+            res = prepare_pass(source, prep_dir, warn=warn_line, progress=progress, workers=os.cpu_count() or 1)
         except SynthError as e:
             err = e
     if dist.enabled:
@@ -162,7 +162,8 @@ def _prepare_all(source: Source, prep_dir: Path, dist: Dist, progress):
     return res
 
 
-def _warn(line: str) -> None:
+def warn_line(line: str) -> None:
+    """One warning line on stderr (a skipped shard)."""
     print(f"synth: warning: {line}", file=sys.stderr, flush=True)
 
 

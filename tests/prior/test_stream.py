@@ -64,6 +64,12 @@ def test_prepare_is_incremental_atomic_and_a_noop_when_nothing_is_new(tmp_path):
     assert (r4.written, r4.reused) == (1, 2)
     t4 = build_table(r4, joints=JOINTS, margin=0.05, planned=src.planned_identities)
     np.testing.assert_array_equal(t4.info.radius, table.info.radius)
+    # two worker processes write the same records
+    r5 = prepare(src, tmp_path / "two", workers=2)
+    assert r5.written == 3
+    t5 = build_table(r5, joints=JOINTS, margin=0.05, planned=src.planned_identities)
+    for k, v in table.info.arrays().items():
+        np.testing.assert_array_equal(getattr(t5.info, k), v)
 
 
 def test_buffer_bound_holds_and_identities_swap(tmp_path):
