@@ -59,18 +59,20 @@ def pixel_radius(K: np.ndarray) -> np.ndarray:
 
 def rays_for(data: list[IdentityData], frames: np.ndarray, pixels: np.ndarray, size: tuple[int, int], centre,
              radius):
-    """origins, directions, near, far of flat ``pixels`` (F, P) of frame ``frames[i]`` of ``data[i]``."""
+    """origins, directions, near, far of flat ``pixels`` (G, V, P) of frames ``frames`` (G, V) of
+    identity ``data[g]`` (G identity draws of V frames each)."""
     H, W = size
-    F, P = pixels.shape
-    o = np.empty((F, P, 3), np.float32)
-    d = np.empty((F, P, 3), np.float32)
-    for i, f in enumerate(frames.tolist()):
-        rows, cols = np.divmod(pixels[i], W)
-        r = camera_rays(data[i].K[f], data[i].c2w[f], W, H, pixels=(rows, cols))
-        o[i], d[i] = r.origins, r.directions
+    G, V, P = pixels.shape
+    o = np.empty((G, V, P, 3), np.float32)
+    d = np.empty((G, V, P, 3), np.float32)
+    for g, x in enumerate(data):
+        for v, f in enumerate(frames[g].tolist()):
+            rows, cols = np.divmod(pixels[g, v], W)
+            r = camera_rays(x.K[f], x.c2w[f], W, H, pixels=(rows, cols))
+            o[g, v], d[g, v] = r.origins, r.directions
     ids = np.array([x.latent for x in data], np.int64)
     o, d = o.reshape(-1, 3), d.reshape(-1, 3)
-    near, far = intersect_sphere(o, d, np.repeat(centre[ids], P, axis=0), np.repeat(radius[ids], P))
+    near, far = intersect_sphere(o, d, np.repeat(centre[ids], V * P, axis=0), np.repeat(radius[ids], V * P))
     return o, d, near.astype(np.float32), far.astype(np.float32)
 
 
@@ -92,7 +94,8 @@ class RaySampler:
         return np.random.default_rng([BATCH_STREAM, self.seed, int(step), int(micro), self.rank])
 
     def draw(self, step: int, micro: int = 0) -> tuple[list[IdentityData], np.ndarray, np.ndarray]:
-        """(identity of each frame, frame index within it (F,), flat pixels (F, P)) of one micro-batch."""
+        """(the identity of each draw (G,), frame indices within it (G, V), flat pixels (G, V, P)) of one
+        micro-batch."""
         rng = self.rng(step, micro)
         slots = self.loader.slots
         ids = rng.choice(slots, size=self.I, replace=self.I > slots.size)
@@ -104,21 +107,21 @@ class RaySampler:
             if tf.size == 0:
                 raise SynthError(f"identity {int(self.loader.table.info.identity_index[m])} has no training view left",
                                  "data.holdout_views", "lower data.holdout_views")
-            pick = rng.choice(tf, size=self.V, replace=self.V > tf.size)
-            data += [d] * self.V
-            frames.append(pick)
-        frames = np.concatenate(frames)
+            frames.append(rng.choice(tf, size=self.V, replace=self.V > tf.size))
+            data.append(d)
+        frames = np.stack(frames)
         H, W = self.loader.table.size
-        pixels = rng.integers(0, H * W, size=(frames.size, self.P))
+        pixels = rng.integers(0, H * W, size=(frames.size, self.P)).reshape(self.I, self.V, self.P)
         if self.n_fg:
-            lo = np.array([d.fg_offsets[f] for d, f in zip(data, frames.tolist())], np.int64)
-            hi = np.array([d.fg_offsets[f + 1] for d, f in zip(data, frames.tolist())], np.int64)
-            count = hi - lo
-            u = rng.random((frames.size, self.n_fg))
-            pick = np.minimum((u * count[:, None]).astype(np.int64), np.maximum(count - 1, 0)[:, None])
-            fgp = np.stack([d.fg_pixels[np.minimum(lo[i] + pick[i], max(d.fg_pixels.size - 1, 0))]
-                            if d.fg_pixels.size else np.zeros(self.n_fg, np.int64) for i, d in enumerate(data)])
-            pixels[:, :self.n_fg] = np.where(count[:, None] > 0, fgp, pixels[:, :self.n_fg])
+            u = rng.random((frames.size, self.n_fg)).reshape(self.I, self.V, self.n_fg)
+            for g, d in enumerate(data):
+                lo, hi = d.fg_offsets[frames[g]], d.fg_offsets[frames[g] + 1]
+                count = hi - lo
+                if not d.fg_pixels.size:
+                    continue
+                pick = lo[:, None] + np.minimum((u[g] * count[:, None]).astype(np.int64), np.maximum(count - 1, 0)[:, None])
+                fgp = d.fg_pixels[np.minimum(pick, d.fg_pixels.size - 1)]
+                pixels[g, :, :self.n_fg] = np.where(count[:, None] > 0, fgp, pixels[g, :, :self.n_fg])
         return data, frames, pixels
 
     def batch(self, step: int, micro: int = 0) -> Batch:
@@ -126,15 +129,18 @@ class RaySampler:
         t = self.loader.table
         H, W = t.size
         o, d, near, far = rays_for(data, frames, pixels, t.size, t.info.centre, t.info.radius)
-        rgba = np.stack([x.rgba[f].reshape(H * W, 4)[p] for x, f, p in zip(data, frames.tolist(), pixels)])
-        latent = np.array([x.latent for x in data], np.int64)
-        codes = np.stack([x.codes[f] for x, f in zip(data, frames.tolist())])
-        K = np.stack([x.K[f] for x, f in zip(data, frames.tolist())])
+        G, V, P = pixels.shape
+        rgba = np.empty((G, V, P, 4), np.float32)
+        codes = np.empty((G, V, t.layout.size), np.float32)
+        K = np.empty((G, V, 3, 3))
+        for g, x in enumerate(data):
+            rgba[g] = x.rgba.reshape(len(x.rgba), H * W, 4)[frames[g][:, None], pixels[g]]
+            codes[g], K[g] = x.codes[frames[g]], x.K[frames[g]]
+        latent = np.repeat(np.array([x.latent for x in data], np.int64), V * P)
         return Batch(origins=o, directions=d, near=near, far=far,
-                     radii=np.repeat(pixel_radius(K), self.P).astype(np.float32),
-                     codes=np.repeat(codes, self.P, axis=0), latent_ids=np.repeat(latent, self.P),
-                     rgba=rgba.reshape(-1, 4).astype(np.float32), frames=np.repeat(frames, self.P),
-                     pixels=pixels.reshape(-1))
+                     radii=np.repeat(pixel_radius(K).reshape(-1), P).astype(np.float32),
+                     codes=np.repeat(codes.reshape(G * V, -1), P, axis=0), latent_ids=latent,
+                     rgba=rgba.reshape(-1, 4), frames=np.repeat(frames.reshape(-1), P), pixels=pixels.reshape(-1))
 
     def step_done(self) -> None:
         """Tell the buffer what this step drew (it may swap identities)."""
