@@ -63,15 +63,12 @@ def rays_for(data: list[IdentityData], frames: np.ndarray, pixels: np.ndarray, s
     identity ``data[g]`` (G identity draws of V frames each)."""
     H, W = size
     G, V, P = pixels.shape
-    o = np.empty((G, V, P, 3), np.float32)
-    d = np.empty((G, V, P, 3), np.float32)
-    for g, x in enumerate(data):
-        for v, f in enumerate(frames[g].tolist()):
-            rows, cols = np.divmod(pixels[g, v], W)
-            r = camera_rays(x.K[f], x.c2w[f], W, H, pixels=(rows, cols))
-            o[g, v], d[g, v] = r.origins, r.directions
+    K = np.concatenate([x.K[f] for x, f in zip(data, frames)])
+    c2w = np.concatenate([x.c2w[f] for x, f in zip(data, frames)])
+    rows, cols = np.divmod(pixels.reshape(G * V, P), W)
+    r = camera_rays(K, c2w, W, H, pixels=(rows, cols))
     ids = np.array([x.latent for x in data], np.int64)
-    o, d = o.reshape(-1, 3), d.reshape(-1, 3)
+    o, d = r.origins.reshape(-1, 3), r.directions.reshape(-1, 3)
     near, far = intersect_sphere(o, d, np.repeat(centre[ids], V * P, axis=0), np.repeat(radius[ids], V * P))
     return o, d, near.astype(np.float32), far.astype(np.float32)
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Callable
 
@@ -59,7 +60,7 @@ class IdentityData:
     fg_offsets: np.ndarray  # (F + 1,) int64 into fg_pixels
     fg_pixels: np.ndarray  # flat (row * W + col) indices of foreground pixels, int32
 
-    @property
+    @cached_property
     def train_frames(self) -> np.ndarray:
         return np.nonzero(self.train)[0]
 
