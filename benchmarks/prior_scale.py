@@ -2,8 +2,9 @@
 
 Synthetic tar datasets are written through the project's own shard writer (StagingShard ->
 commit, ``dataset.shard_format = "tar"``): N identities x 13 expressions x 30 views at 32^2,
-the frames of ``tests/prior/scene.py`` (a shaded sphere per identity seen by ring cameras; frame
-JSON with cameras, codes (identity 48), joint rotations and landmarks). To keep writing
+the frames of ``tests/prior/scene.py`` (a shaded sphere per identity seen by ring cameras, 8
+sphere sizes repeated; frame JSON with cameras, codes (identity 48), joint rotations and
+landmarks). To keep writing
 affordable the writer's jsonschema check runs on the first frame of each shard only (it costs
 about 46 ms a frame) and files are not fsynced; everything else is the writer's own path.
 
@@ -51,8 +52,13 @@ def write(out: Path, identities: int) -> None:
     for sid in ds.pending_shards():
         with ds.staging(sid) as st:
             for key in expected[sid]:
-                k, px, meta = scene.frame(*ff.parse_frame_key(key), VIEWS, SIZE, id_size=48)
-                st.write_frame(k, *px, meta, durable=False)
+                i, e, v = ff.parse_frame_key(key)
+                # the scene's sphere grows with the identity index: 8 sizes, repeated
+                _, px, meta = scene.frame(i % 8, e, v, VIEWS, SIZE, id_size=48)
+                meta.update(frame_id=key, identity_index=i)
+                meta["image"]["file"] = f"{key}.exr"
+                meta["model"]["identity"] = [0.01 * i + 0.05 * k for k in range(48)]
+                st.write_frame(key, *px, meta, durable=False)
             st.commit(manifest_extra={"seeds": {"run": 0}, "versions": {"blender": "none"}}, durable=False)
     n = identities * EXPRESSIONS * VIEWS
     print(f"wrote {identities} identities, {n} frames in {time.perf_counter() - t0:.0f} s", flush=True)
