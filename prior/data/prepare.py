@@ -164,6 +164,7 @@ class PrepareResult:
     written: int = 0
     reused: int = 0
     skipped: list[str] = field(default_factory=list)  # damaged shards, one line each
+    skipped_shards: list[str] = field(default_factory=list)  # their ids
 
 
 def _compute(ref: ShardRef, out_dir: Path) -> tuple[dict | None, str | None]:
@@ -212,6 +213,7 @@ def prepare(source: Source, out_dir: Path, *, refs: list[ShardRef] | None = None
     for i, (rec, line) in zip(todo, results):
         if rec is None:
             res.skipped.append(line)
+            res.skipped_shards.append(refs[i].shard)
             if warn is not None:
                 warn(line)
         else:

@@ -35,7 +35,7 @@ from typing import Callable
 import numpy as np
 
 from prior.data.codes import CodeLayout
-from prior.data.prepare import Table, build_table, prepare
+from prior.data.prepare import Table, build_table, prepare, record_meta
 from prior.data.sources import ShardDamaged, Source, frame_meta, read_shard
 from synth.dataset.reader import decode_frame
 from synth.errors import SynthError
@@ -161,6 +161,18 @@ class Loader:
             return
         res = prepare(self.source, self.prepare_dir, refs=[r for r in refs if r.shard not in self.bad],
                       warn=self._skip_line)
+        self.bad |= set(res.skipped_shards)
+        t = self.table
+        for k in reversed(range(len(res.records))):  # a new shard unlike the run's frames: skipped, one line
+            meta, ref = record_meta(res.records[k]), res.refs[k]
+            if meta["head_model"] != t.head_model or tuple(meta["size"]) != (t.size[1], t.size[0]) \
+                    or tuple(meta["code_sizes"]) != (t.layout.identity_size, t.layout.expression_size):
+                self.bad.add(ref.shard)
+                self._skip_line(f"skipping shard {ref.shard} ({ref.path}): its frames are "
+                                f"{meta['size'][0]}x{meta['size'][1]} of head model "
+                                f"{meta['head_model'].get('name')!r}, the run's {t.size[1]}x{t.size[0]} of "
+                                f"{t.head_model.get('name')!r}")
+                del res.records[k], res.refs[k]
         try:
             table = build_table(res, joints=self.table.layout.joints, margin=self.margin,
                                 holdout_views=self.holdout, planned=self.table.info.identity_index.tolist(),
@@ -168,9 +180,8 @@ class Loader:
         except SynthError as e:
             self._skip_line(f"new shards not taken in: {e.what}")
             return
-        if table.head_model != self.table.head_model or table.size != self.table.size \
-                or not np.array_equal(table.info.identity_index, self.table.info.identity_index):
-            self._skip_line("new shards not taken in: another head model, resolution or identity plan than the run's")
+        if not np.array_equal(table.info.identity_index, self.table.info.identity_index):
+            self._skip_line("new shards not taken in: the dataset's plan changed")
             return
         keep = self.table.frames > 0  # identities already trained keep their bounds (the run's, exactly)
         for k in ("centre", "radius", "front_K", "front_c2w", "front_size"):

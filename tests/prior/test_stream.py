@@ -110,7 +110,7 @@ def test_ranks_read_disjoint_shards(tmp_path, monkeypatch):
 
 
 def test_training_while_rendering_takes_new_commits_never_staged(tmp_path, monkeypatch):
-    ds = scene.make_dataset(tmp_path / "d", identities=4, views=VIEWS, size=SIZE, commit=2)
+    ds = scene.make_dataset(tmp_path / "d", identities=5, views=VIEWS, size=SIZE, commit=2)
     src, prep = open_source(ds), ds / ".prior" / "prepare"
     touched = []
     real = sources_mod.read_shard
@@ -118,14 +118,17 @@ def test_training_while_rendering_takes_new_commits_never_staged(tmp_path, monke
                                                                                  real(ref, ident))[1])
     ld, lines = _loader(src, prep, buffer_identities=1, views_per_load=0.5)
     ld.start()
-    assert ld.table.info.identity_index.tolist() == [0, 1, 2, 3]  # the plan's identities: latent ids fixed
+    assert ld.table.info.identity_index.tolist() == [0, 1, 2, 3, 4]  # the plan's identities: latent ids fixed
     assert set().union(*_steps(ld, 6)) == {0, 1}
     staged = scene.commit_identity(ds, 3, views=VIEWS, size=SIZE, stage_only=True)  # the farm is rendering 3
-    scene.commit_identity(ds, 2, views=VIEWS, size=SIZE)  # ... and has committed 2
-    seen = set().union(*_steps(ld, 12))
-    assert 2 in seen and 3 not in seen and ld.table.frames.tolist() == [8, 8, 8, 0]
+    scene.commit_identity(ds, 2, views=VIEWS, size=SIZE)  # ... has committed 2
+    scene.commit_identity(ds, 4, views=VIEWS, size=SIZE, head_model="another")  # ... and 4 with another head
+    seen = set().union(*_steps(ld, 16))
+    assert 2 in seen and 3 not in seen and 4 not in seen and ld.table.frames.tolist() == [8, 8, 8, 0, 0]
     assert ld.table.info.radius[2] > 0 and ld.table.info.radius[3] == 0
-    assert not [p for p in touched if ".staging" in str(p)] and lines == []
+    assert not [p for p in touched if ".staging" in str(p)]
+    assert len(lines) == 1 and "shard_000004" in lines[0] and "'another'" in lines[0]  # once, not per epoch
+    assert ld.state_dict()["skipped"] == lines
     staged.__exit__(None, None, None)
 
 
