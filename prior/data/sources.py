@@ -184,8 +184,9 @@ def read_shard(ref: ShardRef, identity: int | None = None) -> Iterator[tuple[str
                     out = []
                     for ext in ("json", "exr"):
                         e = files.get(f"{k}.{ext}")
-                        if not isinstance(e, dict) or not isinstance(e.get("offset"), int):
-                            raise ShardDamaged(f"manifest has no member offset for {k}.{ext}")
+                        if not isinstance(e, dict) or not isinstance(e.get("offset"), int) \
+                                or not 0 <= e["bytes"] <= (MAX_FRAME_JSON_BYTES if ext == "json" else MAX_EXR_BYTES):
+                            raise ShardDamaged(f"manifest has no usable member offset and size for {k}.{ext}")
                         f.seek(e["offset"])
                         out.append(_check(f.read(e["bytes"]), e, f"{k}.{ext}", ref))
                     yield k, out[0], out[1]

@@ -11,8 +11,9 @@ background, so in stage "bg" empty space inside the bounds must get density. Ray
 their identity's bounding sphere are left out of the L1 mean.
 
 Then the gradients are clipped per parameter group, checked (a non-finite loss or gradient
-stops the run with the last good checkpoint kept), and Adam steps. Under torchrun the model is
-wrapped in DDP and each rank draws from its own shard of identities. Ctrl-C finishes the
+stops the run with the last good checkpoint kept), and Adam steps; then the rank's buffer of
+identities may swap (:mod:`prior.data.stream`). Under torchrun the model is wrapped in DDP and
+each rank draws from its own identities. Ctrl-C finishes the
 current step, writes a checkpoint and exits with 130.
 """
 
