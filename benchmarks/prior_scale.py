@@ -16,7 +16,8 @@ about 46 ms a frame) and files are not fsynced; everything else is the writer's 
 RSS), then per rank (1 and 2 ranks; 2 run at once) the run's setup path: the table from the
 records, a loader with ``--buffer`` identities, time to the first batch, and the loader's rays/s
 (``small`` batch shape 2 x 4 x 128 split over the ranks, then the paper's 256 x 8 x 64) with
-identities swapped in and out (``views_per_load`` 4), and the rank's peak RSS.
+identities swapped in and out (``--views-per-load``, default 1: an identity leaves the buffer
+after as many views as it has frames), and the rank's peak RSS.
 """
 
 from __future__ import annotations
@@ -81,7 +82,7 @@ def prepare_child(ds: str, out: str, workers: int) -> None:
                       "peak_rss_mb": _peak_mb(), "worker_peak_rss_mb": kids}))
 
 
-def rank_child(ds: str, prep: str, rank: int, world: int, buffer: int, steps: int) -> None:
+def rank_child(ds: str, prep: str, rank: int, world: int, buffer: int, steps: int, reuse: float) -> None:
     import numpy as np
 
     from prior.data import Loader, RaySampler, build_table, open_source, prepare
@@ -90,7 +91,7 @@ def rank_child(ds: str, prep: str, rank: int, world: int, buffer: int, steps: in
     src = open_source(ds)
     table = build_table(prepare(src, Path(prep)), joints=("jaw", "eye_l", "eye_r"), margin=0.05,
                         planned=src.planned_identities)
-    ld = Loader(src, table, seed=0, rank=rank, world=world, buffer_identities=buffer, views_per_load=4.0,
+    ld = Loader(src, table, seed=0, rank=rank, world=world, buffer_identities=buffer, views_per_load=reuse,
                 read_ahead=2, prepare_dir=Path(prep))
     ld.start()
     per = max(2 // world, 1)
@@ -124,7 +125,7 @@ def _child(args: list[str]) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, __file__, *args], stdout=subprocess.PIPE, text=True, env=env)
 
 
-def measure(ds: Path, buffer: int, ranks: list[int], steps: int, workers: int) -> None:
+def measure(ds: Path, buffer: int, ranks: list[int], steps: int, workers: int, reuse: float) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         prep = str(Path(tmp) / "prepare")
         p = _child(["_prepare", str(ds), prep, str(workers)])
@@ -135,7 +136,7 @@ def measure(ds: Path, buffer: int, ranks: list[int], steps: int, workers: int) -
         again = json.loads(_child(["_prepare", str(ds), prep, str(workers)]).communicate()[0])
         print(f"| prepare again (nothing new) | {again['written']} written | {again['prepare_s']:.2f} s |", flush=True)
         for world in ranks:
-            procs = [_child(["_rank", str(ds), prep, str(r), str(world), str(buffer), str(steps)])
+            procs = [_child(["_rank", str(ds), prep, str(r), str(world), str(buffer), str(steps), str(reuse)])
                      for r in range(world)]
             for q in procs:
                 o = json.loads(q.communicate()[0])
@@ -181,7 +182,7 @@ def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] == "_prepare":
         return prepare_child(sys.argv[2], sys.argv[3], int(sys.argv[4]))
     if len(sys.argv) > 1 and sys.argv[1] == "_rank":
-        return rank_child(sys.argv[2], sys.argv[3], *map(int, sys.argv[4:8]))
+        return rank_child(sys.argv[2], sys.argv[3], *map(int, sys.argv[4:8]), float(sys.argv[8]))
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     w = sub.add_parser("write")
@@ -193,6 +194,7 @@ def main() -> None:
     m.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     m.add_argument("--steps", type=int, default=200)
     m.add_argument("--workers", type=int, default=2)
+    m.add_argument("--views-per-load", type=float, default=1.0)
     b = sub.add_parser("webdataset")
     b.add_argument("dataset", type=Path)
     b.add_argument("--workers", type=int, default=1)
@@ -201,7 +203,7 @@ def main() -> None:
     if a.cmd == "write":
         write(a.out, a.identities)
     elif a.cmd == "measure":
-        measure(a.dataset, a.buffer, a.ranks, a.steps, a.workers)
+        measure(a.dataset, a.buffer, a.ranks, a.steps, a.workers, a.views_per_load)
     else:
         webdataset_pipeline(a.dataset, a.workers, a.frames)
 
