@@ -188,3 +188,22 @@ def test_tar_shards_by_brace_pattern_read_like_the_directory(tmp_path):
         np.testing.assert_array_equal(a.held[m].rgba, b.held[m].rgba)
     with pytest.raises(SynthError, match="not a tar shard"):
         open_source([str(ds / "shards" / "shard_{000000..000003}.tar")])
+
+
+def test_an_identity_over_two_shards_gets_a_sphere_holding_both(tmp_path):
+    ds = scene.make_dataset(tmp_path / "d", identities=1, views=VIEWS, size=SIZE)
+    src = open_source(ds)
+    res = prepare(src, ds / ".prior" / "prepare")
+    one = build_table(res, joints=JOINTS, margin=0.0)
+    rec = dict(res.records[0])  # the same identity's frames again, in a second shard, moved 5 cm along x
+    shift = np.array([0.05, 0.0, 0.0])
+    rec["box"], rec["centre"] = rec["box"] + shift, rec["centre"] + shift
+    res.records.append(rec)
+    res.refs.append(res.refs[0]._replace(shard="shard_000001"))
+    two = build_table(res, joints=JOINTS, margin=0.0)
+    assert two.frames.tolist() == [2 * one.frames[0]] and len(two.shards_of[0]) == 2
+    c, r = two.info.centre[0], two.info.radius[0]
+    box = np.concatenate([res.records[0]["box"][0], rec["box"][0]])
+    np.testing.assert_allclose(c, 0.5 * (box.min(0) + box.max(0)))  # the merged box's centre
+    for cs in (one.info.centre[0], one.info.centre[0] + shift):  # both spheres inside
+        assert np.linalg.norm(cs - c) + one.info.radius[0] <= r + 1e-9
