@@ -37,6 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from prior.data import RaySampler  # noqa: E402
+from prior.data.stream import load_identity  # noqa: E402
 from prior.render_views import png_bytes, render_image, to_srgb8  # noqa: E402
 from prior.train import checkpoint as ckpt  # noqa: E402
 from prior.train.loop import Trainer  # noqa: E402
@@ -60,7 +61,7 @@ def speed(args) -> None:
             n_load += 1
         load_rate = n_load * rays / (time.perf_counter() - t0)
         # the loader at the paper's batch shape (256 x 8 x 64; identities repeat on a small dataset)
-        paper = RaySampler(s.store, seed=0, identities=256, views=8, pixels=64)
+        paper = RaySampler(tr.loader, seed=0, identities=256, views=8, pixels=64)
         t0 = time.perf_counter()
         for k in range(3):
             paper.batch(k)
@@ -94,18 +95,18 @@ def evaluate(run: Path, dataset: Path, sheet: Path | None, threads: int) -> dict
     torch.set_num_threads(threads)
     ck = ckpt.load(ckpt.latest(run))
     s = prepare(dataset, run, sets=[], resume=True)
-    st = s.store
-    model = build_model(ck.config, st.layout.size, len(st.identities.identity_index))
+    tb = s.table
+    model = build_model(ck.config, tb.layout.size, len(tb.info.identity_index))
     model.load_state_dict(ck.model_state)
     model.eval()
-    H, W = st.size
+    H, W = tb.size
     rows, fg_mse, all_mse, srgb_mse = [], [], [], []
-    held = np.nonzero(~st.train)[0]
-    for n in held.tolist():
-        m = int(st.latent[n])
-        img = render_image(model, st.K[n], st.c2w[n], W, H, st.codes[n], m, st.identities.centre[m],
-                           float(st.identities.radius[m]), chunk=ck.config.train.render_chunk)
-        gt = st.rgba[n].astype(np.float32)
+    held = [(load_identity(tb, m, holdout_views=ck.config.data.holdout_views), m) for m in tb.available.tolist()]
+    held = [(d, m, n) for d, m in held for n in np.nonzero(~d.train)[0].tolist()]
+    for d, m, n in held:
+        img = render_image(model, d.K[n], d.c2w[n], W, H, d.codes[n], m, tb.info.centre[m],
+                           float(tb.info.radius[m]), chunk=ck.config.train.render_chunk)
+        gt = d.rgba[n].astype(np.float32)
         pred, ref = np.clip(img["rgb"], 0, 1), np.clip(gt[..., :3], 0, 1)
         fg = gt[..., 3] > 0
         err = (pred - ref) ** 2

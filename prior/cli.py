@@ -1,6 +1,7 @@
 """``synth prior``: train the conditional NeRF face prior, render novel views, inspect a run.
 
-    synth prior train DATASET --out RUN [--preset small|paper] [--config F] [--set key=value]
+    synth prior prepare DATASET... [--out DIR]
+    synth prior train DATASET... --out RUN [--preset small|paper] [--config F] [--set key=value]
                               [--steps N] [--resume] [--device cpu|cuda]
     synth prior render RUN --identity I --expression E [--orbit N] [--size S] -o DIR
     synth prior info RUN
@@ -11,12 +12,16 @@
 
 Bad input gets one line ``synth: error: ...`` and exit code 2, with nothing written; Ctrl-C
 during training writes a checkpoint and exits with 130 (``--resume`` continues exactly).
+DATASET is the --out directory of ``synth render`` (its committed shards, listed again as the
+farm commits more), or tar shards / shard directories, listed or as a brace pattern
+(``DIR/shards/shard_{000000..000149}.tar``).
 Multi-GPU / multi-node: ``torchrun --nproc-per-node G -m prior.cli train ...``.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Optional
@@ -38,9 +43,39 @@ def _need_torch() -> None:
     require("prior", ("torch", "safetensors"), "synth prior")
 
 
+_DATASET_HELP = ("Dataset directory (the --out of synth render), or tar shards / shard directories (paths or a "
+                 "brace pattern such as DIR/shards/shard_{000000..000149}.tar).")
+
+
+@app.command("prepare")
+def prepare_cmd(
+    dataset: list[str] = typer.Argument(..., help=_DATASET_HELP),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Where the records go (default DATASET/.prior/"
+                                                                    "prepare)."),
+    workers: int = typer.Option(0, "--workers", "-j", help="Processes reading shards (0: one per CPU core)."),
+) -> None:
+    """The prepare pass over the committed shards (train runs it too): identity table, codes,
+    bounds; only shards without a record are read."""
+    import time
+
+    from prior.data.prepare import build_table, prepare
+    from prior.data.sources import open_source
+    from prior.train.run import warn_line
+
+    src = open_source(dataset)
+    t0 = time.perf_counter()
+    res = prepare(src, out or src.default_prepare_dir(), warn=warn_line, workers=workers or os.cpu_count() or 1)
+    tb = build_table(res, joints=(), margin=0.0, planned=src.planned_identities,
+                     where=src.describe())
+    print(f"prepared {len(res.records)} shards ({res.written} read now, {res.reused} unchanged, "
+          f"{len(res.skipped)} skipped as damaged): {int((tb.frames > 0).sum())} of {len(tb.frames)} identities, "
+          f"{int(tb.frames.sum())} frames, {tb.size[1]}x{tb.size[0]}, head model "
+          f"{tb.head_model.get('name')!r}; {time.perf_counter() - t0:.1f} s")
+
+
 @app.command("train")
 def train_cmd(
-    dataset: Path = typer.Argument(..., help="Dataset directory (the --out of synth render)."),
+    dataset: list[str] = typer.Argument(..., help=_DATASET_HELP),
     out: Path = typer.Option(..., "--out", "-o", help="Run directory (created; with --resume: continued)."),
     preset: PriorPreset = None,
     config: Optional[Path] = typer.Option(None, "--config", "-c", help="TOML file with model, sampling, data "
@@ -59,7 +94,8 @@ def train_cmd(
     dev = resolve_device(device)
     dist = init_distributed(dev)
     try:
-        setup = prepare(dataset, out, preset=preset, config_path=config, sets=set_, steps=steps, resume=resume)
+        setup = prepare(dataset, out, preset=preset, config_path=config, sets=set_, steps=steps, resume=resume,
+                        dist=dist)
         trainer = Trainer(setup, device_for(dist, dev), dist)
         rc = trainer.run()
     finally:

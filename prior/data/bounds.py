@@ -26,13 +26,23 @@ def foreground_points(frame) -> np.ndarray:
     return o + t[:, None] * d
 
 
+def tight_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """Centre (middle of the axis-aligned box) and radius (farthest point) of the points."""
+    p = np.asarray(points, np.float64)
+    centre = 0.5 * (p.min(0) + p.max(0))
+    return centre, float(np.sqrt(((p - centre) ** 2).sum(1).max()))
+
+
+def grow(radius: float, margin: float) -> float:
+    """A tight radius times 1 + margin, plus 1 micrometre (for float32 inputs)."""
+    return radius * (1.0 + margin) + 1e-6
+
+
 def bounding_sphere(points: np.ndarray, margin: float) -> tuple[np.ndarray, float]:
     """Centre (middle of the axis-aligned box) and radius (farthest point, times 1 + margin,
     plus 1 micrometre for float32 inputs) of a sphere holding every point."""
-    p = np.asarray(points, np.float64)
-    centre = 0.5 * (p.min(0) + p.max(0))
-    radius = float(np.sqrt(((p - centre) ** 2).sum(1).max()))
-    return centre, radius * (1.0 + margin) + 1e-6
+    centre, radius = tight_sphere(points)
+    return centre, grow(radius, margin)
 
 
 def intersect_sphere(origins: np.ndarray, directions: np.ndarray, centre: np.ndarray,

@@ -1,17 +1,20 @@
-"""Training batches: identities x views x pixels, every draw a function of (seed, step, micro-batch, rank).
+"""Training batches: identities x views x pixels, every draw a function of (seed, step, micro-batch, rank)
+and of the identities the rank's buffer holds (:mod:`prior.data.stream`).
 
 For step ``s``, micro-batch ``m`` and rank ``r`` the sampler draws, with a generator seeded by
 ``(seed, s, m, r)``:
 
-1. ``identities`` latent ids from the rank's shard (ids ``r, r + world, ...``), without
-   replacement while the shard has enough;
+1. ``identities`` latent ids among those the buffer holds (ascending), without replacement while
+   it holds enough;
 2. for each, ``views`` of its training frames (any expression, held-out views never), without
    replacement while it has enough;
 3. for each frame, ``pixels`` pixels: ``round(pixels * foreground_fraction)`` uniformly among its
    foreground pixels (alpha > 0; uniform over the image when it has none), the rest uniformly
    over the image.
 
-Nothing depends on earlier steps, so a resumed run draws exactly the batches it would have.
+The buffer's contents are part of the checkpoint, so a resumed run draws exactly the batches it
+would have. With a buffer that holds every identity of the rank the draws are those of the
+former in-memory store (identities ``r, r + world, ...``).
 Rays go through pixel centres (:func:`synth.dataset.reader.camera_rays`) and are cut to the
 identity's bounding sphere; ``near == far`` marks a ray that misses it.
 """
@@ -23,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from prior.data.bounds import intersect_sphere
-from prior.data.store import FrameStore
+from prior.data.stream import IdentityData, Loader
 from synth.dataset.reader import camera_rays
 from synth.errors import SynthError
 
@@ -41,7 +44,7 @@ class Batch:
     codes: np.ndarray  # (N, C) float32
     latent_ids: np.ndarray  # (N,) int64
     rgba: np.ndarray  # (N, 4) float32: premultiplied colour and alpha
-    frames: np.ndarray  # (N,) int64: index into the store
+    frames: np.ndarray  # (N,) int64: frame index within its identity (IdentityData)
     pixels: np.ndarray  # (N,) int64: flat pixel index (row * W + col)
 
     def __len__(self) -> int:
@@ -54,42 +57,31 @@ def pixel_radius(K: np.ndarray) -> np.ndarray:
     return (2.0 / np.sqrt(12.0)) / np.asarray(K)[..., 0, 0]
 
 
-def rays_for(store: FrameStore, frames: np.ndarray, pixels: np.ndarray):
-    """origins, directions, near, far of flat ``pixels`` (F, P) of ``frames`` (F,)."""
-    H, W = store.size
-    F, P = pixels.shape
-    o = np.empty((F, P, 3), np.float32)
-    d = np.empty((F, P, 3), np.float32)
-    for i, f in enumerate(frames.tolist()):
-        rows, cols = np.divmod(pixels[i], W)
-        r = camera_rays(store.K[f], store.c2w[f], W, H, pixels=(rows, cols))
-        o[i], d[i] = r.origins, r.directions
-    ids = store.latent[frames]
-    centre = np.repeat(store.identities.centre[ids], P, axis=0)
-    radius = np.repeat(store.identities.radius[ids], P)
-    o, d = o.reshape(-1, 3), d.reshape(-1, 3)
-    near, far = intersect_sphere(o, d, centre, radius)
+def rays_for(data: list[IdentityData], frames: np.ndarray, pixels: np.ndarray, size: tuple[int, int], centre,
+             radius):
+    """origins, directions, near, far of flat ``pixels`` (G, V, P) of frames ``frames`` (G, V) of
+    identity ``data[g]`` (G identity draws of V frames each)."""
+    H, W = size
+    G, V, P = pixels.shape
+    K = np.concatenate([x.K[f] for x, f in zip(data, frames)])
+    c2w = np.concatenate([x.c2w[f] for x, f in zip(data, frames)])
+    rows, cols = np.divmod(pixels.reshape(G * V, P), W)
+    r = camera_rays(K, c2w, W, H, pixels=(rows, cols))
+    ids = np.array([x.latent for x in data], np.int64)
+    o, d = r.origins.reshape(-1, 3), r.directions.reshape(-1, 3)
+    near, far = intersect_sphere(o, d, np.repeat(centre[ids], V * P, axis=0), np.repeat(radius[ids], V * P))
     return o, d, near.astype(np.float32), far.astype(np.float32)
 
 
 class RaySampler:
-    def __init__(self, store: FrameStore, *, seed: int, identities: int, views: int, pixels: int,
-                 foreground_fraction: float = 0.0, rank: int = 0, world: int = 1):
-        self.store, self.seed = store, int(seed)
+    def __init__(self, loader: Loader, *, seed: int, identities: int, views: int, pixels: int,
+                 foreground_fraction: float = 0.0, rank: int = 0):
+        self.loader, self.seed = loader, int(seed)
         self.I, self.V, self.P = int(identities), int(views), int(pixels)
         self.n_fg = int(round(self.P * float(foreground_fraction)))
-        self.rank, self.world = int(rank), int(world)
-        M = len(store.identities.identity_index)
-        self.shard = np.arange(self.rank, M, self.world)
-        if self.shard.size == 0:
-            raise SynthError(f"rank {rank} of {world} has no identity ({M} in the dataset)", "torchrun",
-                             "use at most as many ranks as identities")
-        train_frames = np.nonzero(store.train)[0]
-        self.frames_of = {m: train_frames[store.latent[train_frames] == m] for m in self.shard.tolist()}
-        empty = [int(store.identities.identity_index[m]) for m, fr in self.frames_of.items() if fr.size == 0]
-        if empty:
-            raise SynthError(f"identity {empty[0]} has no training view left", "data.holdout_views",
-                             "lower data.holdout_views")
+        self.rank = int(rank)
+        #: latent ids drawn since the last :meth:`step_done` (one per identity draw)
+        self.drawn: list[np.ndarray] = []
 
     @property
     def rays_per_batch(self) -> int:
@@ -98,30 +90,57 @@ class RaySampler:
     def rng(self, step: int, micro: int = 0) -> np.random.Generator:
         return np.random.default_rng([BATCH_STREAM, self.seed, int(step), int(micro), self.rank])
 
-    def draw(self, step: int, micro: int = 0) -> tuple[np.ndarray, np.ndarray]:
-        """(frames (F,), flat pixels (F, P)) of one micro-batch."""
+    def draw(self, step: int, micro: int = 0) -> tuple[list[IdentityData], np.ndarray, np.ndarray]:
+        """(the identity of each draw (G,), frame indices within it (G, V), flat pixels (G, V, P)) of one
+        micro-batch."""
         rng = self.rng(step, micro)
-        ids = rng.choice(self.shard, size=self.I, replace=self.I > self.shard.size)
-        frames = np.concatenate([rng.choice(self.frames_of[m], size=self.V, replace=self.V > self.frames_of[m].size)
-                                 for m in ids.tolist()])
-        H, W = self.store.size
-        pixels = rng.integers(0, H * W, size=(frames.size, self.P))
-        if self.n_fg and self.store.fg_pixels.size:
-            lo, hi = self.store.fg_offsets[frames], self.store.fg_offsets[frames + 1]
-            count = hi - lo
-            u = rng.random((frames.size, self.n_fg))
-            pick = lo[:, None] + np.minimum((u * count[:, None]).astype(np.int64), np.maximum(count - 1, 0)[:, None])
-            fgp = self.store.fg_pixels[np.minimum(pick, self.store.fg_pixels.size - 1)]
-            pixels[:, :self.n_fg] = np.where(count[:, None] > 0, fgp, pixels[:, :self.n_fg])
-        return frames, pixels
+        slots = self.loader.slots
+        ids = rng.choice(slots, size=self.I, replace=self.I > slots.size)
+        self.drawn.append(ids)
+        data, frames = [], []
+        for m in ids.tolist():
+            d = self.loader.held[m]
+            tf = d.train_frames
+            if tf.size == 0:
+                raise SynthError(f"identity {int(self.loader.table.info.identity_index[m])} has no training view left",
+                                 "data.holdout_views", "lower data.holdout_views")
+            frames.append(rng.choice(tf, size=self.V, replace=self.V > tf.size))
+            data.append(d)
+        frames = np.stack(frames)
+        H, W = self.loader.table.size
+        pixels = rng.integers(0, H * W, size=(frames.size, self.P)).reshape(self.I, self.V, self.P)
+        if self.n_fg:
+            u = rng.random((frames.size, self.n_fg)).reshape(self.I, self.V, self.n_fg)
+            for g, d in enumerate(data):
+                lo, hi = d.fg_offsets[frames[g]], d.fg_offsets[frames[g] + 1]
+                count = hi - lo
+                if not d.fg_pixels.size:
+                    continue
+                pick = lo[:, None] + np.minimum((u[g] * count[:, None]).astype(np.int64), np.maximum(count - 1, 0)[:, None])
+                fgp = d.fg_pixels[np.minimum(pick, d.fg_pixels.size - 1)]
+                pixels[g, :, :self.n_fg] = np.where(count[:, None] > 0, fgp, pixels[g, :, :self.n_fg])
+        return data, frames, pixels
 
     def batch(self, step: int, micro: int = 0) -> Batch:
-        frames, pixels = self.draw(step, micro)
-        st = self.store
-        o, d, near, far = rays_for(st, frames, pixels)
-        H, W = st.size
-        rgba = st.rgba.reshape(len(st.rgba), H * W, 4)[frames[:, None], pixels].reshape(-1, 4).astype(np.float32)
-        fr = np.repeat(frames, self.P)
-        radii = np.repeat(pixel_radius(st.K[frames]), self.P).astype(np.float32)
-        return Batch(origins=o, directions=d, near=near, far=far, radii=radii, codes=st.codes[fr], latent_ids=st.latent[fr],
-                     rgba=rgba, frames=fr, pixels=pixels.reshape(-1))
+        data, frames, pixels = self.draw(step, micro)
+        t = self.loader.table
+        H, W = t.size
+        o, d, near, far = rays_for(data, frames, pixels, t.size, t.info.centre, t.info.radius)
+        G, V, P = pixels.shape
+        rgba = np.empty((G, V, P, 4), np.float32)
+        codes = np.empty((G, V, t.layout.size), np.float32)
+        K = np.empty((G, V, 3, 3))
+        for g, x in enumerate(data):
+            rgba[g] = x.rgba.reshape(len(x.rgba), H * W, 4)[frames[g][:, None], pixels[g]]
+            codes[g], K[g] = x.codes[frames[g]], x.K[frames[g]]
+        latent = np.repeat(np.array([x.latent for x in data], np.int64), V * P)
+        return Batch(origins=o, directions=d, near=near, far=far,
+                     radii=np.repeat(pixel_radius(K).reshape(-1), P).astype(np.float32),
+                     codes=np.repeat(codes.reshape(G * V, -1), P, axis=0), latent_ids=latent,
+                     rgba=rgba.reshape(-1, 4), frames=np.repeat(frames.reshape(-1), P), pixels=pixels.reshape(-1))
+
+    def step_done(self) -> None:
+        """Tell the buffer what this step drew (it may swap identities)."""
+        drawn = np.concatenate(self.drawn) if self.drawn else np.zeros(0, np.int64)
+        self.drawn = []
+        self.loader.advance(drawn, self.V)

@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from prior.data.codes import CodeLayout
-from prior.data.store import IdentityInfo
+from prior.data.identities import IdentityInfo
 from prior.train import config as run_config
 from synth.io import atomic_write_bytes, sha256_bytes
 from synth.errors import SynthError

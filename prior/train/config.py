@@ -33,7 +33,16 @@ class DataConfig:
     pixel_dtype: Annotated[str, Choices("float16", "float32")] = "float16"
     """dtype of the decoded pixels kept in memory (float16 is the EXR's own precision)"""
     fit_scene: bool = True
-    """set model.scene_center and model.scene_radius to a sphere holding every identity's bounding sphere"""
+    """set model.scene_center and model.scene_radius to a sphere holding every identity's bounding sphere (those
+    committed when the run starts)"""
+    buffer_identities: Count = 0
+    """decoded identities each rank holds at once (its memory); 0 = all of the rank's identities"""
+    views_per_load: Positive = 4.0
+    """an identity in the buffer is swapped out once this many times its training frames were drawn from it"""
+    read_ahead: Count = 2
+    """identities decoded ahead by a background thread (held beside the buffer); 0 = decode when needed"""
+    refresh_steps: Size = 1000
+    """at most this often (steps) a rank lists the dataset's committed shards again, at the end of an epoch"""
 
 
 @section
@@ -128,7 +137,8 @@ def _small() -> tuple[DataConfig, TrainConfig]:
 
 
 def _paper() -> tuple[DataConfig, TrainConfig]:
-    return DataConfig(), TrainConfig()
+    # 64 identities decoded per rank: 64 x 390 frames x 256^2 x 12 bytes = 19 GB of host memory per rank
+    return DataConfig(buffer_identities=64), TrainConfig()
 
 
 PRESETS = {"small": _small, "paper": _paper}

@@ -11,8 +11,9 @@ background, so in stage "bg" empty space inside the bounds must get density. Ray
 their identity's bounding sphere are left out of the L1 mean.
 
 Then the gradients are clipped per parameter group, checked (a non-finite loss or gradient
-stops the run with the last good checkpoint kept), and Adam steps. Under torchrun the model is
-wrapped in DDP and each rank draws from its own shard of identities. Ctrl-C finishes the
+stops the run with the last good checkpoint kept), and Adam steps; then the rank's buffer of
+identities may swap (:mod:`prior.data.stream`). Under torchrun the model is wrapped in DDP and
+each rank draws from its own identities. Ctrl-C finishes the
 current step, writes a checkpoint and exits with 130.
 """
 
@@ -21,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import math
 import signal
+import sys
 import time
 
 import numpy as np
@@ -29,6 +31,7 @@ import torch
 from prior import losses
 from prior.data.sampler import RaySampler
 from prior.precision import resolve_bf16
+from prior.data.stream import Loader
 from prior.render_views import render_image, scaled_camera, to_srgb8
 from prior.train import checkpoint as ckpt
 from prior.train.logs import RunLog
@@ -74,17 +77,23 @@ class Trainer:
                  tensorboard: bool = True):
         dist = dist or Dist()
         self.s, self.cfg, self.dev, self.dist = setup, setup.cfg, device, dist
-        t, st = self.cfg.train, setup.store
+        t, tb, d = self.cfg.train, setup.table, self.cfg.data
         per = dist.world * t.grad_accum
         if t.identities_per_batch % per:
             raise SynthError(f"train.identities_per_batch = {t.identities_per_batch} is not a multiple of ranks x "
                              f"grad_accum = {per}", "config", "change identities_per_batch or grad_accum")
-        self.sampler = RaySampler(st, seed=t.seed, identities=t.identities_per_batch // per,
+        self.loader = Loader(setup.source, tb, seed=t.seed, rank=dist.rank, world=dist.world,
+                             buffer_identities=d.buffer_identities, views_per_load=d.views_per_load,
+                             read_ahead=d.read_ahead, refresh_steps=d.refresh_steps, holdout_views=d.holdout_views,
+                             pixel_dtype=d.pixel_dtype, prepare_dir=setup.prepare_dir, margin=d.bounds_margin,
+                             warn=self._warn)
+        self.sampler = RaySampler(self.loader, seed=t.seed, identities=t.identities_per_batch // per,
                                   views=t.views_per_identity, pixels=t.pixels_per_view,
-                                  foreground_fraction=t.foreground_fraction, rank=dist.rank, world=dist.world)
-        self.model = build_model(self.cfg, st.layout.size, len(st.identities.identity_index), device)
+                                  foreground_fraction=t.foreground_fraction, rank=dist.rank)
+        self.model = build_model(self.cfg, tb.layout.size, len(tb.info.identity_index), device)
         self.opt = build_optimizer(self.model, t)
         self.start, self.collapse_count = 0, 0
+        loader_state = None
         if setup.resume_from is not None:
             rf = setup.resume_from
             self.model.load_state_dict(rf.model_state)
@@ -93,6 +102,16 @@ class Trainer:
             self.start = int(state["step"])
             self.collapse_count = int(state["trainer"].get("collapse_count", 0))
             torch.set_rng_state(state["torch_rng"])
+            saved = state["trainer"].get("loader") or []
+            if len(saved) == dist.world:
+                loader_state = saved[dist.rank]
+            elif dist.main:
+                self._warn(f"the checkpoint's data order is of {len(saved) or 'another number of'} rank(s), this run "
+                           f"has {dist.world}: the buffer starts afresh (batches differ from an uninterrupted run)")
+        if loader_state is not None:
+            self.loader.load_state_dict(loader_state)
+        else:
+            self.loader.start()
         self.fwd = self.ddp = self.model
         if dist.enabled:
             from torch.nn.parallel import DistributedDataParallel as DDP
@@ -156,7 +175,7 @@ class Trainer:
         ``stop_at`` or at the first step that ends after ``deadline`` (``time.perf_counter()``
         seconds; benchmarks). Returns 0, or 130 when interrupted by SIGINT."""
         t = self.cfg.train
-        if self.start == 0 and self.dist.main and self.last_saved is None:
+        if self.start == 0 and self.last_saved is None:
             self._save(0)  # a good checkpoint to fall back to from the first step on
         window = (time.perf_counter(), self.start)
         rays_step = self.cfg.rays_per_step
@@ -165,6 +184,7 @@ class Trainer:
                 for step in range(self.start, t.steps):
                     set_learning_rate(self.opt, learning_rate(step, t))
                     stats = self.step(step)
+                    self.sampler.step_done()
                     norms = clip_per_group(self.opt, t.grad_clip)
                     flags = torch.stack([(~torch.isfinite(torch.stack([stats[0], *norms.values()]))).any().float(),
                                          torch.tensor(float(stop.hit), device=self.dev)])
@@ -191,8 +211,7 @@ class Trainer:
                         late = bool(late_t.item())
                     stopping = bool(interrupted) or done == stop_at or late
                     if done % t.checkpoint_every == 0 or done == t.steps or stopping:
-                        if self.dist.main:
-                            self._save(done)
+                        self._save(done)
                     if stopping:
                         if interrupted:
                             self.log.message(f"interrupted: checkpoint of step {done} written; "
@@ -201,14 +220,22 @@ class Trainer:
                         return 0
             finally:
                 self.log.close()
+                self.loader.close()
         return 0
 
     def _log(self, done: int, stats, norms, window, rays_step):
-        s = stats.clone()
-        if self.dist.enabled:
+        s = torch.cat([stats, torch.tensor([float(len(self.loader.skipped))], device=stats.device)])
+        spread = 0.0
+        if self.dist.enabled:  # ranks must hold the same parameters (DDP): the spread of their sums
+            with torch.no_grad():
+                total = torch.stack([p.detach().double().sum() for p in self.model.parameters()]).sum().reshape(1)
+            lo, hi = total.clone(), total.clone()
+            torch.distributed.all_reduce(lo, op=torch.distributed.ReduceOp.MIN)
+            torch.distributed.all_reduce(hi, op=torch.distributed.ReduceOp.MAX)
+            spread = float(hi - lo)
             torch.distributed.all_reduce(s)
             s[:3] /= self.dist.world
-        loss, l1, prop, se, acc_sum, fg_n, valid_n = s.tolist()
+        loss, l1, prop, se, acc_sum, fg_n, valid_n, skipped = s.tolist()
         mse = se / max(valid_n, 1)
         acc_fg = acc_sum / fg_n if fg_n > 0 else float("nan")
         now = time.perf_counter()
@@ -219,6 +246,7 @@ class Trainer:
                        "psnr": -10 * math.log10(max(mse, 1e-12)), "acc_fg": acc_fg}
         metrics = {**self.losses, "lr": self.opt.param_groups[0]["lr"], "rays_per_s": rate,
                    "samples_per_s": rate * sum(self.cfg.sampling.samples_per_level), "stage": stage,
+                   "skipped_shards": int(skipped), "epoch": self.loader.epoch, "param_spread": spread,
                    **{f"grad_norm_{k}": float(v) for k, v in norms.items()}}
         metrics.pop("step")
         self.log.log(done, metrics)
@@ -232,30 +260,46 @@ class Trainer:
                                                       "background stage (train.background_steps) or a lower lr_init")
         return time.perf_counter(), done
 
+    def _warn(self, line: str) -> None:
+        """One warning line (a skipped shard): in the run's log on rank 0, on stderr elsewhere."""
+        text = f"synth: warning: {line}"
+        if self.dist.main and getattr(self, "log", None) is not None:
+            self.log.message(text)
+        else:
+            print(text, file=sys.stderr, flush=True)
+
     def _save(self, done: int) -> None:
-        t = self.cfg.train
-        ckpt.save(self.s.run_dir, done, self.model, self.opt, self.cfg, self.s.store.layout, self.s.store.identities,
-                  losses=self.losses, trainer_state={"collapse_count": self.collapse_count},
-                  dataset=str(self.s.dataset), keep=t.keep_checkpoints, head_model=self.s.store.head_model)
+        """Every rank: its loader state to rank 0; rank 0 writes the checkpoint."""
+        states = [self.loader.state_dict()]
+        if self.dist.enabled:
+            states = [None] * self.dist.world
+            torch.distributed.all_gather_object(states, self.loader.state_dict())
+        if not self.dist.main:
+            self.last_saved = done
+            return
+        t, tb = self.cfg.train, self.loader.table
+        ckpt.save(self.s.run_dir, done, self.model, self.opt, self.cfg, tb.layout, tb.info,
+                  losses=self.losses, trainer_state={"collapse_count": self.collapse_count, "loader": states},
+                  dataset=str(self.s.dataset), keep=t.keep_checkpoints, head_model=tb.head_model)
         self.last_saved = done
 
     def _preview(self, done: int) -> None:
         """Prediction | ground truth of the first training view of up to 3 identities."""
         from PIL import Image
 
-        st, t = self.s.store, self.cfg.train
-        H, W = st.size
+        tb, t = self.loader.table, self.cfg.train
+        H, W = tb.size
         self.model.eval()
         try:
-            for m in range(min(3, len(st.identities.identity_index))):
-                n = int(np.nonzero((st.latent == m) & st.train)[0][0])
+            for m in self.loader.slots[:3].tolist():
+                d = self.loader.held[m]
+                n = int(d.train_frames[0])
                 size = t.preview_size
-                K = scaled_camera(st.K[n], W, H, size)
-                img = render_image(self.model, K, st.c2w[n], size, size, st.codes[n], m, st.identities.centre[m],
-                                   float(st.identities.radius[m]), chunk=t.render_chunk, device=self.dev,
-                                   bf16=self.bf16)
-                gt = Image.fromarray(to_srgb8(st.rgba[n, ..., :3].astype(np.float32))).resize((size, size))
-                self.log.image(f"preview/identity_{int(st.identities.identity_index[m])}",
+                K = scaled_camera(d.K[n], W, H, size)
+                img = render_image(self.model, K, d.c2w[n], size, size, d.codes[n], m, tb.info.centre[m],
+                                   float(tb.info.radius[m]), chunk=t.render_chunk, device=self.dev, bf16=self.bf16)
+                gt = Image.fromarray(to_srgb8(d.rgba[n, ..., :3].astype(np.float32))).resize((size, size))
+                self.log.image(f"preview/identity_{int(tb.info.identity_index[m])}",
                                np.concatenate([to_srgb8(img["rgb"]), np.asarray(gt)], axis=1), done)
         finally:
             self.model.train()

@@ -372,7 +372,8 @@ def camera_rays(K, camera_to_world, width: int, height: int, *, pixels=None, dty
 
     ``pixels``: None for every pixel ((H, W, 3) outputs, row-major), or ``(rows, cols)`` integer
     arrays for a subset ((N, 3) outputs). The direction of pixel (col i, row j) is
-    ``R_c2w @ normalise(K^-1 @ [i + 0.5, j + 0.5, 1])``.
+    ``R_c2w @ normalise(K^-1 @ [i + 0.5, j + 0.5, 1])``. Several cameras at once: ``K`` (B, 3, 3),
+    ``camera_to_world`` (B, 4, 4) and ``pixels`` of shape (B, N) give (B, N, 3) outputs.
     """
     K = np.asarray(K, np.float64)
     c2w = np.asarray(camera_to_world, np.float64)
@@ -383,14 +384,15 @@ def camera_rays(K, camera_to_world, width: int, height: int, *, pixels=None, dty
     else:
         rows, cols = (np.asarray(a) for a in pixels)
         uu, vv = cols.astype(np.float64) + 0.5, rows.astype(np.float64) + 0.5
+    lead = (slice(None),) * (K.ndim - 2) + (None,) * (uu.ndim - (K.ndim - 2))  # camera axes, then pixel axes
     # K^-1 for a camera matrix [[fx, s, cx], [0, fy, cy], [0, 0, 1]] (skew allowed)
-    fx, s, cx, fy, cy = K[0, 0], K[0, 1], K[0, 2], K[1, 1], K[1, 2]
+    fx, s, cx, fy, cy = (K[..., a, b][lead] for a, b in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2)))
     y = (vv - cy) / fy
     x = (uu - cx - s * y) / fx
     inv_norm = 1.0 / np.sqrt(x * x + y * y + 1.0)
-    R = c2w[:3, :3]
-    d = (x * inv_norm)[..., None] * R[:, 0] + (y * inv_norm)[..., None] * R[:, 1] + inv_norm[..., None] * R[:, 2]
-    o = np.broadcast_to(c2w[:3, 3], d.shape)
+    R = c2w[..., :3, :3][lead]
+    d = (x * inv_norm)[..., None] * R[..., 0] + (y * inv_norm)[..., None] * R[..., 1] + inv_norm[..., None] * R[..., 2]
+    o = np.broadcast_to(c2w[..., :3, 3][lead], d.shape)
     return Rays(o.astype(dtype), d.astype(dtype), inv_norm.astype(dtype))
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from synth.dataset.reader import camera_rays
-from synth.dataset.shards import open_dataset
+from synth.dataset.shards import load_dataset, open_dataset
 from tests.support import fake_frames as ff
 
 ID_SIZE, EXPR_SIZE = 4, 3
@@ -36,7 +36,7 @@ def camera(az_deg: float, el_deg: float, size: int, dist: float = 0.8) -> dict:
             "radius_m": dist}
 
 
-def frame(ident: int, expr: int, view: int, views: int, size: int, id_size: int = ID_SIZE):
+def frame(ident: int, expr: int, view: int, views: int, size: int, id_size: int = ID_SIZE, head_model: str = "fake"):
     key = ff.frame_key(ident, expr, view)
     cam = camera((360.0 * view / views + 23.0 * expr) % 360.0 - 180.0, 15.0 - 10.0 * (view % 3), size)
     o, d, cos_z = camera_rays(cam["K"], cam["camera_to_world"], size, size, dtype=np.float64)
@@ -60,6 +60,7 @@ def frame(ident: int, expr: int, view: int, views: int, size: int, id_size: int 
     pc = lm3 @ cam["world_to_camera"][:3, :3].T + cam["world_to_camera"][:3, 3]
     q = pc @ cam["K"].T
     meta["landmarks_3d"], meta["landmarks_2d"] = lm3, q[:, :2] / q[:, 2:3]
+    meta["model"]["name"] = head_model
     meta["model"]["identity"] = [0.1 * ident + 0.05 * k for k in range(id_size)]
     meta["model"]["expression"] = [0.2 * expr - 0.1 * k for k in range(EXPR_SIZE)]
     meta["model"]["joint_rotations"] = {"neck": [0.0, 0.0, 0.0], "jaw": [0.05 * expr, 0.0, 0.0],
@@ -68,18 +69,33 @@ def frame(ident: int, expr: int, view: int, views: int, size: int, id_size: int 
 
 
 def make_dataset(root, identities: int = 2, expressions: int = 2, views: int = 4, size: int = 16,
-                 id_size: int = ID_SIZE) -> Path:
+                 id_size: int = ID_SIZE, *, commit: int | None = None, shard_format: str = "dir",
+                 head_model: str = "fake") -> Path:
+    """A dataset of one shard per identity; only the first ``commit`` shards committed (default all)."""
     root = Path(root)
     expected = {f"shard_{i:06d}": [ff.frame_key(i, e, v) for e in range(expressions) for v in range(views)]
                 for i in range(identities)}
-    ds = open_dataset(root, "a" * 64, expected)
-    for sid, keys in expected.items():
-        with ds.staging(sid) as st:
-            for key in keys:
-                k, px, meta = frame(*ff.parse_frame_key(key), views, size, id_size)
-                st.write_frame(k, *px, meta)
-            st.commit(manifest_extra={"seeds": {"run": 0}, "versions": {"blender": "none"}})
+    open_dataset(root, "a" * 64, expected, shard_format=shard_format)
+    for i in range(identities if commit is None else commit):
+        commit_identity(root, i, views=views, size=size, id_size=id_size, head_model=head_model)
     return root
+
+
+def commit_identity(root, ident: int, *, views: int, size: int, id_size: int = ID_SIZE, head_model: str = "fake",
+                    stage_only: bool = False):
+    """Render (fake) and commit shard ``ident`` of a dataset made by :func:`make_dataset`; with
+    ``stage_only`` the frames are written to its staging area and left there (not committed)."""
+    ds = open_dataset(Path(root), "a" * 64, load_dataset(root).expected)
+    sid = f"shard_{ident:06d}"
+    st = ds.staging(sid)
+    st.__enter__()
+    for key in ds.expected[sid]:
+        k, px, meta = frame(*ff.parse_frame_key(key), views, size, id_size, head_model)
+        st.write_frame(k, *px, meta)
+    if stage_only:
+        return st
+    st.commit(manifest_extra={"seeds": {"run": 0}, "versions": {"blender": "none"}})
+    st.__exit__(None, None, None)
 
 
 #: a model and batch small enough for tests that train a few steps on CPU

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tests.prior import scene
-from prior.data import CodeLayout, RaySampler, bounding_sphere, intersect_sphere, load_store
+from prior.data import CodeLayout, Loader, RaySampler, bounding_sphere, build_table, intersect_sphere, open_source, prepare
 from synth.dataset.reader import iter_frames
 from synth.errors import SynthError
 
@@ -17,6 +17,23 @@ JOINTS = ("jaw", "eye_l", "eye_r")
 @pytest.fixture(scope="module")
 def ds(tmp_path_factory):
     return scene.make_dataset(tmp_path_factory.mktemp("prior") / "d", identities=3, expressions=2, views=5, size=16)
+
+
+def load_all(ds, *, joints=JOINTS, holdout_views=0, margin=0.05, pixel_dtype="float16", rank=0, world=1,
+             buffer=0, start=True):
+    """The prepare pass and a loader holding every identity of the rank (the former in-memory store)."""
+    src = open_source(ds)
+    table = build_table(prepare(src, ds / ".prior" / "prepare"), joints=joints, margin=margin,
+                        holdout_views=holdout_views, planned=src.planned_identities)
+    ld = Loader(src, table, seed=0, rank=rank, world=world, buffer_identities=buffer, holdout_views=holdout_views,
+                pixel_dtype=pixel_dtype, read_ahead=0)
+    if start:
+        ld.start()
+    return ld
+
+
+def sampler(ld, **kw):
+    return RaySampler(ld, **kw)
 
 
 def _points_reference(frame) -> np.ndarray:
@@ -33,19 +50,23 @@ def _points_reference(frame) -> np.ndarray:
 
 
 def test_bounds_contain_every_foreground_point(ds):
-    st = load_store(ds, joints=JOINTS, margin=0.0)
+    st = load_all(ds, margin=0.0).table.info
     frames = list(iter_frames(ds))
-    for m, ident in enumerate(st.identities.identity_index.tolist()):
+    for m, ident in enumerate(st.identity_index.tolist()):
         pts = np.concatenate([_points_reference(f) for f in frames if f.identity_index == ident])
-        d = np.linalg.norm(pts - st.identities.centre[m], axis=1)
-        assert d.max() <= st.identities.radius[m] * (1 + 1e-6)
+        d = np.linalg.norm(pts - st.centre[m], axis=1)
+        assert d.max() <= st.radius[m] * (1 + 1e-6)
+        # the prepare pass keeps hull vertices only; the sphere equals the one of every point
+        c_all, r_all = bounding_sphere(pts.astype(np.float32), 0.0)
+        np.testing.assert_allclose(st.centre[m], c_all, rtol=0, atol=1e-7)
+        assert abs(st.radius[m] - r_all) < 1e-7
         # the sphere is tight: the scene's true head sphere is centre c, radius r, and the
         # farthest visible point lies near it
         c, r = scene.head(ident)
-        assert st.identities.radius[m] < r * 1.25
-        assert np.linalg.norm(st.identities.centre[m] - c) < 0.25 * r
-    margin = load_store(ds, joints=JOINTS, margin=0.1)
-    np.testing.assert_allclose(margin.identities.radius - 1e-6, (st.identities.radius - 1e-6) * 1.1, rtol=1e-9)
+        assert st.radius[m] < r * 1.25
+        assert np.linalg.norm(st.centre[m] - c) < 0.25 * r
+    margin = load_all(ds, margin=0.1, start=False).table.info
+    np.testing.assert_allclose(margin.radius - 1e-6, (st.radius - 1e-6) * 1.1, rtol=1e-9)
 
 
 def test_bounding_sphere_degenerate():
@@ -74,63 +95,67 @@ def test_intersect_sphere_against_marching():
 
 
 def test_codes_layout_from_the_data(ds):
-    st = load_store(ds, joints=JOINTS)
-    assert st.layout == CodeLayout(scene.ID_SIZE, scene.EXPR_SIZE, JOINTS)
-    assert st.codes.shape == (len(st.keys), scene.ID_SIZE + scene.EXPR_SIZE + 9)
+    ld = load_all(ds)
+    layout = ld.table.layout
+    assert layout == CodeLayout(scene.ID_SIZE, scene.EXPR_SIZE, JOINTS)
+    codes = ld.held[0].codes
+    assert codes.shape == (10, scene.ID_SIZE + scene.EXPR_SIZE + 9)
     f = next(iter_frames(ds))
-    sl = st.layout.slices()
-    code = st.codes[0]
+    sl = layout.slices()
+    code = codes[0]
     np.testing.assert_array_equal(code[sl["beta"]], f.identity_code)
     np.testing.assert_array_equal(code[sl["expression"]], f.expression_code)
     for j in JOINTS:
         np.testing.assert_array_equal(code[sl[j]], f.joint_rotations[j])
-    assert CodeLayout.from_dict(st.layout.to_dict()) == st.layout
+    assert CodeLayout.from_dict(layout.to_dict()) == layout
     # per (identity, expression) table used for rendering agrees with the frames
-    np.testing.assert_array_equal(st.identities.code(0, 0), code)
+    np.testing.assert_array_equal(ld.table.info.code(0, 0), code)
     # another joint order is another layout; an unknown joint is refused
-    assert load_store(ds, joints=("eye_r", "jaw")).layout.joints == ("eye_r", "jaw")
+    assert load_all(ds, joints=("eye_r", "jaw"), start=False).table.layout.joints == ("eye_r", "jaw")
     with pytest.raises(SynthError, match="no rotation for joint"):
-        load_store(ds, joints=("jaw", "tongue"))
+        load_all(ds, joints=("jaw", "tongue"), start=False)
 
 
 def test_latent_ids_dense_and_pixels_exact(ds):
-    st = load_store(ds, joints=JOINTS, pixel_dtype="float32")
-    assert st.identities.identity_index.tolist() == [0, 1, 2]
-    frames = list(iter_frames(ds))
-    for n, f in enumerate(frames):
-        assert st.keys[n] == f.key and st.latent[n] == f.identity_index
-        np.testing.assert_array_equal(st.rgba[n], f.rgba)
-    half = load_store(ds, joints=JOINTS)  # float16 holds the EXR's HALF colours exactly
-    np.testing.assert_array_equal(half.rgba.astype(np.float32), st.rgba)
+    ld = load_all(ds, pixel_dtype="float32")
+    assert ld.table.info.identity_index.tolist() == [0, 1, 2] and ld.slots.tolist() == [0, 1, 2]
+    frames = {f.key: f for f in iter_frames(ds)}
+    half = load_all(ds)  # float16 holds the EXR's HALF colours exactly
+    for m, d in ld.held.items():
+        assert d.keys == sorted(k for k in frames if frames[k].identity_index == m)
+        for n, k in enumerate(d.keys):
+            np.testing.assert_array_equal(d.rgba[n], frames[k].rgba)
+        np.testing.assert_array_equal(half.held[m].rgba.astype(np.float32), d.rgba)
 
 
 def test_sampler_deterministic_and_holdout_never_drawn(ds):
-    st = load_store(ds, joints=JOINTS, holdout_views=2)
-    held = ~st.train
-    assert held.sum() == 3 * 2 * 2 and set(st.view[held].tolist()) == {3, 4}
+    ld = load_all(ds, holdout_views=2)
+    held = {(m, n) for m, d in ld.held.items() for n in np.nonzero(~d.train)[0].tolist()}
+    assert len(held) == 3 * 2 * 2
+    assert {int(ld.held[m].view[n]) for m, n in held} == {3, 4}
     kw = dict(seed=7, identities=2, views=3, pixels=16, foreground_fraction=0.5)
-    a, b = RaySampler(st, **kw), RaySampler(st, **kw)
+    a, b = sampler(ld, **kw), sampler(ld, **kw)
     seen = set()
     for step in range(60):
         x, y = a.batch(step), b.batch(step)
         for k in ("origins", "directions", "near", "far", "codes", "latent_ids", "rgba", "pixels"):
             np.testing.assert_array_equal(getattr(x, k), getattr(y, k))
-        seen |= set(x.frames.tolist())
+        seen |= set(zip(x.latent_ids.tolist(), x.frames.tolist()))
         assert len(set(x.latent_ids.tolist())) == 2  # two distinct identities per batch
-    assert not seen & set(np.nonzero(held)[0].tolist())
-    assert seen == set(np.nonzero(st.train)[0].tolist())
+    assert not seen & held
+    assert seen == {(m, n) for m, d in ld.held.items() for n in np.nonzero(d.train)[0].tolist()}
     assert not np.array_equal(a.batch(1).pixels, a.batch(2).pixels)
-    assert not np.array_equal(a.batch(1).pixels, RaySampler(st, **{**kw, "seed": 8}).batch(1).pixels)
+    assert not np.array_equal(a.batch(1).pixels, sampler(ld, **{**kw, "seed": 8}).batch(1).pixels)
 
 
 def test_sampler_rays_and_targets_match_the_frames(ds):
-    st = load_store(ds, joints=JOINTS)
-    s = RaySampler(st, seed=0, identities=3, views=2, pixels=32, foreground_fraction=1.0)
+    ld = load_all(ds)
+    s = sampler(ld, seed=0, identities=3, views=2, pixels=32, foreground_fraction=1.0)
     b = s.batch(0)
-    frames = list(iter_frames(ds))
-    H, W = st.size
+    frames = {f.key: f for f in iter_frames(ds)}
+    H, W = ld.table.size
     for k in range(0, len(b), 7):
-        f = frames[b.frames[k]]
+        f = frames[ld.held[int(b.latent_ids[k])].keys[b.frames[k]]]
         row, col = divmod(int(b.pixels[k]), W)
         assert f.alpha[row, col] > 0  # foreground_fraction = 1: all foreground
         np.testing.assert_allclose(b.rgba[k], f.rgba[row, col], atol=0)
@@ -142,9 +167,9 @@ def test_sampler_rays_and_targets_match_the_frames(ds):
 
 
 def test_foreground_fraction_and_misses(ds):
-    st = load_store(ds, joints=JOINTS)
-    uni = RaySampler(st, seed=1, identities=3, views=4, pixels=64).batch(0)
-    fg = RaySampler(st, seed=1, identities=3, views=4, pixels=64, foreground_fraction=0.75).batch(0)
+    ld = load_all(ds)
+    uni = sampler(ld, seed=1, identities=3, views=4, pixels=64).batch(0)
+    fg = sampler(ld, seed=1, identities=3, views=4, pixels=64, foreground_fraction=0.75).batch(0)
     assert fg.rgba[:, 3].mean() > uni.rgba[:, 3].mean() + 0.2
     miss = uni.far <= uni.near
     assert miss.any() and (uni.rgba[miss, 3] == 0).all()  # rays missing the sphere see background
@@ -153,9 +178,8 @@ def test_foreground_fraction_and_misses(ds):
 def test_errors(tmp_path, ds):
     (tmp_path / "empty" / "shards").mkdir(parents=True)
     with pytest.raises(SynthError, match="no committed frames"):
-        load_store(tmp_path / "empty", joints=JOINTS)
+        load_all(tmp_path / "empty")
     with pytest.raises(SynthError, match="holdout_views"):
-        load_store(ds, joints=JOINTS, holdout_views=5)
-    st = load_store(ds, joints=JOINTS)
-    with pytest.raises(SynthError, match="no identity"):
-        RaySampler(st, seed=0, identities=1, views=1, pixels=1, rank=3, world=4)
+        load_all(ds, holdout_views=5)
+    with pytest.raises(SynthError, match="no committed identity"):
+        load_all(ds, rank=3, world=4)

@@ -39,7 +39,9 @@ def _state(run):
     return ckpt.load(ckpt.latest(run))
 
 
-@pytest.mark.parametrize("sets", [[], ["train.grad_accum=2", "train.foreground_fraction=0.5"]])
+@pytest.mark.parametrize("sets", [[], ["train.grad_accum=2", "train.foreground_fraction=0.5"],
+                                  # streaming: a buffer of 1 of the 2 identities, swapped every 2 steps
+                                  ["data.buffer_identities=1", "data.views_per_load=0.5", "data.read_ahead=1"]])
 def test_resume_is_exact(ds, tmp_path, sets):
     assert _train(ds, tmp_path / "a", sets, steps=6) == 0
     assert _train(ds, tmp_path / "b", sets, steps=6, stop_at=3) == 0
@@ -125,6 +127,30 @@ def test_ddp_gloo_world_1_equals_plain_and_world_2_runs(ds, tmp_path):
     assert json.loads((tmp_path / "ddp2" / "run.json").read_text())["ranks"] == 2
     assert not all(torch.equal(c.model_state[k], b.model_state[k]) for k in b.model_state)
     assert np.isfinite(c.losses["loss"])
+
+
+@pytest.mark.slow
+def test_ddp_gloo_two_ranks_stream_disjoint_identities_in_sync(tmp_path):
+    """2 ranks through torchrun on localhost (gloo), a tar dataset of 4 identities, a buffer of 1."""
+    import json
+
+    ds = scene.make_dataset(tmp_path / "d", identities=4, expressions=2, views=4, size=16, shard_format="tar")
+    sets = [a for s in [*scene.TINY, "data.buffer_identities=1", "data.views_per_load=0.5", "train.log_every=2"]
+            for a in ("--set", s)]
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc-per-node", "2", "--master-addr", "127.0.0.1",
+           "--master-port", str(_free_port()), "-m", "prior.cli", "train", str(ds), "--out", str(tmp_path / "run"),
+           "--steps", "8", *sets]
+    p = subprocess.run(cmd, env={**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"},
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
+    c = _state(tmp_path / "run")
+    state = ckpt.load_optimizer_state(c)["trainer"]["loader"]
+    assert [s["rank"] for s in state] == [0, 1]
+    seen = [set(s["order"]) | set(s["held"]) for s in state]
+    assert seen == [{0, 2}, {1, 3}]  # latent ids m % 2 == rank: disjoint identities (and shards)
+    assert all(s["epoch"] >= 1 for s in state)  # the buffer of 1 swapped through each rank's identities
+    metrics = [json.loads(x) for x in (tmp_path / "run" / "metrics.jsonl").read_text().splitlines()]
+    assert len(metrics) == 4 and all(m["param_spread"] == 0.0 for m in metrics)  # parameters in sync
 
 
 def test_bf16_autocast_on_cpu_trains(ds, tmp_path):

@@ -1,0 +1,212 @@
+"""The prior's data path at scale: prepare pass, memory per rank, loader rays/s (docs/prior.md, "Scale").
+
+Synthetic tar datasets are written through the project's own shard writer (StagingShard ->
+commit, ``dataset.shard_format = "tar"``): N identities x 13 expressions x 30 views at 32^2,
+the frames of ``tests/prior/scene.py`` (a shaded sphere per identity seen by ring cameras, 8
+sphere sizes repeated; frame JSON with cameras, codes (identity 48), joint rotations and
+landmarks). To keep writing
+affordable the writer's jsonschema check runs on the first frame of each shard only (it costs
+about 46 ms a frame) and files are not fsynced; everything else is the writer's own path.
+
+    python benchmarks/prior_scale.py write --identities 15 --out /tmp/scale15
+    python benchmarks/prior_scale.py measure /tmp/scale15 --buffer 8 --ranks 1 2
+    python benchmarks/prior_scale.py webdataset /tmp/scale15        # the plain WebDataset pipeline
+
+``measure`` runs, each in fresh processes: the prepare pass (into a new directory; time and peak
+RSS), then per rank (1 and 2 ranks; 2 run at once) the run's setup path: the table from the
+records, a loader with ``--buffer`` identities, time to the first batch, and the loader's rays/s
+(``small`` batch shape 2 x 4 x 128 split over the ranks, then the paper's 256 x 8 x 64) with
+identities swapped in and out (``--views-per-load``, default 1: an identity leaves the buffer
+after as many views as it has frames), and the rank's peak RSS.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+EXPRESSIONS, VIEWS, SIZE = 13, 30, 32
+
+
+def write(out: Path, identities: int) -> None:
+    import synth.dataset.staging as staging
+    from synth.dataset.shards import open_dataset
+    from tests.prior import scene
+    from tests.support import fake_frames as ff
+
+    real = staging.check_frame_json
+    staging.check_frame_json = lambda fj, where: real(fj, where) if fj["frame_id"].endswith("_ex00_v00") else None
+    expected = {f"shard_{i:06d}": [ff.frame_key(i, e, v) for e in range(EXPRESSIONS) for v in range(VIEWS)]
+                for i in range(identities)}
+    ds = open_dataset(out, "b" * 64, expected, shard_format="tar")
+    t0 = time.perf_counter()
+    for sid in ds.pending_shards():
+        with ds.staging(sid) as st:
+            for key in expected[sid]:
+                i, e, v = ff.parse_frame_key(key)
+                # the scene's sphere grows with the identity index: 8 sizes, repeated
+                _, px, meta = scene.frame(i % 8, e, v, VIEWS, SIZE, id_size=48)
+                meta.update(frame_id=key, identity_index=i)
+                meta["image"]["file"] = f"{key}.exr"
+                meta["model"]["identity"] = [0.01 * i + 0.05 * k for k in range(48)]
+                st.write_frame(key, *px, meta, durable=False)
+            st.commit(manifest_extra={"seeds": {"run": 0}, "versions": {"blender": "none"}}, durable=False)
+    n = identities * EXPRESSIONS * VIEWS
+    print(f"wrote {identities} identities, {n} frames in {time.perf_counter() - t0:.0f} s", flush=True)
+
+
+def _peak_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def prepare_child(ds: str, out: str, workers: int) -> None:
+    from prior.data import build_table, open_source, prepare
+
+    t0 = time.perf_counter()
+    src = open_source(ds)
+    res = prepare(src, Path(out), workers=workers)
+    t = build_table(res, joints=("jaw", "eye_l", "eye_r"), margin=0.05, planned=src.planned_identities)
+    dt = time.perf_counter() - t0
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+    print(json.dumps({"prepare_s": dt, "frames": int(t.frames.sum()), "written": res.written,
+                      "peak_rss_mb": _peak_mb(), "worker_peak_rss_mb": kids}))
+
+
+def rank_child(ds: str, prep: str, rank: int, world: int, buffer: int, steps: int, reuse: float) -> None:
+    import numpy as np
+
+    from prior.data import Loader, RaySampler, build_table, open_source, prepare
+
+    t0 = time.perf_counter()
+    src = open_source(ds)
+    table = build_table(prepare(src, Path(prep)), joints=("jaw", "eye_l", "eye_r"), margin=0.05,
+                        planned=src.planned_identities)
+    ld = Loader(src, table, seed=0, rank=rank, world=world, buffer_identities=buffer, views_per_load=reuse,
+                read_ahead=2, prepare_dir=Path(prep))
+    ld.start()
+    per = max(2 // world, 1)
+    s = RaySampler(ld, seed=0, identities=per, views=4, pixels=128, foreground_fraction=0.5, rank=rank)
+    s.batch(0)
+    s.step_done()
+    first = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    for step in range(1, steps + 1):
+        s.batch(step)
+        s.step_done()
+    dt = time.perf_counter() - t1
+    rays = steps * s.rays_per_batch
+    paper = RaySampler(ld, seed=0, identities=256 // world, views=8, pixels=64, foreground_fraction=0.5, rank=rank)
+    paper.batch(0)
+    times = []
+    for step in range(1, 4):
+        t2 = time.perf_counter()
+        paper.batch(step)
+        times.append(time.perf_counter() - t2)
+        paper.drawn = []
+    held = ld.nbytes
+    ld.close()
+    print(json.dumps({"rank": rank, "world": world, "first_batch_s": first, "rays_per_s": rays / dt,
+                      "swapped_epochs": ld.epoch, "paper_batch_rays": paper.rays_per_batch,
+                      "paper_batch_s": float(np.median(times)), "buffer_mb": held / 2**20, "peak_rss_mb": _peak_mb()}))
+
+
+def _child(args: list[str]) -> subprocess.Popen:
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1"}
+    return subprocess.Popen([sys.executable, __file__, *args], stdout=subprocess.PIPE, text=True, env=env)
+
+
+def measure(ds: Path, buffer: int, ranks: list[int], steps: int, workers: int, reuse: float) -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        prep = str(Path(tmp) / "prepare")
+        p = _child(["_prepare", str(ds), prep, str(workers)])
+        r = json.loads(p.communicate()[0])
+        print(f"| prepare | {r['frames']} frames | {r['prepare_s']:.1f} s | {r['frames'] / r['prepare_s']:.0f} "
+              f"frames/s | peak RSS {r['peak_rss_mb']:.0f} MB (workers {r['worker_peak_rss_mb']:.0f} MB) |",
+              flush=True)
+        again = json.loads(_child(["_prepare", str(ds), prep, str(workers)]).communicate()[0])
+        print(f"| prepare again (nothing new) | {again['written']} written | {again['prepare_s']:.2f} s |", flush=True)
+        for world in ranks:
+            procs = [_child(["_rank", str(ds), prep, str(r), str(world), str(buffer), str(steps), str(reuse)])
+                     for r in range(world)]
+            for q in procs:
+                o = json.loads(q.communicate()[0])
+                print(f"| {world} rank(s), rank {o['rank']} | buffer {buffer} | first batch {o['first_batch_s']:.1f} s "
+                      f"| {o['rays_per_s']:,.0f} rays/s | paper batch {o['paper_batch_rays']:,} rays in "
+                      f"{o['paper_batch_s']:.3f} s | buffer {o['buffer_mb']:.0f} MB | peak RSS {o['peak_rss_mb']:.0f} "
+                      f"MB | epochs {o['swapped_epochs']} |", flush=True)
+
+
+def webdataset_pipeline(ds: Path, workers: int, limit: int) -> None:
+    """Frames/s of a plain WebDataset + DataLoader over the same tar shards, decoding the same
+    frames (synth.dataset.reader.decode_sample), against the project's reader (read_shard + decode)."""
+    import torch.utils.data as tud
+    import webdataset as wds
+
+    from prior.data.sources import open_source, read_shard
+    from synth.dataset.reader import decode_frame, decode_sample
+
+    urls = sorted(str(p) for p in (ds / "shards").glob("*.tar"))
+    pipe = wds.WebDataset(urls, shardshuffle=False, empty_check=False).map(lambda s: decode_sample(s).rgba.shape)
+    loader = tud.DataLoader(pipe, batch_size=None, num_workers=workers)
+    t0, n = time.perf_counter(), 0
+    for _ in loader:
+        n += 1
+        if n >= limit:
+            break
+    wd = n / (time.perf_counter() - t0)
+    t0, m = time.perf_counter(), 0
+    for ref in open_source(ds).committed():
+        for key, jb, eb in read_shard(ref):
+            decode_frame(jb, eb, key=key)
+            m += 1
+            if m >= limit:
+                break
+        if m >= limit:
+            break
+    own = m / (time.perf_counter() - t0)
+    print(f"| WebDataset + DataLoader ({workers} workers) | {wd:.0f} frames/s |\n"
+          f"| project reader (read_shard + decode, 1 thread) | {own:.0f} frames/s |")
+
+
+def main() -> None:
+    if len(sys.argv) > 1 and sys.argv[1] == "_prepare":
+        return prepare_child(sys.argv[2], sys.argv[3], int(sys.argv[4]))
+    if len(sys.argv) > 1 and sys.argv[1] == "_rank":
+        return rank_child(sys.argv[2], sys.argv[3], *map(int, sys.argv[4:8]), float(sys.argv[8]))
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    w = sub.add_parser("write")
+    w.add_argument("--identities", type=int, required=True)
+    w.add_argument("--out", type=Path, required=True)
+    m = sub.add_parser("measure")
+    m.add_argument("dataset", type=Path)
+    m.add_argument("--buffer", type=int, default=8)
+    m.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
+    m.add_argument("--steps", type=int, default=200)
+    m.add_argument("--workers", type=int, default=2)
+    m.add_argument("--views-per-load", type=float, default=1.0)
+    b = sub.add_parser("webdataset")
+    b.add_argument("dataset", type=Path)
+    b.add_argument("--workers", type=int, default=1)
+    b.add_argument("--frames", type=int, default=2000)
+    a = ap.parse_args()
+    if a.cmd == "write":
+        write(a.out, a.identities)
+    elif a.cmd == "measure":
+        measure(a.dataset, a.buffer, a.ranks, a.steps, a.workers, a.views_per_load)
+    else:
+        webdataset_pipeline(a.dataset, a.workers, a.frames)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,333 @@
+"""The prepare pass: one read of the committed frames, before training, for what needs them all.
+
+Per committed shard, one record ``<prepare dir>/<shard>.npz`` (default ``DATASET/.prior/prepare``;
+written atomically, keyed by the sha256 of the shard's manifest) holds, per identity in it:
+frame count, views per expression, the conditioning code parts of each (identity, expression)
+(its first frame's identity and expression codes and joint rotations), the front camera (the
+frame nearest azimuth 0 / elevation 0), and the box and tight sphere of its foreground depth
+points (:mod:`prior.data.bounds`). Plus the shard's head model (name, sha256), image size and
+code sizes.
+
+Bounds: an identity whose frames are all in one shard (``synth render`` writes one shard per
+identity) gets exactly the sphere of all its points. One spread over several shards gets the
+centre of the merged box (exact) and the smallest radius the per-shard spheres guarantee
+(``max |c - c_s| + r_s``: conservative, it holds every point).
+
+:func:`prepare` writes the records of shards that have none (or whose manifest changed), and
+nothing else: a rerun with nothing new writes nothing. Memory: one identity's points of one
+shard at a time, reduced to their convex-hull vertices (which keep the box and the farthest
+point from any centre: exact) beyond :data:`REDUCE_AT` points; records are a few kB per
+identity. :func:`build_table` merges records into the run's :class:`Table`.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from prior.data.bounds import foreground_points, grow, tight_sphere
+from prior.data.codes import CodeLayout
+from prior.data.identities import IdentityInfo
+from prior.data.sources import ShardDamaged, ShardRef, Source, read_shard
+from synth.dataset.reader import decode_frame
+from synth.errors import SynthError
+from synth.io import atomic_write_bytes, sha256_bytes
+
+FORMAT = "synth-prior-prepare/1"
+REDUCE_AT = 2_000_000
+
+
+def _hull(points: np.ndarray) -> np.ndarray:
+    """The vertices of the convex hull of ``points`` (float32, (n, 3)); every point when the set
+    is too small or flat for a hull (Qhull refuses it)."""
+    if len(points) < 64:
+        return points
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        return np.ascontiguousarray(points[ConvexHull(points.astype(np.float64)).vertices])
+    except (QhullError, ValueError):
+        return np.unique(points, axis=0)
+
+
+def _front_score(meta: dict) -> float:
+    cam = meta.get("camera", {})
+    try:
+        return abs(float(cam["azimuth_deg"])) + abs(float(cam["elevation_deg"]))
+    except (KeyError, TypeError, ValueError):
+        return float("inf")
+
+
+def shard_signature(ref: ShardRef) -> str:
+    """What identifies the shard's content: its manifest's sha256 (a tar without manifest: size and mtime)."""
+    if ref.manifest is not None:
+        return ref.signed or sha256_bytes(ref.manifest.read_bytes())
+    st = os.stat(ref.path)
+    return f"tar:{st.st_size}:{st.st_mtime_ns}"
+
+
+def summarise_shard(ref: ShardRef, signature: str) -> dict[str, np.ndarray]:
+    """The record of one shard (see the module docstring). Raises ShardDamaged."""
+    per: dict[int, dict] = {}
+    pairs: dict[tuple[int, int], dict] = {}
+    head = size = sizes = joints_seen = None
+    n = 0
+    for key, jb, eb in read_shard(ref):
+        try:
+            f = decode_frame(jb, eb, key=key, shard=ref.shard, where=f"{ref.path}:{key}")
+            meta = f.meta
+            ident, expr, view = f.identity_index, f.expression_index, f.view_index
+            beta, ex = f.identity_code.reshape(-1), f.expression_code.reshape(-1)
+            rots = f.joint_rotations
+            hm = {k: meta.get("model", {}).get(k) for k in ("name", "sha256")}
+            pts = foreground_points(f).astype(np.float32)
+            K, c2w = f.K, f.camera_to_world
+        except (SynthError, KeyError, TypeError, ValueError) as e:
+            raise ShardDamaged(f"frame {key} cannot be read ({str(e)[:120]})") from None
+        if head is None:
+            head, size, sizes, joints_seen = hm, (f.width, f.height), (beta.size, ex.size), sorted(rots)
+        if hm != head or (f.width, f.height) != size or (beta.size, ex.size) != sizes:
+            raise ShardDamaged(f"frame {key} has another head model, code size or resolution than the shard's first")
+        p = per.setdefault(ident, {"frames": 0, "pts": [], "npts": 0, "fg": 0, "front": (np.inf, None, None)})
+        p["frames"] += 1
+        p["pts"].append(pts)
+        p["npts"] += len(pts)
+        p["fg"] += len(pts)
+        if p["npts"] > REDUCE_AT:
+            p["pts"] = [_hull(np.concatenate(p["pts"]))]
+            p["npts"] = len(p["pts"][0])
+        score = _front_score(meta)
+        if p["front"][1] is None or score < p["front"][0]:
+            p["front"] = (score, K, c2w)
+        q = pairs.setdefault((ident, expr), {"views": 0, "beta": beta, "expr": ex,
+                                             "joints": {j: np.asarray(r, np.float32).reshape(-1)[:3]
+                                                        for j, r in rots.items() if np.asarray(r).size == 3}})
+        q["views"] += 1
+        n += 1
+    if n == 0:
+        raise ShardDamaged("it has no frames")
+    ids = sorted(per)
+    boxes, spheres = [], []
+    for i in ids:
+        pts = np.concatenate(per[i]["pts"]) if per[i]["npts"] else np.zeros((1, 3), np.float32)
+        boxes.append(np.stack([pts.min(0), pts.max(0)]))
+        spheres.append(tight_sphere(pts))
+    keys = sorted(pairs)
+    jn = sorted({j for q in pairs.values() for j in q["joints"]})
+    joints = np.full((len(keys), len(jn), 3), np.nan, np.float32)
+    for a, k in enumerate(keys):
+        for b, j in enumerate(jn):
+            if j in pairs[k]["joints"]:
+                joints[a, b] = pairs[k]["joints"][j]
+    meta_out = {"format": FORMAT, "shard": ref.shard, "signature": signature, "frames": n, "size": list(size),
+                "head_model": head, "code_sizes": list(sizes)}
+    return {"meta": np.array(json.dumps(meta_out)), "identities": np.array(ids, np.int64),
+            "frames": np.array([per[i]["frames"] for i in ids], np.int64),
+            "fg_points": np.array([per[i]["fg"] for i in ids], np.int64),
+            "front_score": np.array([per[i]["front"][0] for i in ids]),
+            "front_K": np.stack([per[i]["front"][1] if per[i]["front"][1] is not None else np.eye(3) for i in ids]),
+            "front_c2w": np.stack([per[i]["front"][2] if per[i]["front"][2] is not None else np.eye(4) for i in ids]),
+            "box": np.stack(boxes).astype(np.float64),
+            "centre": np.stack([c for c, _ in spheres]), "radius": np.array([r for _, r in spheres]),
+            "pairs": np.array(keys, np.int64).reshape(-1, 2), "views": np.array([pairs[k]["views"] for k in keys]),
+            "beta": np.stack([pairs[k]["beta"] for k in keys]).astype(np.float32),
+            "expr": np.stack([pairs[k]["expr"] for k in keys]).astype(np.float32),
+            "joint_names": np.array(jn, dtype="U32"), "joints": joints}
+
+
+def record_meta(rec: dict) -> dict:
+    return json.loads(str(rec["meta"]))
+
+
+def _read_record(path: Path) -> dict | None:
+    """A record, or None when it cannot be read (cut short, foreign): it is then computed again."""
+    import zipfile
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            rec = {k: z[k] for k in z.files}
+        return rec if record_meta(rec).get("format") == FORMAT else None
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None
+
+
+@dataclass
+class PrepareResult:
+    records: list[dict]  # in shard order
+    refs: list[ShardRef]  # the shards of the records
+    written: int = 0
+    reused: int = 0
+    skipped: list[str] = field(default_factory=list)  # damaged shards, one line each
+    skipped_shards: list[str] = field(default_factory=list)  # their ids
+
+
+def _compute(ref: ShardRef, out_dir: Path) -> tuple[dict | None, str | None]:
+    """Summarise one shard and write its record (atomically): (record, None) or (None, warning)."""
+    try:
+        rec = summarise_shard(ref, shard_signature(ref))
+        buf = io.BytesIO()
+        np.savez(buf, **rec)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(out_dir / f"{ref.shard}.npz", buf.getvalue(), durable=False)
+        return rec, None
+    except (ShardDamaged, OSError) as e:
+        return None, f"skipping damaged shard {ref.shard} ({ref.path}): {e}"
+
+
+def prepare(source: Source, out_dir: Path, *, refs: list[ShardRef] | None = None,
+            warn: Callable[[str], None] | None = None, progress=None, workers: int = 1) -> PrepareResult:
+    """Records of every committed shard of ``source`` (or of ``refs``), computing and writing
+    only those missing or stale (in ``workers`` processes); a damaged shard is skipped with one
+    line to ``warn``."""
+    out_dir = Path(out_dir)
+    refs = source.committed() if refs is None else refs
+    got: dict[int, dict] = {}
+    todo = []
+    for i, ref in enumerate(refs):
+        path = out_dir / f"{ref.shard}.npz"
+        try:
+            rec = _read_record(path) if path.is_file() else None
+            fresh = rec is not None and record_meta(rec).get("signature") == shard_signature(ref)
+        except OSError:
+            fresh = False
+        if fresh:
+            got[i] = rec
+        else:
+            todo.append(i)
+    res = PrepareResult([], [], reused=len(got))
+    if len(todo) > 1 and workers > 1:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(workers, mp_context=mp.get_context("fork")) as pool:
+            done = pool.map(_compute, [refs[i] for i in todo], [out_dir] * len(todo), chunksize=4)
+            results = list(_progress(done, progress, len(todo)))
+    else:
+        results = list(_progress((_compute(refs[i], out_dir) for i in todo), progress, len(todo)))
+    for i, (rec, line) in zip(todo, results):
+        if rec is None:
+            res.skipped.append(line)
+            res.skipped_shards.append(refs[i].shard)
+            if warn is not None:
+                warn(line)
+        else:
+            got[i] = rec
+            res.written += 1
+    for i in sorted(got):
+        res.records.append(got[i])
+        res.refs.append(refs[i])
+    return res
+
+
+def _progress(it, progress, total):
+    for n, x in enumerate(it):
+        if progress is not None:
+            progress(n + 1, total)
+        yield x
+
+
+@dataclass
+class Table:
+    """What training needs to know before reading pixels: the run's identities (latent id =
+    position in the sorted ``identities``), their bounds, codes and front cameras
+    (:class:`IdentityInfo`), where each one's frames are, the code layout, head model and size."""
+
+    layout: CodeLayout
+    info: IdentityInfo
+    shards_of: dict[int, list[ShardRef]]  # latent id -> shards holding its frames
+    frames: np.ndarray  # (M,) frames per latent id (0: not committed yet)
+    size: tuple[int, int]  # (height, width)
+    head_model: dict
+
+    @property
+    def available(self) -> np.ndarray:
+        """Latent ids with committed frames and bounds."""
+        return np.nonzero(self.frames > 0)[0]
+
+
+def _check_same(value, first, what: str, where: str, fix: str):
+    if value != first:
+        raise SynthError(f"the dataset mixes {what}: {value} and {first}", where, fix)
+
+
+def build_table(result: PrepareResult, *, joints: tuple[str, ...], margin: float, holdout_views: int = 0,
+                planned: list[int] | None = None, where: str = "dataset") -> Table:
+    """Merge shard records (shard order) into a :class:`Table`; ``planned``: every identity
+    index of the plan (latent ids then do not change as shards arrive)."""
+    if not result.records:
+        raise SynthError("dataset has no committed frames", where,
+                         "render it first (synth render ... --out DIR) or pass the --out directory of a render")
+    metas = [record_meta(r) for r in result.records]
+    head, size, sizes = metas[0]["head_model"], tuple(metas[0]["size"]), tuple(metas[0]["code_sizes"])
+    for m in metas[1:]:
+        _check_same(m["head_model"], head, "head models", where, "train on a dataset of one head model")
+        _check_same(tuple(m["size"]), size, "resolutions", where, "train on a dataset rendered at one resolution")
+        _check_same(tuple(m["code_sizes"]), sizes, "code sizes", where, "use one head model for the whole dataset")
+    seen = sorted({int(i) for r in result.records for i in r["identities"]})
+    uniq = np.array(sorted(set(planned or []) | set(seen)), np.int64)
+    M = len(uniq)
+    frames = np.zeros(M, np.int64)
+    fg = np.zeros(M, np.int64)
+    spheres: dict[int, list[tuple]] = {}  # latent id -> (box, centre, radius) per shard
+    front_score = np.full(M, np.nan)  # nan: no front camera yet
+    front_K, front_c2w = np.tile(np.eye(3), (M, 1, 1)), np.tile(np.eye(4), (M, 1, 1))
+    shards_of: dict[int, list[ShardRef]] = {}
+    code_parts: dict[tuple[int, int], tuple] = {}
+    views: dict[tuple[int, int], int] = {}
+    for rec, ref in zip(result.records, result.refs):
+        lat = np.searchsorted(uniq, rec["identities"])
+        for a, m in enumerate(lat.tolist()):
+            frames[m] += rec["frames"][a]
+            fg[m] += rec["fg_points"][a]
+            if rec["fg_points"][a]:
+                spheres.setdefault(m, []).append((rec["box"][a], rec["centre"][a], float(rec["radius"][a])))
+            shards_of.setdefault(m, []).append(ref)
+            if np.isnan(front_score[m]) or rec["front_score"][a] < front_score[m]:
+                front_score[m], front_K[m], front_c2w[m] = rec["front_score"][a], rec["front_K"][a], rec["front_c2w"][a]
+        jn = [str(j) for j in rec["joint_names"]]
+        for q, (ident, e) in enumerate(rec["pairs"].tolist()):
+            key = (int(np.searchsorted(uniq, ident)), int(e))
+            views[key] = views.get(key, 0) + int(rec["views"][q])
+            if key not in code_parts:
+                missing = [j for j in joints if j not in jn or not np.isfinite(rec["joints"][q, jn.index(j)]).all()]
+                if missing:
+                    raise SynthError(f"frames of identity {ident} have no rotation for joint(s) {', '.join(missing)} "
+                                     f"(they have: {', '.join(jn) or 'none'})", ref.shard,
+                                     "set data.joints to joints the dataset records")
+                parts = [rec["beta"][q], rec["expr"][q]] + [rec["joints"][q, jn.index(j)] for j in joints]
+                code_parts[key] = np.concatenate(parts).astype(np.float32)
+    centre, radius = np.zeros((M, 3)), np.zeros(M)
+    for m in np.nonzero(frames)[0].tolist():
+        parts = spheres.get(m)
+        if not parts:
+            raise SynthError(f"identity {uniq[m]} has no foreground depth pixel in any frame", where,
+                             "check the renders (synth preview): the head must be visible")
+        if len(parts) == 1:
+            c, r = parts[0][1], parts[0][2]
+        else:  # the merged box's centre; a radius that holds every shard's sphere
+            box = np.stack([p[0] for p in parts])
+            c = 0.5 * (box[:, 0].min(0) + box[:, 1].max(0))
+            r = max(float(np.linalg.norm(c - p[1])) + p[2] for p in parts)
+        centre[m], radius[m] = c, grow(r, margin)
+    if holdout_views:
+        for (m, e), v in sorted(views.items()):
+            if v <= holdout_views:
+                raise SynthError(f"identity {uniq[m]} expression {e} has {v} views, not more than "
+                                 f"data.holdout_views = {holdout_views}", where,
+                                 "lower data.holdout_views or render more views")
+    keys = sorted(code_parts)
+    layout = CodeLayout(int(sizes[0]), int(sizes[1]), tuple(joints))
+    info = IdentityInfo(identity_index=uniq, centre=centre, radius=radius, front_K=front_K, front_c2w=front_c2w,
+                        front_size=np.where(frames[:, None] > 0, [size[0], size[1]], 0).astype(np.int64),
+                        code_keys=np.array(keys, np.int64).reshape(-1, 2),
+                        codes=np.stack([code_parts[k] for k in keys]) if keys else np.zeros((0, layout.size), np.float32))
+    return Table(layout, info, shards_of, frames, (int(size[1]), int(size[0])), head or {})
+
+
+__all__ = ["FORMAT", "PrepareResult", "Table", "build_table", "prepare", "summarise_shard"]
