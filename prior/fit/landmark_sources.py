@@ -6,7 +6,7 @@ landmarks) and ``landmarks_visible``; optional Gaussian noise (``noise_px`` per 
 a sigma per point (``max(sigma_px, noise_px)``; hidden points unused, or with ``hidden_sigma_px``).
 The frame's camera is for evaluation only: K is passed on only when asked (``known_intrinsics``).
 
-``mediapipe``: the optional ``synth[fit]`` extra, ``mediapipe==0.10.21`` (the last wheel that
+``mediapipe``: the optional ``synth-faces[fit]`` extra, ``mediapipe==0.10.21`` (the last wheel that
 bundles its face-mesh and selfie-segmentation models). Its 478 refined face-mesh points are
 mapped to model surface points by the correspondence in ``prior/fit/data/`` (docs/fitting.md:
 how it was derived and what is missing); the selfie segmentation gives foreground masks.
@@ -85,7 +85,7 @@ def frame_observations(frames, *, noise_px: float = 0.0, sigma_px: float = 1.0, 
 
 def require_mediapipe():
     """The mediapipe module, or one SynthError line saying how to install it (for the CLI)."""
-    fix = f"install the fit extra: pip install 'synth[fit]' (mediapipe=={MEDIAPIPE_VERSION}; docs/fitting.md)"
+    fix = f"install the fit extra: pip install 'synth-faces[fit]' (mediapipe=={MEDIAPIPE_VERSION}; docs/fitting.md)"
     try:
         import mediapipe
     except ImportError:
@@ -103,14 +103,15 @@ CORRESPONDENCE_TOLERANCE_M = 1e-5
 
 
 def model_key(model) -> str:
-    """Identifies a head model's name and topology, what a correspondence file is named by. Its rest
-    shape is checked by :func:`load_correspondence` against the file's ``template_points`` within
-    :data:`CORRESPONDENCE_TOLERANCE_M`, not hashed: the default model built on another CPU has the
-    same shape but not the same float32 bytes."""
+    """Names a correspondence file: the head model's name and its vertex and triangle counts. Neither
+    its rest shape nor its triangle list is hashed: the default model built on another CPU has the
+    same shape but not the same float32 bytes, and quads whose two diagonals are equally long may be
+    split the other way. What makes a correspondence valid is checked by :func:`load_correspondence`:
+    every point, evaluated on this model's triangles, lies where it lay on the rest shape it was
+    derived on, within :data:`CORRESPONDENCE_TOLERANCE_M`."""
     import hashlib
 
-    h = hashlib.sha256(str(model.name).encode())
-    h.update(np.ascontiguousarray(model.triangles, np.int32).tobytes())
+    h = hashlib.sha256(f"{model.name}|{len(model.template)}|{len(model.triangles)}".encode())
     return h.hexdigest()[:16]
 
 

@@ -73,7 +73,7 @@ def test_mediapipe_missing_is_one_line(monkeypatch):
     with pytest.raises(SynthError) as e:
         require_mediapipe()
     msg = str(e.value)
-    assert "\n" not in msg and "not installed" in msg and f"pip install 'synth[fit]'" in msg
+    assert "\n" not in msg and "not installed" in msg and "pip install 'synth-faces[fit]'" in msg
     assert MEDIAPIPE_VERSION in msg
 
 
@@ -157,8 +157,8 @@ def test_mediapipe_points_fit_round_trip(default_model):
 
 
 def test_mediapipe_on_a_photo(default_model):
-    """Runs only where the fit extra is installed (not in the project's environment)."""
-    pytest.importorskip("mediapipe", reason="the synth[fit] extra (mediapipe) is not installed")
+    """Needs the fit extra (mediapipe), which scripts/setup.sh installs."""
+    pytest.importorskip("mediapipe", reason="the synth-faces[fit] extra (mediapipe) is not installed: make setup")
     skd = pytest.importorskip("skimage.data", reason="scikit-image (test extra) provides the photo")
     from prior.fit.landmark_sources import mediapipe_observations
     from prior.fit.landmarks_fit import fit_landmarks
