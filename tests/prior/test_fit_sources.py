@@ -164,7 +164,8 @@ def test_mediapipe_on_a_photo(default_model):
     from prior.fit.landmarks_fit import fit_landmarks
 
     photo = skd.astronaut()  # 512 x 512 RGB, one face
-    obs, masks = mediapipe_observations([photo], default_model)
+    obs, masks, found = mediapipe_observations([photo], default_model)
+    assert found == [{"faces": 1, "face_px": found[0]["face_px"]}] and 90 < found[0]["face_px"] < 120
     assert obs.mean.shape[1] == len(load_correspondence(default_model)["index"]) and np.all(np.isfinite(obs.sigma))
     assert masks[0].shape == photo.shape[:2] and 0.05 < float(masks[0].mean()) < 0.95
     fit = fit_landmarks(default_model, obs)
