@@ -113,7 +113,7 @@ def _progress(log):
 def landmark_fit(inputs, source: str, model, cfg, log=print):
     """Step 2: the inputs' landmarks (``source``: json or mediapipe; photos get their masks) and the
     head model and cameras fitted to them, with the config's landmark options (EXIF focal lengths
-    as the initial focal length, or a known ``landmarks.focal_px``)."""
+    as the initial focal length, or a known ``landmarks.focal_px``): the observations and the fit."""
     from prior.fit.landmarks_fit import FitOptions, fit_landmarks
 
     lm = cfg.landmarks
@@ -126,8 +126,8 @@ def landmark_fit(inputs, source: str, model, cfg, log=print):
         obs.focal_init = exif_focal_init(inputs)
         if obs.focal_init is not None:
             log(f"initial focal length from EXIF: {', '.join(f'{f:.1f}' for f in obs.focal_init)} px")
-    return fit_landmarks(model, obs, FitOptions(per_image_expression=lm.per_image_expression,
-                                                focal_init_fov_deg=lm.fov_init_deg))
+    return obs, fit_landmarks(model, obs, FitOptions(per_image_expression=lm.per_image_expression,
+                                                     focal_init_fov_deg=lm.fov_init_deg))
 
 
 def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | None = None, config_path=None,
@@ -158,7 +158,7 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
         require_mediapipe()
     times = {}
     t0 = time.perf_counter()
-    fit = landmark_fit(inputs, source, model, cfg, log)
+    _, fit = landmark_fit(inputs, source, model, cfg, log)
     times["landmarks_s"] = time.perf_counter() - t0
     log(f"landmarks: {source}, {len(inputs)} images, rmse {', '.join(f'{r:.2f}' for r in fit.rmse_px)} px, "
         f"focal {fit.K[0, 0, 0]:.1f} px, converged {fit.converged}")
