@@ -48,6 +48,7 @@ class InputImage:
     content: tuple[int, int] | None = None  # (width, height) of the image on the canvas; None = all of it
     detection: dict | None = None  # faces found by the landmark detector (photos)
     focal_px: float | None = None  # EXIF focal length in canvas pixels (the fit's initial focal)
+    mask_source: str = "none"  # "alpha" (the frame's or the PNG's), "segmentation" (mediapipe) or "none"
 
     @property
     def size(self) -> tuple[int, int]:
@@ -82,7 +83,8 @@ def _read_photo(p: Path, max_side: int) -> InputImage:
     rec = {"source_size": list(ph.source_size), "decode_scale": ph.scale, "orientation": ph.orientation,
            "pixel_format": ph.mode, "exif_focal_px": ph.focal_px}
     target = ph.colour * (1.0 if ph.alpha is None else ph.alpha[..., None])
-    return InputImage(p, target, ph.alpha, photo=rec, focal_px=ph.focal_px)
+    return InputImage(p, target, ph.alpha, photo=rec, focal_px=ph.focal_px,
+                      mask_source="none" if ph.alpha is None else "alpha")
 
 
 def _read_frame(p: Path) -> InputImage:
@@ -93,7 +95,7 @@ def _read_frame(p: Path) -> InputImage:
                          "keep KEY.json next to KEY.exr (as synth render writes them)")
     f = read_frame(p.with_suffix(".json"))
     return InputImage(p, np.ascontiguousarray(f.rgba[..., :3], np.float32), np.clip(f.alpha, 0, 1).astype(np.float32),
-                      frame=f)
+                      frame=f, mask_source="alpha")
 
 
 def _place(im: InputImage, width: int, height: int) -> None:
@@ -207,5 +209,6 @@ def observations(inputs: list[InputImage], source: str, model, *, sigma_px: floa
             if im.mask is None:
                 im.mask = np.clip(np.asarray(m, np.float32), 0, 1) * content_mask(im)
                 im.target = im.target * im.mask[..., None]
+                im.mask_source = "segmentation"
     _check_counts(inputs, obs)
     return obs

@@ -190,8 +190,7 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
             "head_model": {"name": model.name, "sha256": model_sha,
                            "path": None if model_path is None else str(Path(model_path).resolve())},
             "config": cfg.to_dict(), "landmark_source": source, "inputs": [im.record() for im in inputs],
-            "masks": [("alpha" if im.frame is not None else "given") if im.mask is not None else "none"
-                      for im in inputs],
+            "masks": [im.mask_source for im in inputs],
             "cameras": [{"K": fit.K[i].tolist(), "world_to_camera": fit.world_to_camera[i].tolist(),
                          "camera_to_world": c2w[i].tolist(), "width": inputs[i].size[0],
                          "height": inputs[i].size[1]} for i in range(len(inputs))],

@@ -301,3 +301,39 @@ def test_a_small_face_in_a_large_photo_is_found(astronaut, tmp_path, default_mod
     assert inputs[0].detection["faces"] == 1
     shift = np.abs(obs.mean[0] - (alone.mean[0] + (444, 888)))
     assert np.median(shift) < 3.0, np.median(shift)
+
+
+@pytest.mark.slow
+def test_synth_prior_train_and_fit_a_photo(astronaut, tmp_path, default_model, monkeypatch):
+    """One environment: ``synth prior train`` (TensorBoard events written) and ``synth prior fit
+    PHOTO --landmarks mediapipe`` (a sideways JPEG with an EXIF focal length) on a tiny prior trained
+    on toy renders labelled with the default model's codes and name."""
+    pytest.importorskip("mediapipe", reason="the synth-faces[fit] extra (mediapipe) is not installed: make setup")
+    pytest.importorskip("OpenEXR")
+    import json
+
+    from synth.model.default import default_model_path
+    from synth.model.head import HeadModel
+    from tests.prior import face_scene as fs
+    from tests.prior.scene import TINY
+    from tests.prior.test_cli import synth
+
+    for name, value in (("MODEL", default_model), ("HEAD", HeadModel(default_model, np.float64)),
+                        ("IDENTITY_DIMS", default_model.identity_dims)):
+        monkeypatch.setattr(fs, name, value)
+    train = fs.make_dataset(tmp_path / "train", default_model_path(), identities=(0, 1), expressions=1, views=4)
+    r = synth("prior", "train", train, "--out", tmp_path / "run", "--steps", 4, *[a for s in TINY for a in ("--set", s)])
+    assert r.returncode == 0, r.stderr
+    assert list((tmp_path / "run" / "tb").glob("events.out.tfevents.*"))
+    photo = _save_jpeg(tmp_path / "me.jpg", Image.fromarray(astronaut).transpose(Image.Transpose.ROTATE_90),
+                       orientation=6, ifd={0xA405: 50})
+    r = synth("prior", "fit", photo, "--prior", tmp_path / "run", "--out", tmp_path / "fit", "--landmarks", "mediapipe",
+              "--set", "inversion.steps=2", "--set", "inversion.patches=1", "--set", "finetune.rays_per_step=128",
+              "--set", "finetune.warmup_steps=1", "--steps", 3)
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    info = json.loads((tmp_path / "fit" / "fit.json").read_text())
+    rec = info["inputs"][0]
+    assert rec["orientation"] == 6 and rec["faces"] == 1 and info["masks"] == ["segmentation"]
+    assert rec["exif_focal_px"] == pytest.approx(50 * np.hypot(512, 512) / FULL_FRAME_DIAGONAL_MM)
+    assert "initial focal length from EXIF" in r.stdout
+    assert json.loads((tmp_path / "fit" / "report.json").read_text())["landmarks"]["converged"]
