@@ -15,7 +15,7 @@ Two kinds of input (``synth prior fit IMAGES...``):
 The fit works on one canvas, the first image's (decoded) size: the fitted cameras share one
 focal length (a shared scale of each image's initial focal length). An image of another size
 is scaled uniformly to fit inside the canvas and centred on it (its ``scale`` and ``offset``,
-canvas = source * scale + offset, are kept in ``fit.json``); the border it leaves is outside
+canvas = decoded * scale + offset, are kept in ``fit.json``); the border it leaves is outside
 the mask. Every check happens before anything is fitted or written; each failure is one
 :class:`SynthError` line naming the file.
 """
@@ -43,7 +43,7 @@ class InputImage:
     mask: np.ndarray | None  # (H, W) float32 in [0, 1]; None = not known yet (photo without alpha)
     frame: object | None = None  # synth.dataset.reader.Frame for synth frames
     photo: dict | None = None  # what decoding did (prior.fit.photos.Photo without its pixels)
-    scale: tuple[float, float] = (1.0, 1.0)  # canvas pixels per decoded pixel in x and y (equal to 1 px)
+    scale: tuple[float, float] = (1.0, 1.0)  # canvas pixels per decoded pixel in x and y (equal but for rounding)
     offset: tuple[int, int] = (0, 0)  # where the decoded image's top-left corner lies on the canvas
     content: tuple[int, int] | None = None  # (width, height) of the image on the canvas; None = all of it
     detection: dict | None = None  # faces found by the landmark detector (photos)

@@ -178,7 +178,8 @@ def test_bad_input_is_one_line_and_writes_nothing(world, fitted, tmp_path, case)
     msg = one_line_error(synth("prior", "fit", *images, "--prior", run, "--out", out, *extra, *FIT_SETS,
                                path_first=path_first))
     expect = {"no_face": "no face in the image", "photo_no_face": "no face found",
-              "few_landmarks": "only 3 landmarks are visible", "unreadable": "unreadable image", "other_dims": "identity 6",
+              "few_landmarks": "only 3 landmarks are visible", "unreadable": "unreadable image",
+              "other_dims": "identity 6",
               "other_model": "not 'other-toy'", "exists": "fit output exists", "no_json": "has no JSON beside it",
               "suffix": "unsupported image type", "json_photo": "needs synth frames",
               "no_mediapipe": "mediapipe landmark detector is not installed", "bad_set": "finetune.steps",

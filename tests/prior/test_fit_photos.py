@@ -322,7 +322,8 @@ def test_synth_prior_train_and_fit_a_photo(astronaut, tmp_path, default_model, m
                         ("IDENTITY_DIMS", default_model.identity_dims)):
         monkeypatch.setattr(fs, name, value)
     train = fs.make_dataset(tmp_path / "train", default_model_path(), identities=(0, 1), expressions=1, views=4)
-    r = synth("prior", "train", train, "--out", tmp_path / "run", "--steps", 4, *[a for s in TINY for a in ("--set", s)])
+    sets = [a for s in TINY for a in ("--set", s)]
+    r = synth("prior", "train", train, "--out", tmp_path / "run", "--steps", 4, *sets)
     assert r.returncode == 0, r.stderr
     assert list((tmp_path / "run" / "tb").glob("events.out.tfevents.*"))
     photo = _save_jpeg(tmp_path / "me.jpg", Image.fromarray(astronaut).transpose(Image.Transpose.ROTATE_90),
