@@ -1,10 +1,9 @@
 """Run mediapipe's face detector and face mesh on PNGs; write one JSON (no synth imports).
 
-Runs in its own environment (mediapipe==0.10.21 needs protobuf<5, so it is never installed in
-the project's venv; numpy and pillow suffice besides)::
+Runs with mediapipe==0.10.21 (the fit extra, in the project's venv; numpy and pillow suffice
+besides, so any environment with those three does)::
 
-    python3.11 -m venv MPENV && MPENV/bin/pip install mediapipe==0.10.21 numpy pillow
-    MPENV/bin/python benchmarks/mediapipe_judge.py PNG_DIR OUT.json
+    .venv/bin/python benchmarks/mediapipe_judge.py PNG_DIR OUT.json
 
 ``benchmarks/realism.py judge`` writes the PNGs, calls this script as a subprocess and reads
 the JSON: per image, ``detected`` (face detection, short-range model, confidence >= 0.5),

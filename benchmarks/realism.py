@@ -7,7 +7,7 @@
         [--hair long_straight ... --hair-identities 6]
     .venv/bin/python benchmarks/realism.py hair [--identities 12 --seed 0 --style braids]
     .venv/bin/python benchmarks/realism.py hats [--identities 3 --seed 0 --resolution 256]
-    .venv/bin/python benchmarks/realism.py judge DATASET --mp-python MPENV/bin/python [--max-azimuth 45]
+    .venv/bin/python benchmarks/realism.py judge DATASET [--mp-python PY] [--max-azimuth 45]
         [--detections MP.json]
     .venv/bin/python benchmarks/realism.py jaw DATASET [--detections MP.json]
     .venv/bin/python benchmarks/realism.py mapping [--relax convex 1e-2 1e-3 ...] [--dataset D --detections MP.json]
@@ -38,7 +38,7 @@ scalp: skin seen between hair strands above the brows, its luminance over the fa
   and the hair's, by hair colour (docs/realism.md, "The scalp under the hair").
 hats: hair under a beanie or cap, groomed without and with the hat: strands, share of hair points
   beyond the hat's cut plane (through its crown), groom seconds.
-judge: mediapipe 0.10.21 (its own environment; benchmarks/mediapipe_judge.py) on the frames
+judge: mediapipe 0.10.21 (the fit extra; benchmarks/mediapipe_judge.py, in a subprocess) on the frames
   whose camera azimuth is within --max-azimuth, composited over mid grey: face-detection
   rate, face-mesh rate, and the error of its points (shifted by +0.5 px to synth's pixel
   convention) against the frame's ``landmarks_2d``, in units of the inter-ocular distance
@@ -742,7 +742,7 @@ def main(argv=None) -> None:
     p.add_argument("--reach", type=float, default=0.3)
     p = sub.add_parser("judge")
     p.add_argument("dataset")
-    p.add_argument("--mp-python", required=True)
+    p.add_argument("--mp-python", default=sys.executable, help="a Python with mediapipe==0.10.21 (default: this one)")
     p.add_argument("--max-azimuth", type=float, default=45.0)
     p.add_argument("--detections", help="mediapipe's JSON: read it if it exists (no mediapipe run), else write it")
     p = sub.add_parser("jaw")

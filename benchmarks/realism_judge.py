@@ -1,6 +1,6 @@
 """mediapipe as a judge of realism (issue 13): the mediapipe -> ibug68 mapping and the error metric.
 
-``benchmarks/realism.py judge`` runs mediapipe (its own environment, benchmarks/mediapipe_judge.py)
+``benchmarks/realism.py judge`` runs mediapipe (benchmarks/mediapipe_judge.py, in a subprocess)
 on the frames and compares its face mesh with the frames' ``landmarks_2d``. This module holds
 what that comparison is made of, all plain numpy (tested in tests/benchmarks/test_realism_judge.py):
 

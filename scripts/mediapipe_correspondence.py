@@ -1,12 +1,12 @@
 """Derive (and evaluate) the mapping of mediapipe's face-mesh points to head-model surface points.
 
-mediapipe needs protobuf<5, so it lives in its own environment; the steps alternate:
+The steps (mediapipe==0.10.21 is the fit extra, in the project's venv):
 
     # 1. renders of the model (any synth dataset, faces roughly frontal), then PNGs + truth
     .venv/bin/synth render -n 6 -e 1 -v 5 -p preview -o R --set render.resolution=[384,384] ...
     .venv/bin/python scripts/mediapipe_correspondence.py export R WORK
-    # 2. detection, in an environment with mediapipe==0.10.21 (numpy and pillow suffice besides)
-    MPENV/bin/python scripts/mediapipe_correspondence.py detect WORK
+    # 2. detection (any environment with mediapipe==0.10.21, numpy and pillow)
+    .venv/bin/python scripts/mediapipe_correspondence.py detect WORK
     # 3. the correspondence from identities < --train (prior/fit/data/mediapipe-<model key>.json)
     .venv/bin/python scripts/mediapipe_correspondence.py derive WORK --train 4
     # 4. fit the held-out identities with it and compare with the renders' cameras

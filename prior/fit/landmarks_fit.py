@@ -60,7 +60,9 @@ class Observations:
     unused. ``K`` (N, 3, 3) known intrinsics, else None (then ``width``/``height`` are needed
     and a shared focal length is fitted). ``world_to_camera`` (N, 4, 4) known extrinsics or None.
     The points are the model's landmark set ``landmark_set``, or surface points given as
-    ``landmark_def`` (triangle indices (L,), barycentric weights (L, 3)) under that name."""
+    ``landmark_def`` (triangle indices (L,), barycentric weights (L, 3)) under that name.
+    ``focal_init`` (N,) pixels: each image's initial focal length when K is unknown (e.g. from
+    EXIF; one shared factor is fitted), else None (from ``FitOptions.focal_init_fov_deg``)."""
 
     mean: np.ndarray
     sigma: np.ndarray
@@ -70,6 +72,7 @@ class Observations:
     world_to_camera: np.ndarray | None = None
     landmark_set: str = "ibug68"
     landmark_def: tuple[np.ndarray, np.ndarray] | None = None  # (triangles, bary) if not a set of the model
+    focal_init: np.ndarray | None = None
 
     def __post_init__(self):
         self.mean = np.asarray(self.mean, np.float64)
@@ -84,6 +87,11 @@ class Observations:
             self.K = np.broadcast_to(np.asarray(self.K, np.float64), (N, 3, 3)).copy()
         if self.world_to_camera is not None:
             self.world_to_camera = np.asarray(self.world_to_camera, np.float64).reshape(N, 4, 4)
+        if self.focal_init is not None:
+            self.focal_init = np.broadcast_to(np.asarray(self.focal_init, np.float64), (N,)).copy()
+            if not np.all(np.isfinite(self.focal_init) & (self.focal_init > 0)):
+                raise SynthError(f"initial focal lengths {self.focal_init.tolist()} must be positive", "landmarks",
+                                 "pass focal lengths in pixels, or none")
 
     @property
     def used(self) -> np.ndarray:
@@ -165,7 +173,8 @@ class _Problem:
         else:
             W, H = obs.width.astype(np.float64), obs.height.astype(np.float64)
             K0 = np.zeros((N, 3, 3))
-            K0[:, 0, 0] = K0[:, 1, 1] = 0.5 * W / np.tan(0.5 * np.deg2rad(opt.focal_init_fov_deg))
+            K0[:, 0, 0] = K0[:, 1, 1] = 0.5 * W / np.tan(0.5 * np.deg2rad(opt.focal_init_fov_deg)) \
+                if obs.focal_init is None else obs.focal_init
             K0[:, 0, 2], K0[:, 1, 2], K0[:, 2, 2] = 0.5 * W, 0.5 * H, 1.0
             self.K0 = t(K0)
         nj, Ke = len(opt.joints), self.head.Ke

@@ -82,6 +82,15 @@ def codes_from_fit(fit, model, layout) -> np.ndarray:
     return np.concatenate(parts, 1).astype(np.float32)
 
 
+def exif_focal_init(inputs) -> np.ndarray | None:
+    """(N,) initial focal lengths (canvas pixels) from the inputs' EXIF; an image without one takes
+    the median of the others'; None when no input has one."""
+    known = [im.focal_px for im in inputs if im.focal_px is not None]
+    if not known:
+        return None
+    return np.array([float(np.median(known)) if im.focal_px is None else im.focal_px for im in inputs])
+
+
 def fitted_face_centre(fit, model) -> np.ndarray:
     """Centroid of the fitted head's ibug68 landmarks (first image's expression), in the fit's frame."""
     from synth.model.head import HeadModel
@@ -102,11 +111,30 @@ def _progress(log):
     return report
 
 
+def landmark_fit(inputs, source: str, model, cfg, log=print):
+    """Step 2: the inputs' landmarks (``source``: json or mediapipe; photos get their masks) and the
+    head model and cameras fitted to them, with the config's landmark options (EXIF focal lengths
+    as the initial focal length, or a known ``landmarks.focal_px``): the observations and the fit."""
+    from prior.fit.landmarks_fit import FitOptions, fit_landmarks
+
+    lm = cfg.landmarks
+    obs = observations(inputs, source, model, sigma_px=lm.sigma_px, noise_px=lm.noise_px, seed=cfg.fit.seed)
+    if lm.focal_px > 0:
+        W, H = inputs[0].size
+        obs.K = np.broadcast_to(np.array([[lm.focal_px, 0, W / 2], [0, lm.focal_px, H / 2], [0, 0, 1.0]]),
+                                (len(inputs), 3, 3)).copy()
+    elif lm.exif_focal:
+        obs.focal_init = exif_focal_init(inputs)
+        if obs.focal_init is not None:
+            log(f"initial focal length from EXIF: {', '.join(f'{f:.1f}' for f in obs.focal_init)} px")
+    return obs, fit_landmarks(model, obs, FitOptions(per_image_expression=lm.per_image_expression,
+                                                     focal_init_fov_deg=lm.fov_init_deg))
+
+
 def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | None = None, config_path=None,
              sets=(), steps: int | None = None, pretrained: bool = True, model_path=None, device="cpu",
              log=print) -> Path:
     """Fit a face to ``images`` with the prior in ``prior_run``; write the fit directory ``out``."""
-    from prior.fit.landmarks_fit import FitOptions, fit_landmarks
     from prior.train.setup import build_model, fit_scene
 
     out = Path(out)
@@ -120,7 +148,7 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
     ck = load_prior(prior_run)
     model, model_sha = head_model(model_path)
     check_head_model(model, model_sha, ck, str(ck.path))
-    inputs = read_inputs(images)
+    inputs = read_inputs(images, cfg.fit.max_side_px)
     prior_wh = tuple(int(x) for x in ck.identities.front_size[0])
     low_wh = prior_resolution(*inputs[0].size, prior_wh, cfg.inversion.resolution_factor)
     check_patch_size(cfg.inversion, (low_wh[1], low_wh[0]))
@@ -131,14 +159,7 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
         require_mediapipe()
     times = {}
     t0 = time.perf_counter()
-    lm = cfg.landmarks
-    obs = observations(inputs, source, model, sigma_px=lm.sigma_px, noise_px=lm.noise_px, seed=cfg.fit.seed)
-    if lm.focal_px > 0:
-        W, H = inputs[0].size
-        obs.K = np.broadcast_to(np.array([[lm.focal_px, 0, W / 2], [0, lm.focal_px, H / 2], [0, 0, 1.0]]),
-                                (len(inputs), 3, 3)).copy()
-    fit = fit_landmarks(model, obs, FitOptions(per_image_expression=lm.per_image_expression,
-                                               focal_init_fov_deg=lm.fov_init_deg))
+    _, fit = landmark_fit(inputs, source, model, cfg, log)
     times["landmarks_s"] = time.perf_counter() - t0
     log(f"landmarks: {source}, {len(inputs)} images, rmse {', '.join(f'{r:.2f}' for r in fit.rmse_px)} px, "
         f"focal {fit.K[0, 0, 0]:.1f} px, converged {fit.converged}")
@@ -172,8 +193,7 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
             "head_model": {"name": model.name, "sha256": model_sha,
                            "path": None if model_path is None else str(Path(model_path).resolve())},
             "config": cfg.to_dict(), "landmark_source": source, "inputs": [im.record() for im in inputs],
-            "masks": [("alpha" if im.frame is not None else "given") if im.mask is not None else "none"
-                      for im in inputs],
+            "masks": [im.mask_source for im in inputs],
             "cameras": [{"K": fit.K[i].tolist(), "world_to_camera": fit.world_to_camera[i].tolist(),
                          "camera_to_world": c2w[i].tolist(), "width": inputs[i].size[0],
                          "height": inputs[i].size[1]} for i in range(len(inputs))],

@@ -75,18 +75,27 @@ class ViewSet:
         H, W = self.size
         if (width, height) == (W, H):
             return self
-        x = torch.from_numpy(np.ascontiguousarray(self.target)).permute(0, 3, 1, 2)
-        shrink = width <= W and height <= H
-        y = F.interpolate(x, size=(height, width), mode="bilinear", antialias=shrink, align_corners=False)
         S = np.diag([width / W, height / H, 1.0])
-        return ViewSet(y.permute(0, 2, 3, 1).numpy().astype(np.float32), S @ self.K, self.c2w, self.codes,
-                       self.centre, self.radius)
+        return ViewSet(resample(self.target, width, height), S @ self.K, self.c2w, self.codes, self.centre,
+                       self.radius)
 
     def patch_pixels(self, view: int, top: int, left: int, size: int) -> np.ndarray:
         """Flat pixel indices (size * size,) of a square patch, row-major."""
         H, W = self.size
         r, c = np.mgrid[top:top + size, left:left + size]
         return (r * W + c).reshape(-1)
+
+
+def resample(images: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(N, H, W, C) float images at ``width`` x ``height``: area-averaged (antialiased bilinear)
+    when shrinking, bilinear when growing; pixel corners stay on pixel corners."""
+    N, H, W, C = images.shape
+    if (width, height) == (W, H):
+        return np.asarray(images, np.float32)
+    x = torch.from_numpy(np.ascontiguousarray(images, np.float32)).permute(0, 3, 1, 2)
+    shrink = width <= W and height <= H
+    y = F.interpolate(x, size=(height, width), mode="bilinear", antialias=shrink, align_corners=False)
+    return y.permute(0, 2, 3, 1).numpy().astype(np.float32)
 
 
 def prior_resolution(width: int, height: int, prior_size: tuple[int, int], factor: float = 1.0) -> tuple[int, int]:

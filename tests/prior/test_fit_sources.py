@@ -73,7 +73,7 @@ def test_mediapipe_missing_is_one_line(monkeypatch):
     with pytest.raises(SynthError) as e:
         require_mediapipe()
     msg = str(e.value)
-    assert "\n" not in msg and "not installed" in msg and f"pip install 'synth[fit]'" in msg
+    assert "\n" not in msg and "not installed" in msg and "pip install 'synth-faces[fit]'" in msg
     assert MEDIAPIPE_VERSION in msg
 
 
@@ -157,14 +157,15 @@ def test_mediapipe_points_fit_round_trip(default_model):
 
 
 def test_mediapipe_on_a_photo(default_model):
-    """Runs only where the fit extra is installed (not in the project's environment)."""
-    pytest.importorskip("mediapipe", reason="the synth[fit] extra (mediapipe) is not installed")
+    """Needs the fit extra (mediapipe), which scripts/setup.sh installs."""
+    pytest.importorskip("mediapipe", reason="the synth-faces[fit] extra (mediapipe) is not installed: make setup")
     skd = pytest.importorskip("skimage.data", reason="scikit-image (test extra) provides the photo")
     from prior.fit.landmark_sources import mediapipe_observations
     from prior.fit.landmarks_fit import fit_landmarks
 
     photo = skd.astronaut()  # 512 x 512 RGB, one face
-    obs, masks = mediapipe_observations([photo], default_model)
+    obs, masks, found = mediapipe_observations([photo], default_model)
+    assert found == [{"faces": 1, "face_px": found[0]["face_px"]}] and 90 < found[0]["face_px"] < 120
     assert obs.mean.shape[1] == len(load_correspondence(default_model)["index"]) and np.all(np.isfinite(obs.sigma))
     assert masks[0].shape == photo.shape[:2] and 0.05 < float(masks[0].mean()) < 0.95
     fit = fit_landmarks(default_model, obs)

