@@ -20,7 +20,6 @@ name and renamed when complete.
 
 from __future__ import annotations
 
-import io
 import json
 from pathlib import Path
 
@@ -28,19 +27,12 @@ import numpy as np
 
 from synth.dataset.preview import linear_to_srgb
 from synth.errors import SynthError
-from synth.export.select import check_new_output, select_frames
+from synth.export.select import check_new_output, png_bytes, select_frames
 from synth.io import atomic_dir
 
 ENVIRONMENT = 0  # the index of a synth frame's one environment
 FOLDERS = ("cameras_json", "color_image", "foreground_mask", "segmentation")
 
-
-def _png(array: np.ndarray) -> bytes:
-    from PIL import Image
-
-    buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(array)).save(buf, format="PNG")
-    return buf.getvalue()
 
 
 def camera_json(frame) -> dict:
@@ -80,10 +72,10 @@ def export_cafca(source, out, *, identity: int | None = None, progress=None) -> 
                 raise SynthError("a segmentation id does not fit a 16-bit PNG", str(ref.json_path),
                                  "export frames whose class ids are below 65536")
             rgb = (linear_to_srgb(np.clip(f.rgb_premultiplied, 0.0, 1.0)) * 255.0 + 0.5).astype(np.uint8)
-            (tmp / scene / "color_image" / f"{cam}.png").write_bytes(_png(rgb))
+            (tmp / scene / "color_image" / f"{cam}.png").write_bytes(png_bytes(rgb))
             mask = (np.clip(f.alpha, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
-            (tmp / scene / "foreground_mask" / f"{cam}.png").write_bytes(_png(mask))
-            (tmp / scene / "segmentation" / f"{cam}.png").write_bytes(_png(seg.astype(np.uint16)))
+            (tmp / scene / "foreground_mask" / f"{cam}.png").write_bytes(png_bytes(mask))
+            (tmp / scene / "segmentation" / f"{cam}.png").write_bytes(png_bytes(seg.astype(np.uint16)))
             (tmp / scene / "cameras_json" / f"{cam}.json").write_text(json.dumps(camera_json(f), indent=1))
             if progress:
                 progress(f.key)

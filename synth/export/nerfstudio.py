@@ -29,7 +29,6 @@ and are both the validation and the test images; ``val_views = 0`` writes no spl
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +37,7 @@ from synth.conventions import nerfstudio_camera
 from synth.dataset.layout import held_out, parse_frame_key
 from synth.dataset.preview import linear_to_srgb
 from synth.errors import SynthError
-from synth.export.select import check_new_output, select_frames
+from synth.export.select import check_new_output, png_bytes, select_frames
 from synth.io import atomic_dir, atomic_write_json
 
 #: Pixels with at least this coverage are in the mask.
@@ -48,24 +47,16 @@ DEPTH_UNITS_PER_M = 1000.0
 INTRINSICS = ("fl_x", "fl_y", "cx", "cy")
 
 
-def _png(array: np.ndarray) -> bytes:
-    """PNG bytes; the mode follows the array (uint8 (H, W, 4): RGBA, uint8 (H, W): L, uint16: I;16)."""
-    from PIL import Image
-
-    buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(array)).save(buf, format="PNG")
-    return buf.getvalue()
-
 
 def colour_png(frame) -> bytes:
     """8-bit sRGB RGBA with straight alpha, from the frame's premultiplied scene-linear colour."""
     rgb = (linear_to_srgb(frame.rgb) * 255.0 + 0.5).astype(np.uint8)
     a = (np.clip(frame.alpha, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
-    return _png(np.concatenate([rgb, a[..., None]], axis=-1))
+    return png_bytes(np.concatenate([rgb, a[..., None]], axis=-1))
 
 
 def mask_png(frame) -> bytes:
-    return _png(np.where(frame.alpha >= MASK_ALPHA, 255, 0).astype(np.uint8))
+    return png_bytes(np.where(frame.alpha >= MASK_ALPHA, 255, 0).astype(np.uint8))
 
 
 def depth_png(frame, where: str) -> bytes:
@@ -75,7 +66,7 @@ def depth_png(frame, where: str) -> bytes:
         raise SynthError(f"depth beyond {65535 / DEPTH_UNITS_PER_M:.1f} m does not fit a 16-bit millimetre PNG",
                          where, "this export is for heads at studio distances; use the EXR depth")
     mm = np.where(z > 0, np.maximum(np.rint(z * DEPTH_UNITS_PER_M), 1.0), 0.0)
-    return _png(mm.astype(np.uint16))
+    return png_bytes(mm.astype(np.uint16))
 
 
 def frame_entry(frame, where: str) -> dict:

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
+
+import numpy as np
 
 from synth.dataset.layout import parse_frame_key
 from synth.dataset.reader import FrameRef, list_frames
@@ -35,3 +38,12 @@ def check_new_output(out: Path, what: str) -> None:
         raise SynthError(f"{what} output exists and is not a directory", str(out), "pass a new --out directory")
     if not out.parent.is_dir():
         raise SynthError(f"the parent of the {what} output does not exist", str(out.parent), "create it first")
+
+
+def png_bytes(array: np.ndarray) -> bytes:
+    """PNG bytes; the mode follows the array (uint8 (H, W, 4): RGBA, uint8 (H, W): L, uint16: I;16)."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(array)).save(buf, format="PNG")
+    return buf.getvalue()
