@@ -13,8 +13,8 @@ For step ``s``, micro-batch ``m`` and rank ``r`` the sampler draws, with a gener
    over the image.
 
 The buffer's contents are part of the checkpoint, so a resumed run draws exactly the batches it
-would have. With a buffer that holds every identity of the rank the draws are those of the
-former in-memory store (identities ``r, r + world, ...``).
+would have. With a buffer that holds every identity of the rank, every identity of the rank
+(``r, r + world, ...``) is drawn from at every step.
 Rays go through pixel centres (:func:`synth.dataset.reader.camera_rays`) and are cut to the
 identity's bounding sphere; ``near == far`` marks a ray that misses it.
 """
