@@ -21,7 +21,7 @@ def ds(tmp_path_factory):
 
 def load_all(ds, *, joints=JOINTS, holdout_views=0, margin=0.05, pixel_dtype="float16", rank=0, world=1,
              buffer=0, start=True):
-    """The prepare pass and a loader holding every identity of the rank ."""
+    """The prepare pass and a loader holding every identity of the rank."""
     src = open_source(ds)
     table = build_table(prepare(src, ds / ".prior" / "prepare"), joints=joints, margin=margin,
                         holdout_views=holdout_views, planned=src.planned_identities)
