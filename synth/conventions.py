@@ -30,6 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from synth.geometry import exact
+
 #: OpenCV camera axes <-> OpenGL camera axes (flip y and z); its own inverse. Blender, USD and
 #: nerfstudio cameras use the OpenGL axes (x right, y up, looking down -z).
 CV_TO_GL = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -48,8 +50,8 @@ def _rad(x) -> np.ndarray:
 def spherical_offset(azimuth_deg, elevation_deg) -> np.ndarray:
     """(..., 3) unit vector from the target toward the camera."""
     a, e = _rad(azimuth_deg), _rad(elevation_deg)
-    ce = np.cos(e)
-    return np.stack(np.broadcast_arrays(np.sin(a) * ce, -np.cos(a) * ce, np.sin(e)), axis=-1)
+    ce = exact.cos(e)
+    return np.stack(np.broadcast_arrays(exact.sin(a) * ce, -exact.cos(a) * ce, exact.sin(e)), axis=-1)
 
 
 def spherical_to_position(azimuth_deg, elevation_deg, radius, target) -> np.ndarray:
@@ -64,8 +66,8 @@ def position_to_spherical(position, target) -> tuple[np.ndarray, np.ndarray, np.
     d = np.asarray(position, np.float64) - np.asarray(target, np.float64)
     r = np.linalg.norm(d, axis=-1)
     horiz = np.hypot(d[..., 0], d[..., 1])
-    el = np.degrees(np.arctan2(d[..., 2], horiz))
-    az = np.where(horiz > 1e-12 * np.maximum(r, 1e-300), np.degrees(np.arctan2(d[..., 0], -d[..., 1])), 0.0)
+    el = np.degrees(exact.atan2(d[..., 2], horiz))
+    az = np.where(horiz > 1e-12 * np.maximum(r, 1e-300), np.degrees(exact.atan2(d[..., 0], -d[..., 1])), 0.0)
     return az, el, r
 
 
@@ -97,7 +99,7 @@ def orbit_camera_to_world(azimuth_deg, elevation_deg, radius, target, roll_deg=0
     degenerates at the poles. ``roll_deg`` rotates the camera about its optical axis (x toward y).
     """
     a, e = _rad(azimuth_deg), _rad(elevation_deg)
-    sa, ca, se, ce = np.sin(a), np.cos(a), np.sin(e), np.cos(e)
+    sa, ca, se, ce = exact.sin(a), exact.cos(a), exact.sin(e), exact.cos(e)
     sa, ca, se, ce = np.broadcast_arrays(sa, ca, se, ce)
     z = np.stack([-sa * ce, ca * ce, -se], axis=-1)  # forward = toward the target
     up = np.stack([-sa * se, ca * se, ce], axis=-1)
@@ -105,7 +107,7 @@ def orbit_camera_to_world(azimuth_deg, elevation_deg, radius, target, roll_deg=0
     x = np.cross(y, z)  # right-handed: x = y cross z
     roll = _rad(roll_deg)
     if np.any(roll != 0):
-        cr, sr = np.cos(roll)[..., None], np.sin(roll)[..., None]
+        cr, sr = exact.cos(roll)[..., None], exact.sin(roll)[..., None]
         x, y = cr * x + sr * y, -sr * x + cr * y
     p = spherical_to_position(azimuth_deg, elevation_deg, radius, target)
     return _pack_c2w(x, y, z, np.broadcast_to(p, z.shape))
@@ -144,7 +146,7 @@ def invert_rigid(M: np.ndarray) -> np.ndarray:
     out = np.zeros_like(M)
     Rt = np.swapaxes(M[..., :3, :3], -1, -2)
     out[..., :3, :3] = Rt
-    out[..., :3, 3] = -np.einsum("...ij,...j->...i", Rt, M[..., :3, 3])
+    out[..., :3, 3] = -exact.matvec3(Rt, M[..., :3, 3])
     out[..., 3, 3] = 1.0
     return out
 
@@ -166,13 +168,13 @@ blender_to_opencv_c2w = opencv_to_opengl_c2w
 
 def fov_from_focal(focal_mm: float, sensor_width_mm: float) -> float:
     """Horizontal field of view (degrees) of a lens on a sensor (horizontal sensor fit)."""
-    return float(np.degrees(2.0 * np.arctan(0.5 * sensor_width_mm / focal_mm)))
+    return float(np.degrees(2.0 * exact.atan(0.5 * sensor_width_mm / focal_mm)))
 
 
 def intrinsics(width: int, height: int, fov_x_deg, principal_offset_px=(0.0, 0.0)) -> np.ndarray:
     """(..., 3, 3) K with square pixels: fx = fy = (W/2) / tan(fov_x/2), principal point at
     (W/2, H/2) + offset (pixel centres at integer + 0.5)."""
-    f = 0.5 * width / np.tan(0.5 * _rad(fov_x_deg))
+    f = 0.5 * width / exact.tan(0.5 * _rad(fov_x_deg))
     off = np.asarray(principal_offset_px, np.float64)
     f, ox, oy = np.broadcast_arrays(f, off[..., 0], off[..., 1])
     K = np.zeros(f.shape + (3, 3))
@@ -266,8 +268,8 @@ def project(K: np.ndarray, world_to_camera: np.ndarray, points) -> tuple[np.ndar
     """Project (..., N, 3) world points: returns (pixels (..., N, 2), depth along +z (..., N))."""
     X = np.asarray(points, np.float64)
     w2c = np.asarray(world_to_camera, np.float64)
-    Xc = np.einsum("...ij,...nj->...ni", w2c[..., :3, :3], X) + w2c[..., None, :3, 3]
-    uvw = np.einsum("...ij,...nj->...ni", np.asarray(K, np.float64), Xc)
+    Xc = exact.points_times_matrix(X, np.swapaxes(w2c[..., :3, :3], -1, -2)) + w2c[..., None, :3, 3]
+    uvw = exact.points_times_matrix(Xc, np.swapaxes(np.asarray(K, np.float64), -1, -2))
     return uvw[..., :2] / uvw[..., 2:3], Xc[..., 2]
 
 
@@ -294,4 +296,4 @@ def _compose_zx(z_deg, x_deg) -> np.ndarray:
     o = np.zeros_like(zr)
     Rz = axis_angle_to_matrix(np.stack([o, o, zr], -1))
     Rx = axis_angle_to_matrix(np.stack([xr, o, o], -1))
-    return matrix_to_axis_angle(Rz @ Rx)
+    return matrix_to_axis_angle(exact.matmul3(Rz, Rx))

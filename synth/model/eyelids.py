@@ -45,6 +45,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from synth.geometry import exact
+
 #: upper / lower lid rotation per unit of gaze pitch (see docs/default-model.md, "Eyelids")
 FOLLOW_UPPER = 0.8
 FOLLOW_LOWER = 0.3
@@ -63,6 +65,12 @@ LACRIMAL_GAP_M = 0.003
 
 NUMPY_OPS = SimpleNamespace(atan2=np.arctan2, asin=np.arcsin, acos=np.arccos, sqrt=np.sqrt, sin=np.sin,
                             cos=np.cos, clip=np.clip, maximum=np.maximum, stack=np.stack, const=lambda a: a)
+
+
+#: the same functions from :mod:`synth.geometry.exact`: the evaluated head's lids are the same bits
+#: on every machine (numpy's SIMD transcendental loops are not)
+EXACT_OPS = SimpleNamespace(atan2=exact.atan2, asin=exact.asin, acos=exact.acos, sqrt=np.sqrt, sin=exact.sin,
+                            cos=exact.cos, clip=np.clip, maximum=np.maximum, stack=np.stack, const=lambda a: a)
 
 
 def _cosine_falloff(d: np.ndarray, D: float) -> np.ndarray:

@@ -15,8 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from synth.errors import CodeError
+from synth.geometry import exact
 from synth.geometry.rotations import axis_angle_to_matrix
-from synth.model.eyelids import EyelidRig, apply_eyelids
+from synth.model.eyelids import EXACT_OPS, EyelidRig, apply_eyelids
 from synth.model.format import HeadModelData
 
 
@@ -57,8 +58,7 @@ class HeadModel:
         self.Ki, self.Ke = d.identity_dims, d.expression_dims
         dt = self.dtype
         self._template = d.template.astype(dt).reshape(1, V * 3)
-        # scaled bases, flattened to (K, 3V) for one GEMM per call
-        # identity and expression bases stacked into one (Ki + Ke, 3V) matrix: one GEMM per call
+        # identity and expression bases, scaled and stacked into one (Ki + Ke, 3V) matrix
         self._basis = np.concatenate([
             (d.identity_basis * d.identity_scale[:, None, None]).reshape(self.Ki, V * 3),
             (d.expression_basis * d.expression_scale[:, None, None]).reshape(self.Ke, V * 3)]).astype(dt)
@@ -120,7 +120,7 @@ class HeadModel:
                 raise CodeError(f"batch sizes differ: identity {B}, expression {psi.shape[0]}", "expression",
                                 "pass equal batch sizes or a single code")
         rot, trans = self._check_pose(joint_rotations, translation, B)
-        shaped = np.concatenate([beta, psi], axis=1) @ self._basis
+        shaped = exact.lincomb(np.concatenate([beta, psi], axis=1), self._basis)
         shaped += self._template
         shaped = shaped.reshape(B, self.V, 3)
         joints = self._joints(beta)
@@ -131,7 +131,9 @@ class HeadModel:
         lms = {}
         if landmarks:
             for s, (corners, bary) in self._lm.items():
-                lms[s] = np.einsum("blkc,lk->blc", posed[:, corners], bary, optimize=True).astype(self.dtype)
+                lms[s] = ((posed[:, corners[:, 0]] * bary[None, :, 0, None]
+                           + posed[:, corners[:, 1]] * bary[None, :, 1, None])
+                          + posed[:, corners[:, 2]] * bary[None, :, 2, None]).astype(self.dtype)
         return Evaluation(posed, G, lms)
 
     # ---- internals ------------------------------------------------------------------
@@ -169,12 +171,12 @@ class HeadModel:
         for e in self._eyelids.eyes:
             eye_rot[e.joint] = (np.broadcast_to(np.eye(3), (B, 3, 3)) if rot is None
                                 else axis_angle_to_matrix(rot[:, e.joint].astype(np.float64)))
-        moved = apply_eyelids(self._eyelids, shaped, joints, psi, eye_rot)
+        moved = apply_eyelids(self._eyelids, shaped, joints, psi, eye_rot, EXACT_OPS)
         for idx, p in moved.values():
             shaped[:, idx] = p
 
     def _joints(self, beta: np.ndarray) -> np.ndarray:
-        return (beta @ self._joint_basis + self._joint_rest).reshape(-1, self.J, 3)
+        return (exact.lincomb(beta, self._joint_basis) + self._joint_rest).reshape(-1, self.J, 3)
 
     def _chain(self, joints: np.ndarray, rot, trans):
         """World joint frames G (B,J,4,4) and skinning transforms A = G * [I | -j_rest]."""
@@ -192,16 +194,16 @@ class HeadModel:
                 Rw[:, j] = R[:, j]
                 tw[:, j] = joints[:, j]
             else:
-                Rw[:, j] = Rw[:, p] @ R[:, j]
+                Rw[:, j] = exact.matmul3(Rw[:, p], R[:, j])
                 # joint position moves rigidly with its parent
-                tw[:, j] = np.einsum("bij,bj->bi", Rw[:, p], joints[:, j] - joints[:, p]) + tw[:, p]
+                tw[:, j] = exact.matvec3(Rw[:, p], joints[:, j] - joints[:, p]) + tw[:, p]
         if trans is not None:
             tw = tw + trans[:, None, :]
         G = np.zeros((B, J, 4, 4), dt)
         G[:, :, :3, :3] = Rw
         G[:, :, :3, 3] = tw
         G[:, :, 3, 3] = 1.0
-        A_t = tw - np.einsum("bjik,bjk->bji", Rw, joints)
+        A_t = tw - exact.matvec3(Rw, joints)
         return G, (Rw, A_t)
 
     def _skin_vertices(self, shaped: np.ndarray, A, identity_pose: bool) -> np.ndarray:
@@ -212,12 +214,12 @@ class HeadModel:
         out = np.empty_like(shaped)
         for j, idx in enumerate(self._rigid):
             if idx.size:
-                out[:, idx] = np.matmul(shaped[:, idx], RwT[:, j]) + At[:, j, None, :]
+                out[:, idx] = exact.points_times_matrix(shaped[:, idx], RwT[:, j]) + At[:, j, None, :]
         if self._blend_idx.size:
             vb = shaped[:, self._blend_idx]
             acc = np.zeros_like(vb)
             for j, (sel, w) in enumerate(self._skin):
                 if sel.size:
-                    acc[:, sel] += w * (np.matmul(vb[:, sel], RwT[:, j]) + At[:, j, None, :])
+                    acc[:, sel] += w * (exact.points_times_matrix(vb[:, sel], RwT[:, j]) + At[:, j, None, :])
             out[:, self._blend_idx] = acc
         return out

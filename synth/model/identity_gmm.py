@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import logsumexp
 
+from synth.geometry import exact
+
 _LOG2PI = float(np.log(2.0 * np.pi))
 
 
@@ -40,6 +42,7 @@ class GaussianMixture:
         self.means = np.asarray(self.means, np.float64)
         self.covs = np.asarray(self.covs, np.float64)
         self._chol = np.linalg.cholesky(self.covs)  # raises if not positive definite
+        self._chol_exact = None  # sample()'s machine-independent factor, made on first use
         self._logdet = 2.0 * np.sum(np.log(np.diagonal(self._chol, axis1=1, axis2=2)), axis=1)
 
     @classmethod
@@ -114,7 +117,15 @@ class GaussianMixture:
                 z[bad] = rng.standard_normal((int(bad.sum()), self.dim))
             norms = np.linalg.norm(z, axis=1, keepdims=True)
             z = np.where(norms > max_mahalanobis, z * (max_mahalanobis / np.maximum(norms, 1e-300)), z)
-        return self.means[comps] + np.einsum("nij,nj->ni", self._chol[comps], z)
+        # the factor and the product in a fixed order (synth.geometry.exact): plans are the same bits
+        # on every machine, whatever LAPACK/BLAS kernels would have computed
+        if self._chol_exact is None:
+            self._chol_exact = exact.cholesky(self.covs)
+        L = self._chol_exact[comps]
+        out = self.means[comps].copy()
+        for j in range(self.dim):
+            out += L[:, :, j] * z[:, j, None]
+        return out
 
     def mean(self) -> np.ndarray:
         return self.weights @ self.means

@@ -17,6 +17,7 @@ import numpy as np
 from synth import seeds
 from synth.assets.catalogue import MAX_PARAMETERS, Catalogue
 from synth.assets.classes import CLASSES, NAMES
+from synth.geometry import exact
 
 _SLOTS = 2 + MAX_PARAMETERS
 
@@ -40,7 +41,7 @@ def _draw_param(spec: dict, u: float, chosen: dict[str, dict]) -> Any:
     if spec.get("integer"):
         return int(min(hi, lo + int(u * (hi - lo + 1))))
     if spec.get("log"):
-        return round(float(np.exp(np.log(lo) + u * (np.log(hi) - np.log(lo)))), 8)
+        return round(float(exact.exp(exact.log(lo) + u * (exact.log(hi) - exact.log(lo)))), 8)
     return round(float(lo + u * (hi - lo)), 8)  # plans store floats to 8 decimals
 
 

@@ -18,6 +18,7 @@ import numpy as np
 from synth import seeds
 from synth.conventions import spherical_offset
 from synth.errors import SynthError
+from synth.geometry import exact
 
 _COS_MARGIN = 2e-6  # float32 cosines: accepted pairs are >= the angle in float64 too
 _F32_MIN_DEG = 2.0  # below this separation the check runs in float64 without a margin
@@ -31,15 +32,15 @@ _BATCH = 16  # candidates per expression in the first round (a multiple of 4)
 
 def cap_area(r: float) -> float:
     """Area (sr) of a spherical cap of angular radius r (radians); 2 pi (1 - cos r), stably."""
-    return 4.0 * np.pi * np.sin(0.5 * r) ** 2
+    return 4.0 * np.pi * exact.sin(0.5 * r) ** 2
 
 
 def _point_halfwidth(e: float, ep: np.ndarray, r: float) -> np.ndarray:
     """Azimuth half-width at latitudes ``ep`` of the cap of radius r around latitude e."""
-    ce = np.cos(e) * np.cos(ep)
+    ce = exact.cos(e) * exact.cos(ep)
     with np.errstate(divide="ignore", invalid="ignore"):
-        c = (np.cos(r) - np.sin(e) * np.sin(ep)) / ce
-    w = np.where(c <= -1.0, np.pi, np.arccos(np.clip(c, -1.0, 1.0)))
+        c = (exact.cos(r) - exact.sin(e) * exact.sin(ep)) / ce
+    w = np.where(c <= -1.0, np.pi, exact.acos(np.clip(c, -1.0, 1.0)))
     w = np.where(c > 1.0, -np.inf, w)
     at_pole = ce < 1e-15
     return np.where(at_pole, np.where(np.abs(e - ep) <= r + 1e-15, np.pi, -np.inf), w)
@@ -53,16 +54,16 @@ def expanded_area(az_deg, el_deg, r: float, slices: int = 20000) -> float:
     e0, e1 = np.deg2rad(el_deg)
     lo, hi = max(e0 - r, -np.pi / 2), min(e1 + r, np.pi / 2)
     if a1 - a0 >= 2.0 * np.pi - 1e-12:
-        return float(2.0 * np.pi * (np.sin(hi) - np.sin(lo)))
+        return float(2.0 * np.pi * (exact.sin(hi) - exact.sin(lo)))
     ep = lo + (np.arange(slices) + 0.5) * (hi - lo) / slices
-    cep = np.cos(ep)
+    cep = exact.cos(ep)
     # The half-width W(ep) reached by one meridian segment [e0, e1] is the max over its points
     # of their caps' half-widths: the stationary (tangent) point if its foot lies inside the
     # segment, else an endpoint.
     with np.errstate(divide="ignore", invalid="ignore"):
-        full = np.arcsin(np.clip(np.sin(r) / cep, 0.0, 1.0))
-        foot = np.arctan2(np.sin(ep), cep * np.cos(full))
-    interior = (cep > np.sin(r)) & (foot >= e0) & (foot <= e1)
+        full = exact.asin(np.clip(exact.sin(r) / cep, 0.0, 1.0))
+        foot = exact.atan2(exact.sin(ep), cep * exact.cos(full))
+    interior = (cep > exact.sin(r)) & (foot >= e0) & (foot <= e1)
     w_end = np.maximum(_point_halfwidth(e0, ep, r), _point_halfwidth(e1, ep, r))
     w = np.where(interior, full, w_end)
     extent = np.where(w >= 0, np.minimum(2.0 * np.pi, (a1 - a0) + 2.0 * np.maximum(w, 0.0)), 0.0)
@@ -107,8 +108,8 @@ def uniforms_to_spherical(u: np.ndarray, camera) -> tuple[np.ndarray, np.ndarray
     r0, r1 = camera.radius_m
     az = a0 + u[..., 0] * (a1 - a0)
     if camera.elevation_sampling == "area":
-        s0, s1 = np.sin(np.deg2rad([e0, e1]))
-        el = np.degrees(np.arcsin(np.clip(s0 + u[..., 1] * (s1 - s0), -1.0, 1.0)))
+        s0, s1 = exact.sin(np.deg2rad([e0, e1]))
+        el = np.degrees(exact.asin(np.clip(s0 + u[..., 1] * (s1 - s0), -1.0, 1.0)))
         el = np.clip(el, e0, e1)
     else:
         el = e0 + u[..., 1] * (e1 - e0)
@@ -182,7 +183,7 @@ def sample_views(seed: int, identity: np.ndarray, expression: np.ndarray, n_view
     expression = np.asarray(expression, np.int64).reshape(-1)
     P, V = identity.size, int(n_views)
     sep = effective_separation(camera.min_separation_deg)
-    cos_min = float(np.cos(np.deg2rad(sep)))
+    cos_min = float(exact.cos(np.deg2rad(sep)))
     check = V > 1 and sep > 0
     # float32 cosines with a margin that covers their rounding are fast and exact enough for
     # wide angles; small angles need float64 (the margin alone would reject up to ~0.1 deg)
@@ -267,9 +268,9 @@ def fit_distances(head_radius: np.ndarray, u: np.ndarray, camera, fov_deg: float
     SynthError when a distance falls outside (near_m, far_m)."""
     W, H = resolution
     half_h = np.deg2rad(fov_deg) / 2.0
-    half = min(half_h, float(np.arctan(np.tan(half_h) * H / W)))
+    half = min(half_h, float(exact.atan(exact.tan(half_h) * H / W)))
     f0, f1 = camera.head_fill
-    d = head_radius / np.sin((f0 + np.asarray(u) * (f1 - f0)) * half)
+    d = head_radius / exact.sin((f0 + np.asarray(u) * (f1 - f0)) * half)
     if d.size and not (d.min() > camera.near_m and d.max() < camera.far_m):
         raise SynthError(f"fitting the head into the frame needs camera distances {d.min():.3g}-{d.max():.3g} m, "
                          f"outside near_m {camera.near_m} .. far_m {camera.far_m}", "camera.distance = 'fit'",
@@ -280,7 +281,7 @@ def fit_distances(head_radius: np.ndarray, u: np.ndarray, camera, fov_deg: float
 def min_pairwise_angle_deg(azimuth_deg: np.ndarray, elevation_deg: np.ndarray) -> np.ndarray:
     """(P,) smallest angle between the viewing directions of each row of views."""
     d = spherical_offset(azimuth_deg, elevation_deg)
-    g = np.einsum("pvk,pwk->pvw", d, d)
+    g = (d[:, :, None, 0] * d[:, None, :, 0] + d[:, :, None, 1] * d[:, None, :, 1]) + d[:, :, None, 2] * d[:, None, :, 2]
     V = d.shape[1]
     g[:, np.arange(V), np.arange(V)] = -1.0
-    return np.degrees(np.arccos(np.clip(g.max(axis=(1, 2)), -1.0, 1.0)))
+    return np.degrees(exact.acos(np.clip(g.max(axis=(1, 2)), -1.0, 1.0)))

@@ -11,6 +11,7 @@ import numpy as np
 
 from synth import seeds
 from synth.errors import SynthError
+from synth.geometry import exact
 from synth.model.format import HeadModelData
 from synth.model.identity_gmm import GaussianMixture
 
@@ -53,9 +54,11 @@ def landmark_basis(model: HeadModelData, landmark_set: str = "ibug68") -> tuple[
     tri, bary = model.landmarks[landmark_set]
     corners = model.triangles[tri]  # (L, 3)
     b = bary.astype(np.float64)
-    t = np.einsum("lkc,lk->lc", model.template[corners].astype(np.float64), b)
+    T = model.template[corners].astype(np.float64)  # (L, 3 corners, 3), summed corner by corner in order
+    t = (T[:, 0] * b[:, 0, None] + T[:, 1] * b[:, 1, None]) + T[:, 2] * b[:, 2, None]
     basis = model.identity_basis.astype(np.float64) * model.identity_scale.astype(np.float64)[:, None, None]
-    B = np.einsum("ilkc,lk->ilc", basis[:, corners], b)
+    C = basis[:, corners]
+    B = (C[:, :, 0] * b[None, :, 0, None] + C[:, :, 1] * b[None, :, 1, None]) + C[:, :, 2] * b[None, :, 2, None]
     return t, B
 
 
@@ -79,7 +82,7 @@ def look_at_targets(model: HeadModelData, codes: np.ndarray, mode: str, offset) 
         sel = list(range(t.shape[0]))
     t0 = t[sel].mean(axis=0)
     Bt = B[:, sel].mean(axis=1)  # (Ki, 3)
-    return t0 + codes @ Bt + off
+    return t0 + exact.lincomb(codes, Bt) + off
 
 
 #: Regions of the head (the bust's neck and shoulders excluded) whose extent bounds the head.
@@ -155,7 +158,7 @@ def head_spheres(model: HeadModelData, codes: np.ndarray, margin_m: float,
     v = _extreme_vertices(model) if extremes is None else extremes
     t = model.template[v].astype(np.float64)
     B = model.identity_basis[:, v].astype(np.float64) * model.identity_scale.astype(np.float64)[:, None, None]
-    pts = t[None] + np.einsum("nk,kvc->nvc", codes, B)  # (N, n, 3)
+    pts = t[None] + exact.lincomb(codes, B.reshape(len(B), -1)).reshape(len(codes), *B.shape[1:])  # (N, n, 3)
     centre = 0.5 * (pts.min(axis=1) + pts.max(axis=1))
     radius = np.linalg.norm(pts - centre[:, None], axis=-1).max(axis=1) + float(margin_m)
     return centre, radius

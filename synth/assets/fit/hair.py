@@ -17,6 +17,7 @@ from synth.assets.fit.masks import hair_grows
 from synth.assets.fit.strands import (BACK, DOWN, FORWARD, LEFT, UP, add_curl, arc_length, grow, interpolate,
                                       push_out_strands, resample_fast, scale_count, transport_frames, trim_at_plane,
                                       trim_below)
+from synth.geometry import exact
 from synth.geometry.normals import normalize
 
 POINTS = {"buzz_cut": 4, "short_straight": 10, "short_curly": 14, "undercut": 14, "medium_wavy": 22, "bob": 20,
@@ -299,10 +300,8 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
     cr = surface.points(c_tri, c_bary)
     c_group = np.zeros(len(cr), np.int64)
     if group.max() > 0:
-        # a child belongs to the group of its nearest guide
-        from scipy.spatial import cKDTree
-
-        c_group = group[cKDTree(gr).query(cr)[1]]
+        # a child belongs to the group of its nearest guide (exact distances, lowest index on a tie)
+        c_group = group[exact.nearest_index(cr, gr)]
     pts = np.empty((len(cr), guides.shape[1], 3))
     for gid in np.unique(c_group):
         sel_c = c_group == gid
@@ -431,15 +430,16 @@ def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
         K = int(np.clip(int(prm.get("braid_count", 8)), 2, 40))
         Lb = float(prm.get("length_m", 0.3))
         # braid bases: farthest-point sampling over the roots (deterministic)
+        # (exact squared distances; argmax/argmin take the lowest index on a tie)
         base_idx = [int(np.argmax(R[:, 2]))]
-        dmin = np.linalg.norm(R - R[base_idx[0]], axis=1)
+        dmin = exact.squared_distances(R, R[base_idx[0]][None])[:, 0]
         for _ in range(K - 1):
             j = int(np.argmax(dmin))
             base_idx.append(j)
-            dmin = np.minimum(dmin, np.linalg.norm(R - R[j], axis=1))
+            dmin = np.minimum(dmin, exact.squared_distances(R, R[j][None])[:, 0])
         bases = R[base_idx]
         bn = surface.normals(c_tri[base_idx], c_bary[base_idx])
-        assign = np.argmin(np.linalg.norm(R[:, None] - bases[None], axis=2), axis=1)
+        assign = exact.nearest_index(R, bases)
         Bk = bases + bn * 0.005
         part1 = _sphere_path(c, R, Bk[assign], n1 + 1, lift=0.002)
         # per-braid centre lines hanging down from their bases

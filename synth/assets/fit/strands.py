@@ -95,7 +95,8 @@ class Surface:
 
     def points(self, tri, bary, V=None) -> np.ndarray:
         V = self.V if V is None else V
-        return np.einsum("nk,nkd->nd", bary, V[self.T[tri]])
+        C = V[self.T[tri]]  # (n, 3 corners, 3); summed corner by corner in order (the same bits anywhere)
+        return (bary[:, 0, None] * C[:, 0] + bary[:, 1, None] * C[:, 1]) + bary[:, 2, None] * C[:, 2]
 
     def normals(self, tri, bary) -> np.ndarray:
         """Smooth (vertex-interpolated) normals at the roots."""

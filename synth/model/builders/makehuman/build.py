@@ -79,7 +79,8 @@ def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dim
     joint_rest = base_joints + jmean.reshape(Jn, 3)
     joint_rest = 0.5 * (joint_rest + joint_rest[list(JOINT_MIRROR)] * flip_x)
     # EM on a deterministic subset keeps the build fast (full-covariance EM is the slow step)
-    gmm = fit_gmm(codes[rng.permutation(len(codes))[:GMM_FIT_SAMPLES]], GMM_COMPONENTS, rng, iters=GMM_ITERS)
+    gmm = fit_gmm(codes[rng.permutation(len(codes))[:GMM_FIT_SAMPLES]], GMM_COMPONENTS, rng, iters=GMM_ITERS,
+                  tol=0.0)  # always GMM_ITERS iterations: no stop decided by the last bits of a likelihood
 
     # ---- skinning, expressions
     weights, family = skin_weights(data, mesh)
