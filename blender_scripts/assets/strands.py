@@ -179,7 +179,11 @@ class StrandRig(Rig):
     @classmethod
     def build(cls_, ctx, g: Groom) -> "StrandRig":
         mat = hair_material(g.name, g.cls, g.pigment, roughness=g.roughness, coat=g.coat)
-        pts, attachment = attach(g)
+        _, attachment = attach(g)
+        # the strands where their attachment puts them on this head, as every update does: an
+        # expression change moves them only as the head moves (the groomed points, taken as they
+        # are, sit up to millimetres off what the attachment's push-out gives)
+        pts = attachment.positions(ctx)
         ob = make_curves_object(g.name, pts, ctx.head, mat, g.surface, g.tri, g.bary)
         mods = apply_styling(ob, g.styling)
         info = dict(g.info)

@@ -10,7 +10,9 @@ model's vertex order, density or topology.
 2. **records**: ``rig.record()`` is strict JSON (no NaN), before and after an update, and the
    worker's frame record ``{**entry, "build": record}`` serialises;
 3. **updates** after an expression change (same identity, jaw open: what the worker does
-   between expressions) with finite geometry;
+   between expressions) with finite geometry; an update on the unchanged head moves nothing, and
+   after the change the rig is on the changed head (:func:`_assert_follows`: strand roots on
+   their attachment points, and no rig taken off the head);
 4. **shows in a tiny render** (64 x 64, 4 samples):
    * geometry classes: every material carries the class's segmentation id, and that id is in
      the segmentation of a view framing the rig's objects or of a close-up of one of their
@@ -37,6 +39,7 @@ pytestmark = [pytest.mark.blender, pytest.mark.slow]
 
 SIZE, SAMPLES, FOV = 64, 4, 30.0
 CHANGED_PIXELS, CHANGE = 5, 0.01
+ATTACHED_M, FOLLOW_M, STILL_M, ROOT_M = 0.01, 0.002, 1e-5, 1e-6
 
 
 MODELS = ("default", "ict-facekit", "remeshed")
@@ -141,8 +144,51 @@ def test_asset_class_contract(cls, model, entries, tmp_path):
             assert all(m.pass_index == spec.segmentation_id for m in ob.data.materials if m is not None), ob.name
         assert spec.segmentation_id in _ids_seen(ctx, rig, tmp_path), (cls, entry["id"])
 
+    pre = None if spec.shader_layer else _points(rig)
+    head_pre = ctx.vertices.copy()
+    if not spec.shader_layer:  # an update on the unchanged head leaves the rig where it is
+        update(rigs, ctx)
+        still = float(np.abs(_points(rig) - pre).max())
+        assert still <= STILL_M, (cls, entry["id"], "moved on an unchanged head", still)
     asset_scene.set_case(ctx, hm, "jaw")  # identity 0 as before, jaw open
     update(rigs, ctx)
     assert _strict_json(rig.record())
     if not spec.shader_layer:
         assert spec.segmentation_id in _ids_seen(ctx, rig, tmp_path), (cls, entry["id"], "after update")
+        _assert_follows(cls, entry, rig, ctx, head_pre, pre, _points(rig))
+
+
+def _roots(rig) -> np.ndarray:
+    """The first point of every curve of a strand rig's Curves object."""
+    cv = rig.ob.data
+    pos = np.empty(len(cv.points) * 3, np.float32)
+    cv.position_data.foreach_get("vector", pos)
+    offsets = np.empty(len(cv.curves) + 1, np.int32)
+    cv.curve_offset_data.foreach_get("value", offsets)
+    return pos.reshape(-1, 3)[offsets[:-1]].astype(np.float64)
+
+
+def _assert_follows(cls, entry, rig, ctx, head_pre, pre, moved):
+    """After the expression change the rig is on the changed head.
+
+    * Strand rigs (attached by root triangle and barycentrics): every root is on the changed
+      surface at its attachment point (within ROOT_M).
+    * Every rig: for its points within ATTACHED_M of the head, the distance to the nearest head
+      vertex changes (95th percentile) by at most FOLLOW_M more than it would had the rig not
+      moved at all: the update never takes a rig off the head."""
+    from scipy.spatial import cKDTree
+
+    from synth.assets.fit.strands import Surface
+
+    assert moved.shape == pre.shape, (cls, entry["id"], "the update changed the number of points")
+    att = getattr(rig, "attachment", None)
+    if att is not None:
+        off = np.linalg.norm(_roots(rig) - Surface(ctx).points(att.tri, att.bary), axis=1).max()
+        assert off <= ROOT_M, (cls, entry["id"], "roots off their attachment", off)
+    d_pre = cKDTree(head_pre).query(pre)[0]
+    near = d_pre <= ATTACHED_M
+    assert near.any(), (cls, entry["id"], "no point of the rig is near the head")
+    tree = cKDTree(ctx.vertices)
+    change = float(np.percentile(np.abs(tree.query(moved[near])[0] - d_pre[near]), 95))
+    left = float(np.percentile(np.abs(tree.query(pre[near])[0] - d_pre[near]), 95))
+    assert change <= left + FOLLOW_M, (cls, entry["id"], change, left)
