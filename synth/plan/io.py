@@ -39,6 +39,18 @@ SCHEMA_PATH = Path(__file__).resolve().parents[1] / "schemas" / "plan.schema.jso
 #: plan.json lists every shard (~300 bytes each): a larger file is refused, never read.
 MAX_HEADER_BYTES = 256 << 20
 
+#: Config keys added after plans were first hashed, with the value every older plan had: at that
+#: value the plan's header leaves the key out, so plans made without it keep their bytes and
+#: ``plan_hash`` (readers take the value from here when the key is absent: :func:`planned`;
+#: the writer: ``planner.header_config``).
+LATER_KEYS = {("dataset", "environments_per_expression"): 1}
+
+
+def planned(config: dict, section: str, key: str):
+    """A plan header's config value, :data:`LATER_KEYS`' value when the header leaves it out."""
+    sec = config[section]
+    return sec[key] if key in sec else LATER_KEYS[(section, key)]
+
 
 @lru_cache(maxsize=1)
 def plan_schema() -> dict:
@@ -251,7 +263,15 @@ class Plan:
         a, b = self._shards[shard_id]["identities"]
         E = self.config["dataset"]["expressions_per_identity"]
         V = self.config["dataset"]["views_per_expression"]
-        return [frame_key(i, e, v) for i in range(a, b) for e in range(E) for v in range(V)]
+        N = self.environments
+        if N == 1:
+            return [frame_key(i, e, v) for i in range(a, b) for e in range(E) for v in range(V)]
+        return [frame_key(i, e, v, k) for i in range(a, b) for e in range(E) for k in range(N) for v in range(V)]
+
+    @property
+    def environments(self) -> int:
+        """Environments per expression (plans made before the option: 1)."""
+        return int(planned(self.config, "dataset", "environments_per_expression"))
 
     def expected(self) -> dict[str, list[str]]:
         """shard id -> frame keys (what a dataset directory expects)."""

@@ -49,7 +49,8 @@ class PlanArrays:
     codes: np.ndarray  # (N, Ki)
     targets: np.ndarray  # (N, 3)
     assets: list[dict[str, Any]]
-    lighting: list[dict[str, Any]]
+    lighting: list[dict[str, Any]]  # (N,) environment 0 of each identity
+    environments: list[list[dict[str, Any]]]  # (P,) environments 1.. of each expression ([] with one environment)
     expr: expressions.Expressions  # over P
     expr_model: expressions.ExpressionModel
     views: cameras.Views  # (P, V)
@@ -103,7 +104,9 @@ def sample_plan(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: i
     w2c = invert_rigid(c2w)
     fseeds = seeds.frame_seeds(seed, ii[:, None], ee[:, None], vv)
     lighting = [assets_mod.sample_lighting(seed, int(i), cfg.lighting) for i in ids]
-    return PlanArrays(ids, codes, targets, assets, lighting, expr, em, views, roll, K, c2w, w2c, fseeds, W, H)
+    envs = [[assets_mod.sample_environment(seed, int(i), int(e), k, cfg.lighting)
+             for k in range(1, d.environments_per_expression)] for i, e in zip(ii.tolist(), ee.tolist())]
+    return PlanArrays(ids, codes, targets, assets, lighting, envs, expr, em, views, roll, K, c2w, w2c, fseeds, W, H)
 
 
 DECIMALS = 8  # every float of a plan is rounded to 8 decimal places (byte-stable output)
@@ -127,6 +130,7 @@ class ShardSpecs:
         cfg = cfg.resolved()
         d, cam = cfg.dataset, cfg.camera
         self.E, self.V, self.S = d.expressions_per_identity, d.views_per_expression, d.identities_per_shard
+        self.N = d.environments_per_expression
         self.arr, self.seed = arr, seed
         ex = arr.expr
         # matrices stay float64 numpy arrays (orjson serialises them natively); scalars become lists
@@ -160,20 +164,32 @@ class ShardSpecs:
                     p = n * E + e
                     Kp, w2cp, c2wp = self.K[p], self.w2c[p], self.c2w[p]
                     azp, elp, radp, sp = self.az[p], self.el[p], self.rad[p], self.fseeds[p]
-                    keys = frame_keys(i, e, V)
-                    frames = [{
-                        "frame_id": keys[v], "identity_index": i, "expression_index": e,
-                        "view_index": v, "seed": sp[v],
-                        "camera": {"K": Kp[v], "world_to_camera": w2cp[v], "camera_to_world": c2wp[v],
-                                   "width": W, "height": H, "near": near, "far": far, "azimuth_deg": azp[v],
-                                   "elevation_deg": elp[v], "radius_m": radp[v], "target": tgt}} for v in range(V)]
-                    exprs.append({
+                    if self.N == 1:
+                        frames = [{
+                            "frame_id": key, "identity_index": i, "expression_index": e,
+                            "view_index": v, "seed": sp[v],
+                            "camera": {"K": Kp[v], "world_to_camera": w2cp[v], "camera_to_world": c2wp[v],
+                                       "width": W, "height": H, "near": near, "far": far, "azimuth_deg": azp[v],
+                                       "elevation_deg": elp[v], "radius_m": radp[v], "target": tgt}}
+                            for v, key in enumerate(frame_keys(i, e, V))]
+                    else:  # each view in every environment: the same camera and seed, environment-major
+                        frames = [{
+                            "frame_id": key, "identity_index": i, "expression_index": e, "environment_index": k,
+                            "view_index": v, "seed": sp[v],
+                            "camera": {"K": Kp[v], "world_to_camera": w2cp[v], "camera_to_world": c2wp[v],
+                                       "width": W, "height": H, "near": near, "far": far, "azimuth_deg": azp[v],
+                                       "elevation_deg": elp[v], "radius_m": radp[v], "target": tgt}}
+                            for k in range(self.N) for v, key in enumerate(frame_keys(i, e, V, k))]
+                    rec = {
                         "expression_index": e, "kind": self.kinds[p], "preset": self.presets[p],
                         "expression_code": self.codes_e[p],
                         "joint_rotations": {k: r[p] for k, r in self.rots.items()},
                         "pose": {k: q[p] for k, q in self.pose.items()},
-                        "camera_sampling": {"candidates": self.cand[p], "restarts": self.rest[p]},
-                        "frames": frames})
+                        "camera_sampling": {"candidates": self.cand[p], "restarts": self.rest[p]}}
+                    if self.N > 1:
+                        rec["environments"] = [arr.lighting[n], *arr.environments[p]]
+                    rec["frames"] = frames
+                    exprs.append(rec)
                 asset = arr.assets[n]
                 idents.append({"identity_index": i, "identity_code": self.id_codes[n], "target": tgt,
                                "assets": asset, "skin": dict(asset["skin"]["params"]) if asset.get("skin") else None,
@@ -184,14 +200,15 @@ class ShardSpecs:
 
 
 def replan_frame(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: int, identity: int,
-                 expression: int, view: int) -> dict[str, Any]:
+                 expression: int, view: int, environment: int = 0) -> dict[str, Any]:
     """Re-plan one frame alone (as plain JSON data): the same object as in any plan with this
     seed, config, model and catalogue that contains the frame."""
     import orjson
 
     arr = sample_plan(cfg, model, catalogue, seed, identity, 1)
     (_, spec), = ShardSpecs(cfg, arr, seed).specs()
-    frame = spec["identities"][0]["expressions"][expression]["frames"][view]
+    V = cfg.resolved().dataset.views_per_expression
+    frame = spec["identities"][0]["expressions"][expression]["frames"][environment * V + view]
     return orjson.loads(orjson.dumps(frame, option=orjson.OPT_SERIALIZE_NUMPY))
 
 
@@ -213,6 +230,18 @@ def model_record(model_path) -> tuple[HeadModelData, dict[str, Any]]:
                   "joint_names": list(data.joint_names)}
 
 
+def header_config(cfg: Config) -> dict[str, dict[str, Any]]:
+    """The resolved config as the plan header records it (``io.LATER_KEYS`` at their old value left out)."""
+    from synth.config import to_dict
+    from synth.plan.io import LATER_KEYS
+
+    out = to_dict(cfg, drop_none=False)
+    for (sec, key), old in LATER_KEYS.items():
+        if out[sec].get(key) == old:
+            del out[sec][key]
+    return out
+
+
 def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first_identity: int = 0,
              model_path=None, jobs: int | None = None) -> tuple[dict, dict]:
     """Sample and write a plan directory; returns (header, summary). With ``out=None`` nothing
@@ -224,7 +253,6 @@ def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first
     import dataclasses
 
     import synth
-    from synth.config import to_dict
     from synth.plan import io, stats
 
     if seed is not None:
@@ -267,7 +295,8 @@ def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first
         "run_seed": seed, "first_identity": first_identity, "num_identities": n_identities,
         "identities_per_shard": S, "expressions_per_identity": d.expressions_per_identity,
         "views_per_expression": d.views_per_expression,
-        "num_frames": n_identities * d.expressions_per_identity * d.views_per_expression,
-        "model": model_rec, "catalogue": {"sha256": cat.digest}, "config": to_dict(cfg, drop_none=False),
+        "num_frames": n_identities * d.expressions_per_identity * d.environments_per_expression
+        * d.views_per_expression,
+        "model": model_rec, "catalogue": {"sha256": cat.digest}, "config": header_config(cfg),
     }
     return io.write_plan(out, header, produce)
