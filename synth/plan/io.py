@@ -104,9 +104,11 @@ def check_out_dir(out: Path) -> str | None:
         raise SynthError("output directory holds an unreadable plan.json", str(out), "use a new --out") from None
 
 
-def write_shards(tmp: Path | None, shards: Iterable[tuple[str, dict]]) -> list[dict]:
+def write_shards(tmp: Path | None, shards: Iterable[tuple[str, dict]],
+                 frames_per_identity: int | None = None) -> list[dict]:
     """Write shard specs into ``tmp/shards/`` (``tmp=None``: only hash them); returns their
-    header listing entries."""
+    header listing entries. ``frames_per_identity``: the frame count per identity, for specs
+    whose frames are JSON text (``orjson.Fragment``, planner.ShardSpecs); else counted."""
     listing = []
     for shard_id, spec in shards:
         data = dumps_compact(spec)
@@ -114,7 +116,8 @@ def write_shards(tmp: Path | None, shards: Iterable[tuple[str, dict]]) -> list[d
         if tmp is not None:
             (tmp / name).write_bytes(data)
         idents = spec["identities"]
-        n_frames = sum(len(e["frames"]) for i in idents for e in i["expressions"])
+        n_frames = len(idents) * frames_per_identity if frames_per_identity is not None \
+            else sum(len(e["frames"]) for i in idents for e in i["expressions"])
         listing.append({"shard_id": shard_id, "file": name,
                         "identities": [idents[0]["identity_index"], idents[-1]["identity_index"] + 1],
                         "frames": n_frames, "bytes": len(data), "sha256": sha256_bytes(data)})

@@ -122,9 +122,29 @@ def _rn(a) -> np.ndarray:
     return np.ascontiguousarray(np.round(np.asarray(a, np.float64), DECIMALS) + 0.0)
 
 
+def _texts(a: np.ndarray) -> list[bytes]:
+    """orjson's text of each ``a[j]`` (a: (M,) or (M, r, c), C-contiguous), cut from one orjson
+    call over the whole array: each scalar's digits, or each matrix's rows without its outer
+    two brackets (``1,0,32],[0,1,32],[0,0,1`` for a 3x3). Numbers hold no brackets or commas,
+    so the cuts are exact; the text is what orjson writes for the value inside a document."""
+    import orjson
+
+    t = orjson.dumps(a, option=orjson.OPT_SERIALIZE_NUMPY)
+    if a.ndim == 1:
+        return t[1:-1].split(b",")
+    return t[3:-3].split(b"]],[[")  # (M, r, c)
+
+
 class ShardSpecs:
-    """Turns PlanArrays into shard specs. The bulk rounding and conversion happens once, here;
-    :meth:`specs` then assembles shards [a, b) (cheap per shard, and fork-friendly)."""
+    """Turns PlanArrays into shard specs. The bulk rounding happens once, here; :meth:`specs`
+    then assembles shards [a, b) (cheap per shard, and fork-friendly).
+
+    A shard's frames (585,000 for 1,500 identities at the paper's counts) are written as JSON
+    text, not built as dicts: each expression's ``frames`` is an ``orjson.Fragment`` holding
+    exactly the bytes orjson gives the list of frame objects (keys in the documented order,
+    numbers as orjson writes the rounded float64 values), assembled from :func:`_texts` with
+    slice assignments. ``tests/plan/test_plan_text.py`` checks the text against orjson's own
+    serialisation of the frame dicts."""
 
     def __init__(self, cfg: Config, arr: PlanArrays, seed: int):
         cfg = cfg.resolved()
@@ -133,10 +153,12 @@ class ShardSpecs:
         self.N = d.environments_per_expression
         self.arr, self.seed = arr, seed
         ex = arr.expr
-        # matrices stay float64 numpy arrays (orjson serialises them natively); scalars become lists
-        self.K, self.w2c, self.c2w = _rn(arr.K), _rn(arr.w2c), _rn(arr.c2w)
-        self.az, self.el, self.rad = _r(arr.views.azimuth_deg), _r(arr.views.elevation_deg), _r(arr.views.radius_m)
-        self.fseeds = arr.frame_seeds.tolist()
+        P, V = arr.K.shape[:2]
+        # matrices as (P * V, r, c), scalars as (P * V,): rounded float64, cut into text per shard
+        self.K, self.w2c, self.c2w = (_rn(m).reshape(P * V, *m.shape[2:]) for m in (arr.K, arr.w2c, arr.c2w))
+        self.az, self.el, self.rad = (_rn(x).reshape(P * V) for x in (arr.views.azimuth_deg, arr.views.elevation_deg,
+                                                                      arr.views.radius_m))
+        self.fseeds = np.ascontiguousarray(arr.frame_seeds, np.int64).reshape(P * V)
         self.codes_e = _rn(ex.codes)
         self.rots = {k: _r(v) for k, v in ex.joint_rotations().items()}
         self.pose = {k: _r(getattr(ex, k)) for k in ("jaw_open_deg", "jaw_lateral_deg", "gaze_yaw_deg",
@@ -148,38 +170,78 @@ class ShardSpecs:
         self.near, self.far = cam.near_m, cam.far_m
         self.n_shards = -(-arr.identity.size // self.S)
 
+    def _frames_text(self, n0: int, n1: int) -> list[bytes]:
+        """The ``frames`` JSON list of every expression of identities [n0, n1) (one bytes each).
+
+        Each frame's text is 19 pieces: the variable ones (key, view, seed, the three matrices,
+        azimuth, elevation, radius) cut from bulk orjson output (:func:`_texts`), the constant
+        ones (the keys' names; identity, expression and environment; the image size, near, far
+        and the target) made once; the pieces are laid out with slice assignments and joined
+        per expression."""
+        import orjson
+
+        E, V, N, arr = self.E, self.V, self.N, self.arr
+        r = slice(n0 * E * V, n1 * E * V)  # these identities' views (the same in every environment)
+        var = [_texts(self.K[r]), _texts(self.w2c[r]), _texts(self.c2w[r]), _texts(self.az[r]), _texts(self.el[r]),
+               _texts(self.rad[r]), _texts(self.fseeds[r])]
+        if N > 1:  # every view in each environment, environment-major
+            var = [[t for q in range(0, len(x), V) for _ in range(N) for t in x[q:q + V]] for x in var]
+        Kt, Wt, Ct, azt, elt, radt, seedt = var
+        F = len(Kt)  # frames
+        fixed = (b'","identity_index":%d,"expression_index":%d,"environment_index":%d,"view_index":' if N > 1
+                 else b'","identity_index":%d,"expression_index":%d,"view_index":')
+        tail = (b']],"width":%d,"height":%d,"near":' % (arr.width, arr.height) + orjson.dumps(self.near)
+                + b',"far":' + orjson.dumps(self.far) + b',"azimuth_deg":')
+        views = [b"%d" % v for v in range(V)]
+        keys: list[str] = []
+        ie: list[bytes] = []
+        tgt: list[bytes] = []
+        for n in range(n0, n1):
+            i = int(arr.identity[n])
+            tgt += [b',"target":' + orjson.dumps(self.targets[n]) + b"}}"] * (E * N * V)
+            for e in range(E):
+                for k in range(N):
+                    keys += frame_keys(i, e, V, k if N > 1 else None)
+                    ie += [fixed % ((i, e, k) if N > 1 else (i, e))] * V
+        parts: list = [b""] * (19 * F)
+        parts[0::19] = [b',{"frame_id":"'] * F
+        parts[1::19] = [k.encode() for k in keys]
+        parts[2::19] = ie
+        parts[3::19] = views * (F // V)
+        parts[4::19] = [b',"seed":'] * F
+        parts[5::19] = seedt
+        parts[6::19] = [b',"camera":{"K":[['] * F
+        parts[7::19] = Kt
+        parts[8::19] = [b']],"world_to_camera":[['] * F
+        parts[9::19] = Wt
+        parts[10::19] = [b']],"camera_to_world":[['] * F
+        parts[11::19] = Ct
+        parts[12::19] = [tail] * F
+        parts[13::19] = azt
+        parts[14::19] = [b',"elevation_deg":'] * F
+        parts[15::19] = elt
+        parts[16::19] = [b',"radius_m":'] * F
+        parts[17::19] = radt
+        parts[18::19] = tgt
+        step = 19 * N * V  # pieces per expression
+        return [b"[" + b"".join(parts[q:q + step])[1:] + b"]" for q in range(0, 19 * F, step)]
+
     def specs(self, a: int = 0, b: int | None = None):
-        """Yield (shard_id, spec) for shards [a, b) of this plan (counted from its first shard)."""
-        E, V, S, arr = self.E, self.V, self.S, self.arr
+        """Yield (shard_id, spec) for shards [a, b) of this plan (counted from its first shard);
+        each expression's ``frames`` is an ``orjson.Fragment`` (see the class)."""
+        import orjson
+
+        E, S, arr = self.E, self.S, self.arr
         N = arr.identity.size
-        W, H, near, far = arr.width, arr.height, self.near, self.far
         b = self.n_shards if b is None else b
         for s0 in range(a * S, min(N, b * S), S):
+            s1 = min(N, s0 + S)
+            frames = iter(self._frames_text(s0, s1))
             idents = []
-            for n in range(s0, min(N, s0 + S)):
-                i = int(arr.identity[n])
-                tgt = self.targets[n]
+            for n in range(s0, s1):
                 exprs = []
                 for e in range(E):
                     p = n * E + e
-                    Kp, w2cp, c2wp = self.K[p], self.w2c[p], self.c2w[p]
-                    azp, elp, radp, sp = self.az[p], self.el[p], self.rad[p], self.fseeds[p]
-                    if self.N == 1:
-                        frames = [{
-                            "frame_id": key, "identity_index": i, "expression_index": e,
-                            "view_index": v, "seed": sp[v],
-                            "camera": {"K": Kp[v], "world_to_camera": w2cp[v], "camera_to_world": c2wp[v],
-                                       "width": W, "height": H, "near": near, "far": far, "azimuth_deg": azp[v],
-                                       "elevation_deg": elp[v], "radius_m": radp[v], "target": tgt}}
-                            for v, key in enumerate(frame_keys(i, e, V))]
-                    else:  # each view in every environment: the same camera and seed, environment-major
-                        frames = [{
-                            "frame_id": key, "identity_index": i, "expression_index": e, "environment_index": k,
-                            "view_index": v, "seed": sp[v],
-                            "camera": {"K": Kp[v], "world_to_camera": w2cp[v], "camera_to_world": c2wp[v],
-                                       "width": W, "height": H, "near": near, "far": far, "azimuth_deg": azp[v],
-                                       "elevation_deg": elp[v], "radius_m": radp[v], "target": tgt}}
-                            for k in range(self.N) for v, key in enumerate(frame_keys(i, e, V, k))]
                     rec = {
                         "expression_index": e, "kind": self.kinds[p], "preset": self.presets[p],
                         "expression_code": self.codes_e[p],
@@ -188,15 +250,20 @@ class ShardSpecs:
                         "camera_sampling": {"candidates": self.cand[p], "restarts": self.rest[p]}}
                     if self.N > 1:
                         rec["environments"] = [arr.lighting[n], *arr.environments[p]]
-                    rec["frames"] = frames
+                    rec["frames"] = orjson.Fragment(next(frames))
                     exprs.append(rec)
                 asset = arr.assets[n]
-                idents.append({"identity_index": i, "identity_code": self.id_codes[n], "target": tgt,
-                               "assets": asset, "skin": dict(asset["skin"]["params"]) if asset.get("skin") else None,
+                idents.append({"identity_index": int(arr.identity[n]), "identity_code": self.id_codes[n],
+                               "target": self.targets[n], "assets": asset,
+                               "skin": dict(asset["skin"]["params"]) if asset.get("skin") else None,
                                "lighting": arr.lighting[n], "expressions": exprs})
             sid = shard_name(int(arr.identity[s0]) // S)
             yield sid, {"format": "synth-plan-shard", "format_version": 1, "shard_id": sid, "run_seed": self.seed,
                         "identities": idents}
+
+    @property
+    def frames_per_identity(self) -> int:
+        return self.E * self.N * self.V
 
 
 def replan_frame(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: int, identity: int,
@@ -208,8 +275,8 @@ def replan_frame(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: 
     arr = sample_plan(cfg, model, catalogue, seed, identity, 1)
     (_, spec), = ShardSpecs(cfg, arr, seed).specs()
     V = cfg.resolved().dataset.views_per_expression
-    frame = spec["identities"][0]["expressions"][expression]["frames"][environment * V + view]
-    return orjson.loads(orjson.dumps(frame, option=orjson.OPT_SERIALIZE_NUMPY))
+    frames = spec["identities"][0]["expressions"][expression]["frames"]
+    return orjson.loads(orjson.dumps(frames))[environment * V + view]
 
 
 def model_record(model_path) -> tuple[HeadModelData, dict[str, Any]]:
@@ -283,7 +350,8 @@ def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first
         def chunk(r: tuple[int, int]):
             lo, hi = first_identity + r[0] * S, min(first_identity + r[1] * S, first_identity + n_identities)
             arr = sample_plan(cfg, model, cat, seed, lo, hi - lo, extremes)
-            listing = io.write_shards(tmp, ShardSpecs(cfg, arr, seed).specs())
+            specs = ShardSpecs(cfg, arr, seed)
+            listing = io.write_shards(tmp, specs.specs(), specs.frames_per_identity)
             return listing, stats.partial(arr)
 
         parts = parallel.chunks(n_shards, 1 if jobs == 1 else 2 * jobs)
