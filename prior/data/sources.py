@@ -244,5 +244,5 @@ def frame_meta(json_bytes: bytes, key: str) -> dict:
     return meta
 
 
-__all__ = ["PREPARE_DIR", "PRIOR_ENVIRONMENT", "ShardDamaged", "ShardRef", "Source", "expand_braces", "frame_meta", "open_source",
-           "read_shard"]
+__all__ = ["PREPARE_DIR", "PRIOR_ENVIRONMENT", "ShardDamaged", "ShardRef", "Source", "expand_braces", "frame_meta",
+           "open_source", "read_shard"]

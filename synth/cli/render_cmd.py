@@ -114,8 +114,8 @@ def render_cmd(
             given = (identities, expressions, views, environments, config, preset, seed, model, device)
             if any(x is not None for x in given) or set_:
                 raise SynthError("--plan renders an existing plan; planning options were given too", "--plan",
-                                 "drop --identities/--expressions/--views/--environments/--config/--preset/--seed/--set/"
-                                 "--model")
+                                 "drop --identities/--expressions/--views/--environments/--config/--preset/--seed/"
+                                 "--set/--model")
             pdir = existing_plan(plan_dir)
         else:
             if identities is None:

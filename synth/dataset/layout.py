@@ -138,7 +138,8 @@ def held_out(keys: list[str], n: int, setting: str, where: str) -> list[bool]:
     for (i, e, k), views in sorted(scenes.items()):
         if len(views) <= n:
             scene = f"identity {i} expression {e}" + (f" environment {k}" if k else "")
-            raise SynthError(f"{scene} has {len(views)} view(s), not more than {setting} = {n}", where, f"lower {setting} or render more views")
+            raise SynthError(f"{scene} has {len(views)} view(s), not more than {setting} = {n}", where,
+                             f"lower {setting} or render more views")
         for _, pos in sorted(views)[-n:]:
             out[pos] = True
     return out
