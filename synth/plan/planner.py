@@ -133,9 +133,11 @@ def _texts(a: np.ndarray) -> list[bytes]:
     import orjson
 
     t = orjson.dumps(a, option=orjson.OPT_SERIALIZE_NUMPY)
-    if a.ndim == 1:
-        return t[1:-1].split(b",")
-    return t[3:-3].split(b"]],[[")  # (M, r, c)
+    out = t.split(b",") if a.ndim == 1 else t.split(b"]],[[")  # (M,) or (M, r, c)
+    cut = 1 if a.ndim == 1 else 3  # the brackets around the whole array (not copying the text once more)
+    out[0] = out[0][cut:]
+    out[-1] = out[-1][:-cut]  # (in turn: with M = 1 both are the one piece)
+    return out
 
 
 class ShardSpecs:
@@ -226,8 +228,11 @@ class ShardSpecs:
         parts[16::19] = [b',"radius_m":'] * F
         parts[17::19] = radt
         parts[18::19] = tgt
-        step = 19 * N * V  # pieces per expression
-        return [b"[" + b"".join(parts[q:q + step])[1:] + b"]" for q in range(0, 19 * F, step)]
+        step = 19 * N * V  # pieces per expression: its list opens without a comma and closes
+        for q in range(0, 19 * F, step):
+            parts[q] = b'[{"frame_id":"'
+            parts[q + step - 1] += b"]"
+        return [b"".join(parts[q:q + step]) for q in range(0, 19 * F, step)]
 
     def specs(self, a: int = 0, b: int | None = None):
         """Yield (shard_id, spec) for shards [a, b) of this plan (counted from its first shard);

@@ -36,10 +36,11 @@ def frame_dicts(specs: planner.ShardSpecs, n: int, e: int) -> list[dict]:
     return out
 
 
-@pytest.mark.parametrize("environments", [1, 3])
-def test_frames_text_is_orjsons_text_of_the_frame_objects(tmp_path, environments):
+@pytest.mark.parametrize("environments, expressions, views", [(1, 3, 4), (3, 3, 4), (1, 1, 1), (2, 1, 1)])
+def test_frames_text_is_orjsons_text_of_the_frame_objects(tmp_path, environments, expressions, views):
+    """(With one view and expression, the second shard's arrays hold one frame.)"""
     toy = write_toy_model(tmp_path / "toy.npz")
-    cfg = load_config(None, ["dataset.expressions_per_identity=3", "dataset.views_per_expression=4",
+    cfg = load_config(None, [f"dataset.expressions_per_identity={expressions}", f"dataset.views_per_expression={views}",
                              "dataset.identities_per_shard=2", "camera.principal_point_jitter_px=3.5",
                              "camera.roll_deg=[-20, 20]", f"dataset.environments_per_expression={environments}"])
     model, _ = planner.model_record(toy)
