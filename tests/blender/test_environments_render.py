@@ -52,3 +52,32 @@ def test_two_environments_render_validate_and_export(tmp_path):
         assert np.allclose(cam["world2cam"], a.world_to_camera)
     c0, c1 = (np.asarray(Image.open(scene / f"00000_{k:03d}" / "color_image" / "C01.png")) for k in (0, 1))
     assert c0.shape == (64, 64, 3) and not np.array_equal(c0, c1)
+
+
+def test_a_resume_inside_the_second_environment_gives_the_same_bytes(tmp_path):
+    """Staged: both views of environment 0 and view 0 of environment 1 (what a kill leaves);
+    the rerun lights the scene with environment 1 before its last view, as the one-go run did."""
+    import shutil
+
+    from renderer_jobs.submit import prepare_plan
+    from synth.dataset.shards import open_dataset
+    from synth.plan.io import load_plan
+    from tests.support.farm_helpers import compare
+
+    args = ["--identities", 1, "--expressions", 1, "--views", 2, "--environments", 2, "--preset", "ci", "--seed", 3]
+    one_go = tmp_path / "one_go"
+    synth("render", *args, "--out", one_go, "-q")
+    out = tmp_path / "ds"
+    pdir = prepare_plan(out, 1, None, ["dataset.expressions_per_identity=1", "dataset.views_per_expression=2",
+                                       "dataset.environments_per_expression=2", 'render.preset="ci"'], 3, None)
+    plan = load_plan(pdir)
+    ds = open_dataset(out, plan.plan_hash, plan.expected())
+    dst = ds.staging_dir("shard_000000")
+    dst.mkdir(parents=True, exist_ok=True)
+    for k in ds.expected["shard_000000"][:3]:
+        for ext in ("exr", "json"):
+            shutil.copyfile(one_go / "shards" / "shard_000000" / f"{k}.{ext}", dst / f"{k}.{ext}")
+    p = synth("render", *args, "--out", out, "-q")
+    assert "rendered 1 now" in p.stdout
+    rc, text = compare(one_go, out)
+    assert rc == 0, text
