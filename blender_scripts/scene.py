@@ -154,6 +154,22 @@ def drop_render_cache() -> None:
     r.use_persistent_data = keep
 
 
+def current_world():
+    return bpy.context.scene.world
+
+
+def remove_world(world) -> None:
+    """Remove a world that is no longer the scene's, with the images made for it in memory
+    (a studio's map); maps loaded from files stay for the next environment that uses them."""
+    if world is None or world == bpy.context.scene.world:
+        return
+    images = [n.image for n in (world.node_tree.nodes if world.node_tree else ())
+              if n.bl_idname == "ShaderNodeTexEnvironment" and n.image is not None and n.image.source == "GENERATED"]
+    bpy.data.worlds.remove(world)
+    for img in images:
+        bpy.data.images.remove(img)
+
+
 def uniform_environment(strength: float = 1.0, color=(1.0, 1.0, 1.0)) -> None:
     """A constant environment ('uniform'): every surface gets the same irradiance, no shading."""
     scene = bpy.context.scene

@@ -74,10 +74,11 @@ def _dress(ident: dict, ctx, rigs_out: dict) -> dict:
     return record
 
 
-def _set_environment(ident: dict, plan) -> dict:
+def _set_environment(env: dict) -> dict:
+    """Make the plan's lighting record ``env`` the scene's world; returns it."""
     from blender_scripts import scene as bscene
 
-    env = dict(ident.get("lighting") or plan.lighting())
+    env = dict(env)
     strength = float(env.get("strength", 1.0))
     kind = env.get("environment", "uniform")
     if kind == "uniform":
@@ -125,7 +126,7 @@ class IdentityScene:
         f0 = ident["expressions"][0]["frames"][0]["camera"]
         self.width, self.height = int(f0["width"]), int(f0["height"])
         self.effective = bscene.configure_render(render_cfg, self.width, self.height)
-        self.env = _set_environment(ident, plan)
+        self.env = _set_environment(ident.get("lighting") or plan.lighting())
         skin = dict(ident.get("skin") or {})
         mel, hb = float(skin.get("melanin", 0.05)), float(skin.get("haemoglobin", 0.015))
         albedo, lips = skin_albedo(mel, hb), lip_albedo(mel, hb)
@@ -172,6 +173,19 @@ class IdentityScene:
         bscene.drop_render_cache()
         self.expr = {"e": e, "psi": psi, "rot": rot, "lm3d": lms["ibug68"],
                      "head_pose": joints[hm.joint_index["head"]]}
+
+    def use_environment(self, env: dict) -> None:
+        """Light the scene with ``env`` (an expression's environment, plans of more than one
+        per expression); the world it replaces is removed and Cycles' cache dropped, so a
+        frame's pixels do not depend on the environment rendered before it."""
+        from blender_scripts import scene as bscene
+
+        if env == self.env:
+            return
+        old = bscene.current_world()
+        self.env = _set_environment(env)
+        bscene.remove_world(old)
+        bscene.drop_render_cache()
 
     def render(self, f: dict, tmp: Path, seed: int | None = None) -> tuple[dict, dict]:
         """Render one planned frame of the current expression: (passes, frame JSON)."""
@@ -226,9 +240,12 @@ def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path, lease
                 if all(f["frame_id"] in done for f in e["frames"]):
                     continue
                 sc.set_expression(e)
+                envs = e.get("environments")  # plans of more than one environment per expression
                 for f in e["frames"]:
                     if f["frame_id"] in done:
                         continue
+                    if envs:
+                        sc.use_environment(envs[int(f["environment_index"])])
                     out, fj = sc.render(f, tmp)
                     cam = fj["camera"]  # also in the EXR header, as OpenEXR's standard attributes
                     st.write_frame(f["frame_id"], out["rgba"], out["depth"], out["normals"], out["segmentation"], fj,

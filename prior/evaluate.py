@@ -21,10 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
+from prior.data.sources import PRIOR_ENVIRONMENT
 from prior.fit.align import align_cameras
 from prior.fit.fitdir import load_fit
 from prior.fit.novel import render_fit_view
-from synth.dataset.layout import parse_frame_key
+from synth.dataset.layout import parse_frame_key_env
 from synth.dataset.preview import linear_to_srgb
 from synth.errors import SynthError
 
@@ -39,8 +40,8 @@ def _gt_frames(gt, identity: int, expression: int) -> dict[int, object]:
         raise SynthError("ground-truth dataset has no committed frames", str(gt), "pass a rendered synth dataset")
     out = {}
     for r in refs:
-        i, e, v = parse_frame_key(r.key)
-        if (i, e) == (identity, expression):
+        i, e, k, v = parse_frame_key_env(r.key)
+        if (i, e, k) == (identity, expression, PRIOR_ENVIRONMENT):
             out[v] = r
     if not out:
         raise SynthError(f"ground-truth dataset has no frame of identity {identity} expression {expression}",

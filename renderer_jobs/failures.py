@@ -19,7 +19,7 @@ import re
 from dataclasses import dataclass, field
 
 #: Parts of a message that differ between workers failing alike.
-_VARYING = re.compile(r"\S*/\S*|shard_\d+|id\d{6}_ex\d{2}_v\d{2}|\d+(?:\.\d+)?")
+_VARYING = re.compile(r"\S*/\S*|shard_\d+|id\d{6}_ex\d{2}(?:_en\d{2})?_v\d{2}|\d+(?:\.\d+)?")
 
 
 @dataclass

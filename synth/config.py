@@ -46,6 +46,11 @@ class DatasetConfig:
     """expressions sampled per identity (paper: 13)"""
     views_per_expression: Annotated[int, Bounds(1, 100000)] = 30
     """viewpoints rendered per expression (paper: 30)"""
+    environments_per_expression: Annotated[int, Bounds(1, 100)] = 1
+    """lighting environments each expression's views are rendered in: environment 0 is lighting's (the same for
+    every identity with the default studio), environments 1.. are drawn per (identity, expression, environment)
+    from lighting.hdri_files when lighting.environment = 'hdri', else procedural studios at a random rotation
+    (the Cafca release: 3)"""
     shard_format: Annotated[str, Choices("dir", "tar")] = "dir"
     """how a committed shard is stored: 'dir' = a directory of KEY.exr/KEY.json; 'tar' = one tar of them, for
     WebDataset-style streaming (docs/shard-format.md)"""

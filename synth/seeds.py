@@ -55,6 +55,7 @@ class Stream(enum.IntEnum):
     LIGHTING = 7
     ASSET_GEOMETRY = 8  # per-identity, per-class geometry randomness of asset rigs (strand roots, ...)
     SKIN = 9  # per-identity skin tone (the ITA target, synth.plan.skin)
+    ENVIRONMENT = 10  # environments 1.. of an expression (identity, expression, environment in the view slot)
 
 
 def check_seed(seed: int) -> int:

@@ -28,7 +28,7 @@ from typing import Iterator, NamedTuple
 
 from synth.dataset.index import ManifestError, parse_manifest, read_manifest_bytes, signatures
 from synth.dataset.layout import (DATASET_FILE, FRAME_KEY_RE, MANIFEST_FILE, MAX_EXR_BYTES, MAX_FRAME_JSON_BYTES,
-                                  SHARDS_DIR, parse_frame_key)
+                                  SHARDS_DIR, parse_frame_key, parse_frame_key_env)
 from synth.dataset.tarshard import TAR_SUFFIX, TarRefused, iter_members, present_shards
 from synth.errors import SynthError
 from synth.io import loads_json, read_bounded, sha256_bytes
@@ -163,10 +163,27 @@ def _check(data: bytes, entry, name: str, ref: ShardRef) -> bytes:
     return data
 
 
+#: The lighting environment the prior trains on. The field is conditioned on identity and
+#: expression only, so the views of one expression must share their lighting: in a dataset of
+#: several environments per expression (``dataset.environments_per_expression``) the frames of
+#: the other environments are skipped (docs/prior.md, "Data").
+PRIOR_ENVIRONMENT = 0
+
+
+def _wanted(key: str, identity: int | None) -> bool:
+    if identity is None and not FRAME_KEY_RE.match(key):
+        return True  # (a tar read without its manifest: other members are sorted out later)
+    i, _, k, _ = parse_frame_key_env(key)
+    return k == PRIOR_ENVIRONMENT and (identity is None or i == identity)
+
+
 def read_shard(ref: ShardRef, identity: int | None = None) -> Iterator[tuple[str, bytes, bytes]]:
     """(key, JSON bytes, EXR bytes) of the shard's frames in key order (only ``identity``'s
-    when given), each file checked against the manifest's sha256. Raises :class:`ShardDamaged`."""
-    want = (lambda k: parse_frame_key(k)[0] == identity) if identity is not None else (lambda k: True)
+    when given; only environment :data:`PRIOR_ENVIRONMENT`'s), each file checked against the
+    manifest's sha256. Raises :class:`ShardDamaged`."""
+    def want(k: str) -> bool:
+        return _wanted(k, identity)
+
     try:
         files = None
         if ref.manifest is not None:
@@ -227,5 +244,5 @@ def frame_meta(json_bytes: bytes, key: str) -> dict:
     return meta
 
 
-__all__ = ["PREPARE_DIR", "ShardDamaged", "ShardRef", "Source", "expand_braces", "frame_meta", "open_source",
-           "read_shard"]
+__all__ = ["PREPARE_DIR", "PRIOR_ENVIRONMENT", "ShardDamaged", "ShardRef", "Source", "expand_braces", "frame_meta",
+           "open_source", "read_shard"]

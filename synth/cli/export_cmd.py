@@ -17,6 +17,8 @@ def nerfstudio_cmd(
     out: Path = typer.Option(..., "--out", "-o", help="nerfstudio data folder to create (new or empty)."),
     identity: Optional[int] = typer.Option(None, "--identity", "-i", min=0, help="Only this identity index."),
     expression: Optional[int] = typer.Option(None, "--expression", "-e", min=0, help="Only this expression index."),
+    environment: int = typer.Option(0, "--environment", min=0, help="The lighting environment to export (datasets "
+                                    "planned with dataset.environments_per_expression > 1)."),
     val_views: int = typer.Option(1, "--val-views", min=0, help="Views per scene held out as validation and test "
                                   "images (the highest view indices, as the prior holds out); 0: no split."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
@@ -26,7 +28,8 @@ def nerfstudio_cmd(
     static scene: pick one identity and expression (`ns-train nerfacto --data OUT`)."""
     from synth.export.nerfstudio import export_nerfstudio
 
-    s = export_nerfstudio(directory, out, identity=identity, expression=expression, val_views=val_views)
+    s = export_nerfstudio(directory, out, identity=identity, expression=expression, environment=environment,
+                          val_views=val_views)
     if as_json:
         typer.echo(json.dumps(s, indent=1))
         return

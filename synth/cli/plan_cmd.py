@@ -19,6 +19,9 @@ def plan_cmd(
                                        help="Run seed (overrides dataset.seed)."),
     set_: list[str] = typer.Option([], "--set", help="Override one key: section.key=value (repeatable)."),
     model: Optional[Path] = typer.Option(None, "--model", "-m", help="Head model .npz (default: embedded)."),
+    environments: Optional[int] = typer.Option(None, "--environments", min=1, max=100,
+                                               help="Lighting environments per expression (default: config, 1); "
+                                                    "each expression's views are rendered in every one."),
     start: int = typer.Option(0, "--start", help="First identity index (a multiple of identities_per_shard)."),
     jobs: Optional[int] = typer.Option(None, "--jobs", "-j", help="Processes (default: up to 4 cores); "
                                        "never changes the output."),
@@ -31,7 +34,8 @@ def plan_cmd(
     from synth.plan.planner import run_plan
 
     t0 = time.perf_counter()
-    cfg = load_config(config, set_)
+    sets = [*set_, *([f"dataset.environments_per_expression={environments}"] if environments is not None else [])]
+    cfg = load_config(config, sets)
     header, summ = run_plan(cfg, identities, out, seed=seed, first_identity=start, model_path=model, jobs=jobs)
     dt = time.perf_counter() - t0
     if quiet:

@@ -1,6 +1,6 @@
 """``synth render``: plan (or reuse the plan) and render it into a sharded dataset.
 
-    synth render --identities N [--expressions E] [--views V] [--config F] [--preset P]
+    synth render --identities N [--expressions E] [--views V] [--environments N] [--config F] [--preset P]
                  [--workers W] [--seed S] [--backend local|ray|slurm] --out DIR
 
 ``DIR/plan/`` holds the plan. A rerun of the same command re-plans into a temporary
@@ -30,8 +30,10 @@ from synth.extras import require
 from synth.seeds import MAX_SEED
 
 
-def _overrides(expressions, views, preset, workers_device, set_):
+def _overrides(expressions, views, preset, workers_device, set_, environments=None):
     sets = list(set_)
+    if environments is not None:
+        sets.append(f"dataset.environments_per_expression={environments}")
     if expressions is not None:
         sets.append(f"dataset.expressions_per_identity={expressions}")
     if views is not None:
@@ -55,6 +57,8 @@ def render_cmd(
     expressions: Optional[int] = typer.Option(None, "--expressions", "-e", min=1,
                                               help="Expressions per identity (default: config)."),
     views: Optional[int] = typer.Option(None, "--views", "-v", min=1, help="Views per expression (default: config)."),
+    environments: Optional[int] = typer.Option(None, "--environments", min=1, max=100,
+                                               help="Lighting environments per expression (default: config, 1)."),
     config: Optional[Path] = typer.Option(None, "--config", "-c", help="TOML configuration file."),
     preset: Optional[str] = typer.Option(None, "--preset", "-p", help="Render preset: ci, preview or production."),
     workers: Optional[int] = typer.Option(None, "--workers", "-w", min=1, max=256,
@@ -107,16 +111,17 @@ def render_cmd(
     previous = signal.getsignal(signal.SIGTERM)
     try:
         if plan_dir is not None:
-            if any(x is not None for x in (identities, expressions, views, config, preset, seed, model, device)) \
-                    or set_:
+            given = (identities, expressions, views, environments, config, preset, seed, model, device)
+            if any(x is not None for x in given) or set_:
                 raise SynthError("--plan renders an existing plan; planning options were given too", "--plan",
-                                 "drop --identities/--expressions/--views/--config/--preset/--seed/--set/--model")
+                                 "drop --identities/--expressions/--views/--environments/--config/--preset/--seed/"
+                                 "--set/--model")
             pdir = existing_plan(plan_dir)
         else:
             if identities is None:
                 raise SynthError("missing --identities", "synth render", "pass --identities N (or --plan PLAN_DIR)")
-            pdir = prepare_plan(out, identities, config, _overrides(expressions, views, preset, device, set_), seed,
-                                model)
+            sets = _overrides(expressions, views, preset, device, set_, environments)
+            pdir = prepare_plan(out, identities, config, sets, seed, model)
         progress = Progress(0, 0, auto_mode(quiet), progress_every, log_json,
                             workers=be.workers if backend == "local" else None)
         signal.signal(signal.SIGTERM, _interrupt)  # not before: the planner's forked children keep the default

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from synth.dataset.exr import CHANNELS
-from synth.dataset.layout import MAX_FRAME_JSON_BYTES, frame_files, parse_frame_key
+from synth.dataset.layout import MAX_FRAME_JSON_BYTES, frame_files, parse_frame_key_env
 from synth.errors import SynthError
 from synth.io import atomic_write_json, read_json
 
@@ -122,9 +122,10 @@ def validate_frame_json(obj) -> list[str]:
 def _semantic_errors(f: dict) -> list[str]:
     out: list[str] = []
     key = f["frame_id"]
-    indices = (f["identity_index"], f["expression_index"], f["view_index"])
-    if parse_frame_key(key) != indices:
-        out.append(f"frame_id: {key!r} disagrees with the indices (identity, expression, view) = {indices}")
+    indices = (f["identity_index"], f["expression_index"], f.get("environment_index", 0), f["view_index"])
+    if parse_frame_key_env(key) != indices:
+        out.append(f"frame_id: {key!r} disagrees with the indices (identity, expression, environment, view) = "
+                   f"{indices}")
     img, cam = f["image"], f["camera"]
     exr_file = frame_files(key)[0]
     if img["file"] != exr_file:

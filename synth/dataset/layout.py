@@ -51,7 +51,9 @@ MAX_LEASE_BYTES = 64 << 10
 MAX_RECORD_BYTES = 64 << 10
 
 SHARD_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,127}$")
-FRAME_KEY_RE = re.compile(r"^id(\d{6})_ex(\d{2})_v(\d{2})$")
+#: ``id{identity:06d}_ex{expression:02d}_v{view:02d}``; in a plan of more than one environment per
+#: expression, ``id{identity:06d}_ex{expression:02d}_en{environment:02d}_v{view:02d}``.
+FRAME_KEY_RE = re.compile(r"^id(\d{6})_ex(\d{2})(?:_en(\d{2}))?_v(\d{2})$")
 
 
 def entry_kind(path: Path) -> str | None:
@@ -78,47 +80,66 @@ def utc_now() -> str:
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
 
 
-def frame_key(identity: int, expression: int, view: int) -> str:
-    """``id{identity:06d}_ex{expression:02d}_v{view:02d}`` (sortable, zero-padded)."""
-    if not (0 <= identity <= 999999 and 0 <= expression <= 99 and 0 <= view <= 99):
-        raise SynthError(f"frame indices out of range (identity {identity}, expression {expression}, view {view})",
-                         None, "identity must be < 1e6, expression and view < 100")
-    return f"id{identity:06d}_ex{expression:02d}_v{view:02d}"
+def frame_key(identity: int, expression: int, view: int, environment: int | None = None) -> str:
+    """``id{identity:06d}_ex{expression:02d}_v{view:02d}`` (sortable, zero-padded); with an
+    ``environment`` (plans of more than one environment per expression, every frame has one)
+    ``id{identity:06d}_ex{expression:02d}_en{environment:02d}_v{view:02d}``."""
+    if not (0 <= identity <= 999999 and 0 <= expression <= 99 and 0 <= view <= 99
+            and (environment is None or 0 <= environment <= 99)):
+        raise SynthError(f"frame indices out of range (identity {identity}, expression {expression}, view {view}"
+                         + ("" if environment is None else f", environment {environment}") + ")",
+                         None, "identity must be < 1e6, expression, environment and view < 100")
+    env = "" if environment is None else f"_en{environment:02d}"
+    return f"id{identity:06d}_ex{expression:02d}{env}_v{view:02d}"
 
 
-def frame_keys(identity: int, expression: int, views: int) -> list[str]:
-    """``[frame_key(identity, expression, v) for v in range(views)]``, the range checked once
-    (the planner makes 585,000 keys for 1,500 identities)."""
+def frame_keys(identity: int, expression: int, views: int, environment: int | None = None) -> list[str]:
+    """``[frame_key(identity, expression, v, environment) for v in range(views)]``, the range
+    checked once (the planner makes 585,000 keys for 1,500 identities)."""
     if views <= 0:
         return []
-    head = frame_key(identity, expression, views - 1)[:-2]
+    head = frame_key(identity, expression, views - 1, environment)[:-2]
     return [f"{head}{v:02d}" for v in range(views)]
 
 
 def parse_frame_key(key: str) -> tuple[int, int, int]:
-    """(identity, expression, view) of a frame key; :class:`SynthError` for anything else."""
+    """(identity, expression, view) of a frame key; :class:`SynthError` for anything else
+    (the environment: :func:`key_environment`)."""
+    i, e, _, v = parse_frame_key_env(key)
+    return i, e, v
+
+
+def parse_frame_key_env(key: str) -> tuple[int, int, int, int]:
+    """(identity, expression, environment, view) of a frame key (environment 0 when the key
+    names none); :class:`SynthError` for anything else."""
     m = FRAME_KEY_RE.match(key) if isinstance(key, str) else None
     if not m:
-        raise SynthError(f"bad frame key {key!r}", None, "keys look like id000042_ex07_v13")
-    return int(m[1]), int(m[2]), int(m[3])
+        raise SynthError(f"bad frame key {key!r}", None, "keys look like id000042_ex07_v13 or id000042_ex07_en01_v13")
+    return int(m[1]), int(m[2]), int(m[3] or 0), int(m[4])
+
+
+def key_environment(key: str) -> int:
+    """The environment index of a frame key (0 when it names none)."""
+    return parse_frame_key_env(key)[2]
 
 
 def held_out(keys: list[str], n: int, setting: str, where: str) -> list[bool]:
     """Which of the frames ``keys`` are held out for evaluation: the ``n`` highest view indices
-    of each (identity, expression), the split the prior trains with (``data.holdout_views``)
-    and the nerfstudio export writes (``--val-views``). A scene with ``n`` views or fewer is
-    refused (``setting`` names the option in the message)."""
-    scenes: dict[tuple[int, int], list[tuple[int, int]]] = {}
+    of each (identity, expression, environment), the split the prior trains with
+    (``data.holdout_views``) and the nerfstudio export writes (``--val-views``). A scene with
+    ``n`` views or fewer is refused (``setting`` names the option in the message)."""
+    scenes: dict[tuple[int, int, int], list[tuple[int, int]]] = {}
     for pos, key in enumerate(keys):
-        i, e, v = parse_frame_key(key)
-        scenes.setdefault((i, e), []).append((v, pos))
+        i, e, k, v = parse_frame_key_env(key)
+        scenes.setdefault((i, e, k), []).append((v, pos))
     out = [False] * len(keys)
     if n <= 0:
         return out
-    for (i, e), views in sorted(scenes.items()):
+    for (i, e, k), views in sorted(scenes.items()):
         if len(views) <= n:
-            raise SynthError(f"identity {i} expression {e} has {len(views)} view(s), not more than {setting} = {n}",
-                             where, f"lower {setting} or render more views")
+            scene = f"identity {i} expression {e}" + (f" environment {k}" if k else "")
+            raise SynthError(f"{scene} has {len(views)} view(s), not more than {setting} = {n}", where,
+                             f"lower {setting} or render more views")
         for _, pos in sorted(views)[-n:]:
             out[pos] = True
     return out

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from synth.dataset.exr import read_frame_exr
-from synth.dataset.layout import parse_frame_key
+from synth.dataset.layout import parse_frame_key, parse_frame_key_env
 from synth.dataset.reader import FrameRef, list_frames
 from synth.dataset.segmentation import PALETTE
 from synth.dataset.shards import load_dataset
@@ -103,7 +103,7 @@ def contact_sheet(root, shard_id: str | None = None, out=None, *, max_views: int
         raise SynthError(f"tile size {tile} is too small", None, "use --tile 8 or more")
     manifest = ds.read_manifest(shard_id)
     keys = sorted(manifest["frames"])
-    parsed = {k: parse_frame_key(k) for k in keys}
+    parsed = {k: (i, e, v) for k in keys for i, e, n, v in [parse_frame_key_env(k)] if n == 0}  # environment 0
     exprs = sorted({p[1] for p in parsed.values()})
     views = sorted({p[2] for p in parsed.values()})
     if max_views is not None:

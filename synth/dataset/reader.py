@@ -98,6 +98,12 @@ class Frame:
     identity_index = _meta_field(None, "identity_index", int, "The frame's identity index.")
     expression_index = _meta_field(None, "expression_index", int, "The expression's index within the identity.")
     view_index = _meta_field(None, "view_index", int, "The view's index within the expression.")
+
+    @property
+    def environment_index(self) -> int:
+        """The lighting environment the view is rendered in (0 in a dataset of one environment per
+        expression); ``meta["lighting"]`` describes it."""
+        return int(self.meta.get("environment_index", 0))
     identity_code = _meta_field("model", "identity", np.float32, "The head model's identity code (beta), float32.")
     expression_code = _meta_field("model", "expression", np.float32,
                                   "The head model's expression code (psi), float32.")

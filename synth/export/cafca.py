@@ -11,8 +11,10 @@ code written for that dataset reads ours.
     OUT/SUBJECT/EXP_ENV/segmentation/Cvv.png        16-bit grey: synth's class ids (0 background)
 
 ``SUBJECT`` is the identity index and ``EXP`` the expression index as 5 digits, ``ENV`` the
-environment as 3 digits, ``Cvv`` the view index. A synth frame is rendered in one environment
-(the identity's, ``lighting`` in the frame JSON), so every scene is ``ENV = 000``. Cameras are
+environment as 3 digits, ``Cvv`` the view index. ``ENV`` is the frame's ``environment_index``:
+000 only, unless the dataset was planned with ``dataset.environments_per_expression`` N > 1,
+when each expression has the folders 000 .. N-1 (000 the fixed environment, the others drawn;
+``lighting`` in the frame JSON and ``environment.json`` say which). Cameras are
 OpenCV's (x right, y down, z forward), as the release's; ``orientation``'s rows are the camera's
 x, y and z axes in the world, ``position`` its centre. The folder is written under a temporary
 name and renamed when complete.
@@ -30,7 +32,6 @@ from synth.errors import SynthError
 from synth.export.select import check_new_output, png_bytes, select_frames
 from synth.io import atomic_dir
 
-ENVIRONMENT = 0  # the index of a synth frame's one environment
 FOLDERS = ("cameras_json", "color_image", "foreground_mask", "segmentation")
 
 
@@ -61,11 +62,12 @@ def export_cafca(source, out, *, identity: int | None = None, progress=None) -> 
     with atomic_dir(out) as tmp:
         for ref in refs:
             f = ref.read()
-            scene = Path(f"{f.identity_index:05d}") / f"{f.expression_index:05d}_{ENVIRONMENT:03d}"
+            scene = Path(f"{f.identity_index:05d}") / f"{f.expression_index:05d}_{f.environment_index:03d}"
             if scene not in scenes:
                 for d in FOLDERS:
                     (tmp / scene / d).mkdir(parents=True)
-                scenes[scene] = {"environment": environment_name(f.meta), "synth_lighting": f.meta.get("lighting")}
+                scenes[scene] = {"environment": environment_name(f.meta), "environment_index": f.environment_index,
+                                 "synth_lighting": f.meta.get("lighting")}
             cam = f"C{f.view_index:02d}"
             seg = np.asarray(f.segmentation)
             if seg.size and int(seg.max()) > 65535:

@@ -103,15 +103,17 @@ def transforms(entries: list[dict], held: list[bool] | None = None) -> dict:
 
 
 def export_nerfstudio(source, out, *, identity: int | None = None, expression: int | None = None,
-                      val_views: int = 1, progress=None) -> dict:
+                      environment: int = 0, val_views: int = 1, progress=None) -> dict:
     """Write the selected committed frames of ``source`` as a nerfstudio folder ``out`` (new or
-    empty), holding out the ``val_views`` highest views of each scene. Returns a summary:
+    empty), holding out the ``val_views`` highest views of each scene. One lighting environment
+    (``environment``; 0, the only one unless the dataset was planned with more) is exported,
+    since a radiance field assumes fixed lighting. Returns a summary:
     frames, scenes ((identity, expression) pairs), val (held-out frame keys), out."""
     out = Path(out)
     check_new_output(out, "nerfstudio")
     if val_views < 0:
         raise SynthError(f"--val-views {val_views} is negative", "--val-views", "pass 0 or more")
-    refs = select_frames(source, identity=identity, expression=expression)
+    refs = select_frames(source, identity=identity, expression=expression, environment=environment)
     held = held_out([r.key for r in refs], val_views, "--val-views", str(source))
     entries = []
     with atomic_dir(out) as tmp:

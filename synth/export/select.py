@@ -7,23 +7,26 @@ from pathlib import Path
 
 import numpy as np
 
-from synth.dataset.layout import parse_frame_key
+from synth.dataset.layout import parse_frame_key_env
 from synth.dataset.reader import FrameRef, list_frames
 from synth.errors import SynthError
 
 
 def select_frames(source, *, shards: list[str] | None = None, identity: int | None = None,
-                  expression: int | None = None) -> list[FrameRef]:
+                  expression: int | None = None, environment: int | None = None) -> list[FrameRef]:
     """The committed frames of a dataset (or the frames of one shard directory), optionally only
-    those of some shards, one identity and/or one expression index, sorted by (shard, key)."""
+    those of some shards, one identity, one expression and/or one environment index, sorted by
+    (shard, key)."""
     refs = list_frames(source, shards=shards)
     out = []
     for r in refs:
-        i, e, _ = parse_frame_key(r.key)
-        if (identity is None or i == identity) and (expression is None or e == expression):
+        i, e, k, _ = parse_frame_key_env(r.key)
+        if (identity is None or i == identity) and (expression is None or e == expression) \
+                and (environment is None or k == environment):
             out.append(r)
     if not out:
-        what = ", ".join(f"{n} {v}" for n, v in (("identity", identity), ("expression", expression)) if v is not None)
+        what = ", ".join(f"{n} {v}" for n, v in (("identity", identity), ("expression", expression),
+                                                  ("environment", environment)) if v is not None)
         raise SynthError(f"no committed frames{' of ' + what if what else ''}", str(source),
                          "check the indices (synth report DIR lists what is committed), or render first")
     return out

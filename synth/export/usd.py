@@ -181,7 +181,7 @@ def export_usd(source, out, *, shard: str | None = None, model=None, assets: boo
     if not out.parent.is_dir():
         raise SynthError("the output's folder does not exist", str(out.parent), "create it first")
     shard = shard or _first_committed(root)
-    refs = select_frames(root, shards=[shard])
+    refs = select_frames(root, shards=[shard], environment=0)  # the cameras: views under environment 0
     metas = [r.meta() for r in refs]
     data, run_seed = _resolve_model(root, model, metas)
     hm = HeadModel(data)

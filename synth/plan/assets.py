@@ -107,23 +107,49 @@ def sample_assets(seed: int, identity: int, cat: Catalogue, disabled: tuple[str,
     return sample_assets_batch(seed, [identity], cat, disabled)[0]
 
 
-def sample_lighting(seed: int, identity: int, lighting) -> dict[str, Any]:
-    """The environment of one identity (``lighting``: LightingConfig)."""
-    if lighting.environment == "uniform":
-        return {"environment": "uniform", "strength": lighting.strength, "color": list(lighting.color)}
-    rng = seeds.generator(seed, seeds.Stream.LIGHTING, identity=identity)
-    if lighting.environment == "studio":
-        lo, hi = lighting.studio_rotation_deg
-        return {"environment": "studio", "strength": lighting.strength, "color": list(lighting.color),
-                "key_deg": list(lighting.studio_key_deg), "key_size_deg": lighting.studio_key_size_deg,
-                "key_share": lighting.studio_key_share, "fill_deg": list(lighting.studio_fill_deg),
-                "fill_size_deg": lighting.studio_fill_size_deg, "fill_share": lighting.studio_fill_share,
-                "rotation_deg": round(float(lo + rng.random() * (hi - lo)), 8)}
+def _studio(lighting, rotation_deg: float) -> dict[str, Any]:
+    return {"environment": "studio", "strength": lighting.strength, "color": list(lighting.color),
+            "key_deg": list(lighting.studio_key_deg), "key_size_deg": lighting.studio_key_size_deg,
+            "key_share": lighting.studio_key_share, "fill_deg": list(lighting.studio_fill_deg),
+            "fill_size_deg": lighting.studio_fill_size_deg, "fill_share": lighting.studio_fill_share,
+            "rotation_deg": round(float(rotation_deg), 8)}
+
+
+def _hdri(lighting, rng: np.random.Generator) -> dict[str, Any]:
     files = lighting.hdri_files
     f = files[min(len(files) - 1, int(rng.random() * len(files)))]
     lo, hi = lighting.hdri_rotation_deg
     return {"environment": "hdri", "file": f, "rotation_deg": round(float(lo + rng.random() * (hi - lo)), 8),
             "strength": lighting.strength}
+
+
+def sample_lighting(seed: int, identity: int, lighting) -> dict[str, Any]:
+    """The environment of one identity (``lighting``: LightingConfig): environment 0 of each of
+    its expressions."""
+    if lighting.environment == "uniform":
+        return {"environment": "uniform", "strength": lighting.strength, "color": list(lighting.color)}
+    rng = seeds.generator(seed, seeds.Stream.LIGHTING, identity=identity)
+    if lighting.environment == "studio":
+        lo, hi = lighting.studio_rotation_deg
+        return _studio(lighting, lo + rng.random() * (hi - lo))
+    return _hdri(lighting, rng)
+
+
+#: Rotation range of the drawn procedural studios (environments 1..): the whole circle.
+STUDIO_ROTATION_DEG = (-180.0, 180.0)
+
+
+def sample_environment(seed: int, identity: int, expression: int, environment: int, lighting) -> dict[str, Any]:
+    """Environment ``environment`` >= 1 of one expression, a pure function of (seed, identity,
+    expression, environment): a map drawn from ``lighting.hdri_files`` (and a rotation from
+    ``lighting.hdri_rotation_deg``) when ``lighting.environment`` is 'hdri', else the procedural
+    studio of ``lighting`` turned by a rotation drawn from :data:`STUDIO_ROTATION_DEG`."""
+    rng = seeds.generator(seed, seeds.Stream.ENVIRONMENT, identity=identity, expression=expression,
+                          view=environment)
+    if lighting.environment == "hdri":
+        return _hdri(lighting, rng)
+    lo, hi = STUDIO_ROTATION_DEG
+    return _studio(lighting, lo + rng.random() * (hi - lo))
 
 
 #: How far each hair parameter lets the hair reach beyond the scalp, as (fraction of it, cap in

@@ -156,7 +156,8 @@ def _clear_of(c: np.ndarray, dx, dy, dz, count, cos_chk, mask: bool) -> tuple[np
     conflict = np.empty((A, B, B), bool)
     for s in range(0, A, _CHUNK):
         e = min(A, s + _CHUNK)
-        x, y, z = c[s:e, :, 0], c[s:e, :, 1], c[s:e, :, 2]
+        # contiguous copies (the same values): the products below then stream through memory
+        x, y, z = (np.ascontiguousarray(c[s:e, :, j]) for j in range(3))
         n = min(V, int(count[s:e].max()))  # only the filled slots
         if n == 0:
             ok_old[s:e] = True

@@ -39,6 +39,18 @@ SCHEMA_PATH = Path(__file__).resolve().parents[1] / "schemas" / "plan.schema.jso
 #: plan.json lists every shard (~300 bytes each): a larger file is refused, never read.
 MAX_HEADER_BYTES = 256 << 20
 
+#: Config keys added after plans were first hashed, with the value every older plan had: at that
+#: value the plan's header leaves the key out, so plans made without it keep their bytes and
+#: ``plan_hash`` (readers take the value from here when the key is absent: :func:`planned`;
+#: the writer: ``planner.header_config``).
+LATER_KEYS = {("dataset", "environments_per_expression"): 1}
+
+
+def planned(config: dict, section: str, key: str):
+    """A plan header's config value, :data:`LATER_KEYS`' value when the header leaves it out."""
+    sec = config[section]
+    return sec[key] if key in sec else LATER_KEYS[(section, key)]
+
 
 @lru_cache(maxsize=1)
 def plan_schema() -> dict:
@@ -92,9 +104,11 @@ def check_out_dir(out: Path) -> str | None:
         raise SynthError("output directory holds an unreadable plan.json", str(out), "use a new --out") from None
 
 
-def write_shards(tmp: Path | None, shards: Iterable[tuple[str, dict]]) -> list[dict]:
+def write_shards(tmp: Path | None, shards: Iterable[tuple[str, dict]],
+                 frames_per_identity: int | None = None) -> list[dict]:
     """Write shard specs into ``tmp/shards/`` (``tmp=None``: only hash them); returns their
-    header listing entries."""
+    header listing entries. ``frames_per_identity``: the frame count per identity, for specs
+    whose frames are JSON text (``orjson.Fragment``, planner.ShardSpecs); else counted."""
     listing = []
     for shard_id, spec in shards:
         data = dumps_compact(spec)
@@ -102,7 +116,8 @@ def write_shards(tmp: Path | None, shards: Iterable[tuple[str, dict]]) -> list[d
         if tmp is not None:
             (tmp / name).write_bytes(data)
         idents = spec["identities"]
-        n_frames = sum(len(e["frames"]) for i in idents for e in i["expressions"])
+        n_frames = len(idents) * frames_per_identity if frames_per_identity is not None \
+            else sum(len(e["frames"]) for i in idents for e in i["expressions"])
         listing.append({"shard_id": shard_id, "file": name,
                         "identities": [idents[0]["identity_index"], idents[-1]["identity_index"] + 1],
                         "frames": n_frames, "bytes": len(data), "sha256": sha256_bytes(data)})
@@ -251,7 +266,15 @@ class Plan:
         a, b = self._shards[shard_id]["identities"]
         E = self.config["dataset"]["expressions_per_identity"]
         V = self.config["dataset"]["views_per_expression"]
-        return [frame_key(i, e, v) for i in range(a, b) for e in range(E) for v in range(V)]
+        N = self.environments
+        if N == 1:
+            return [frame_key(i, e, v) for i in range(a, b) for e in range(E) for v in range(V)]
+        return [frame_key(i, e, v, k) for i in range(a, b) for e in range(E) for k in range(N) for v in range(V)]
+
+    @property
+    def environments(self) -> int:
+        """Environments per expression (plans made before the option: 1)."""
+        return int(planned(self.config, "dataset", "environments_per_expression"))
 
     def expected(self) -> dict[str, list[str]]:
         """shard id -> frame keys (what a dataset directory expects)."""

@@ -8,6 +8,7 @@ drawn together, since each is rejected against the earlier ones). So a plan of i
 
 from __future__ import annotations
 
+import gc
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -49,7 +50,8 @@ class PlanArrays:
     codes: np.ndarray  # (N, Ki)
     targets: np.ndarray  # (N, 3)
     assets: list[dict[str, Any]]
-    lighting: list[dict[str, Any]]
+    lighting: list[dict[str, Any]]  # (N,) environment 0 of each identity
+    environments: list[list[dict[str, Any]]]  # (P,) environments 1.. of each expression ([] with one environment)
     expr: expressions.Expressions  # over P
     expr_model: expressions.ExpressionModel
     views: cameras.Views  # (P, V)
@@ -103,7 +105,9 @@ def sample_plan(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: i
     w2c = invert_rigid(c2w)
     fseeds = seeds.frame_seeds(seed, ii[:, None], ee[:, None], vv)
     lighting = [assets_mod.sample_lighting(seed, int(i), cfg.lighting) for i in ids]
-    return PlanArrays(ids, codes, targets, assets, lighting, expr, em, views, roll, K, c2w, w2c, fseeds, W, H)
+    envs = [[assets_mod.sample_environment(seed, int(i), int(e), k, cfg.lighting)
+             for k in range(1, d.environments_per_expression)] for i, e in zip(ii.tolist(), ee.tolist())]
+    return PlanArrays(ids, codes, targets, assets, lighting, envs, expr, em, views, roll, K, c2w, w2c, fseeds, W, H)
 
 
 DECIMALS = 8  # every float of a plan is rounded to 8 decimal places (byte-stable output)
@@ -116,23 +120,50 @@ def _r(a) -> list:
 
 def _rn(a) -> np.ndarray:
     """Rounded float64 array (C-contiguous, serialised natively by orjson)."""
-    return np.ascontiguousarray(np.round(np.asarray(a, np.float64), DECIMALS) + 0.0)
+    r = np.round(np.asarray(a, np.float64), DECIMALS)
+    r += 0.0  # in place: no second array of the plan's size
+    return np.ascontiguousarray(r)
+
+
+def _texts(a: np.ndarray) -> list[bytes]:
+    """orjson's text of each ``a[j]`` (a: (M,) or (M, r, c), C-contiguous), cut from one orjson
+    call over the whole array: each scalar's digits, or each matrix's rows without its outer
+    two brackets (``1,0,32],[0,1,32],[0,0,1`` for a 3x3). Numbers hold no brackets or commas,
+    so the cuts are exact; the text is what orjson writes for the value inside a document."""
+    import orjson
+
+    t = orjson.dumps(a, option=orjson.OPT_SERIALIZE_NUMPY)
+    out = t.split(b",") if a.ndim == 1 else t.split(b"]],[[")  # (M,) or (M, r, c)
+    cut = 1 if a.ndim == 1 else 3  # the brackets around the whole array (not copying the text once more)
+    out[0] = out[0][cut:]
+    out[-1] = out[-1][:-cut]  # (in turn: with M = 1 both are the one piece)
+    return out
 
 
 class ShardSpecs:
-    """Turns PlanArrays into shard specs. The bulk rounding and conversion happens once, here;
-    :meth:`specs` then assembles shards [a, b) (cheap per shard, and fork-friendly)."""
+    """Turns PlanArrays into shard specs. The bulk rounding happens once, here; :meth:`specs`
+    then assembles shards [a, b) (cheap per shard, and fork-friendly).
+
+    A shard's frames (585,000 for 1,500 identities at the paper's counts) are written as JSON
+    text, not built as dicts: each expression's ``frames`` is an ``orjson.Fragment`` holding
+    exactly the bytes orjson gives the list of frame objects (keys in the documented order,
+    numbers as orjson writes the rounded float64 values), assembled from :func:`_texts` with
+    slice assignments. ``tests/plan/test_plan_text.py`` checks the text against orjson's own
+    serialisation of the frame dicts."""
 
     def __init__(self, cfg: Config, arr: PlanArrays, seed: int):
         cfg = cfg.resolved()
         d, cam = cfg.dataset, cfg.camera
         self.E, self.V, self.S = d.expressions_per_identity, d.views_per_expression, d.identities_per_shard
+        self.N = d.environments_per_expression
         self.arr, self.seed = arr, seed
         ex = arr.expr
-        # matrices stay float64 numpy arrays (orjson serialises them natively); scalars become lists
-        self.K, self.w2c, self.c2w = _rn(arr.K), _rn(arr.w2c), _rn(arr.c2w)
-        self.az, self.el, self.rad = _r(arr.views.azimuth_deg), _r(arr.views.elevation_deg), _r(arr.views.radius_m)
-        self.fseeds = arr.frame_seeds.tolist()
+        P, V = arr.K.shape[:2]
+        # matrices as (P * V, r, c), scalars as (P * V,): rounded float64, cut into text per shard
+        self.K, self.w2c, self.c2w = (_rn(m).reshape(P * V, *m.shape[2:]) for m in (arr.K, arr.w2c, arr.c2w))
+        self.az, self.el, self.rad = (_rn(x).reshape(P * V) for x in (arr.views.azimuth_deg, arr.views.elevation_deg,
+                                                                      arr.views.radius_m))
+        self.fseeds = np.ascontiguousarray(arr.frame_seeds, np.int64).reshape(P * V)
         self.codes_e = _rn(ex.codes)
         self.rots = {k: _r(v) for k, v in ex.joint_rotations().items()}
         self.pose = {k: _r(getattr(ex, k)) for k in ("jaw_open_deg", "jaw_lateral_deg", "gaze_yaw_deg",
@@ -144,55 +175,116 @@ class ShardSpecs:
         self.near, self.far = cam.near_m, cam.far_m
         self.n_shards = -(-arr.identity.size // self.S)
 
+    def _frames_text(self, n0: int, n1: int) -> list[bytes]:
+        """The ``frames`` JSON list of every expression of identities [n0, n1) (one bytes each).
+
+        Each frame's text is 19 pieces: the variable ones (key, view, seed, the three matrices,
+        azimuth, elevation, radius) cut from bulk orjson output (:func:`_texts`), the constant
+        ones (the keys' names; identity, expression and environment; the image size, near, far
+        and the target) made once; the pieces are laid out with slice assignments and joined
+        per expression."""
+        import orjson
+
+        E, V, N, arr = self.E, self.V, self.N, self.arr
+        r = slice(n0 * E * V, n1 * E * V)  # these identities' views (the same in every environment)
+        var = [_texts(self.K[r]), _texts(self.w2c[r]), _texts(self.c2w[r]), _texts(self.az[r]), _texts(self.el[r]),
+               _texts(self.rad[r]), _texts(self.fseeds[r])]
+        if N > 1:  # every view in each environment, environment-major
+            var = [[t for q in range(0, len(x), V) for _ in range(N) for t in x[q:q + V]] for x in var]
+        Kt, Wt, Ct, azt, elt, radt, seedt = var
+        F = len(Kt)  # frames
+        fixed = (b'","identity_index":%d,"expression_index":%d,"environment_index":%d,"view_index":' if N > 1
+                 else b'","identity_index":%d,"expression_index":%d,"view_index":')
+        tail = (b']],"width":%d,"height":%d,"near":' % (arr.width, arr.height) + orjson.dumps(self.near)
+                + b',"far":' + orjson.dumps(self.far) + b',"azimuth_deg":')
+        views = [b"%d" % v for v in range(V)]
+        keys: list[str] = []
+        ie: list[bytes] = []
+        tgt: list[bytes] = []
+        for n in range(n0, n1):
+            i = int(arr.identity[n])
+            tgt += [b',"target":' + orjson.dumps(self.targets[n]) + b"}}"] * (E * N * V)
+            for e in range(E):
+                for k in range(N):
+                    keys += frame_keys(i, e, V, k if N > 1 else None)
+                    ie += [fixed % ((i, e, k) if N > 1 else (i, e))] * V
+        parts: list = [b""] * (19 * F)
+        parts[0::19] = [b',{"frame_id":"'] * F
+        parts[1::19] = [k.encode() for k in keys]
+        parts[2::19] = ie
+        parts[3::19] = views * (F // V)
+        parts[4::19] = [b',"seed":'] * F
+        parts[5::19] = seedt
+        parts[6::19] = [b',"camera":{"K":[['] * F
+        parts[7::19] = Kt
+        parts[8::19] = [b']],"world_to_camera":[['] * F
+        parts[9::19] = Wt
+        parts[10::19] = [b']],"camera_to_world":[['] * F
+        parts[11::19] = Ct
+        parts[12::19] = [tail] * F
+        parts[13::19] = azt
+        parts[14::19] = [b',"elevation_deg":'] * F
+        parts[15::19] = elt
+        parts[16::19] = [b',"radius_m":'] * F
+        parts[17::19] = radt
+        parts[18::19] = tgt
+        step = 19 * N * V  # pieces per expression: its list opens without a comma and closes
+        for q in range(0, 19 * F, step):
+            parts[q] = b'[{"frame_id":"'
+            parts[q + step - 1] += b"]"
+        return [b"".join(parts[q:q + step]) for q in range(0, 19 * F, step)]
+
     def specs(self, a: int = 0, b: int | None = None):
-        """Yield (shard_id, spec) for shards [a, b) of this plan (counted from its first shard)."""
-        E, V, S, arr = self.E, self.V, self.S, self.arr
+        """Yield (shard_id, spec) for shards [a, b) of this plan (counted from its first shard);
+        each expression's ``frames`` is an ``orjson.Fragment`` (see the class)."""
+        import orjson
+
+        E, S, arr = self.E, self.S, self.arr
         N = arr.identity.size
-        W, H, near, far = arr.width, arr.height, self.near, self.far
         b = self.n_shards if b is None else b
         for s0 in range(a * S, min(N, b * S), S):
+            s1 = min(N, s0 + S)
+            frames = iter(self._frames_text(s0, s1))
             idents = []
-            for n in range(s0, min(N, s0 + S)):
-                i = int(arr.identity[n])
-                tgt = self.targets[n]
+            for n in range(s0, s1):
                 exprs = []
                 for e in range(E):
                     p = n * E + e
-                    Kp, w2cp, c2wp = self.K[p], self.w2c[p], self.c2w[p]
-                    azp, elp, radp, sp = self.az[p], self.el[p], self.rad[p], self.fseeds[p]
-                    keys = frame_keys(i, e, V)
-                    frames = [{
-                        "frame_id": keys[v], "identity_index": i, "expression_index": e,
-                        "view_index": v, "seed": sp[v],
-                        "camera": {"K": Kp[v], "world_to_camera": w2cp[v], "camera_to_world": c2wp[v],
-                                   "width": W, "height": H, "near": near, "far": far, "azimuth_deg": azp[v],
-                                   "elevation_deg": elp[v], "radius_m": radp[v], "target": tgt}} for v in range(V)]
-                    exprs.append({
+                    rec = {
                         "expression_index": e, "kind": self.kinds[p], "preset": self.presets[p],
                         "expression_code": self.codes_e[p],
                         "joint_rotations": {k: r[p] for k, r in self.rots.items()},
                         "pose": {k: q[p] for k, q in self.pose.items()},
-                        "camera_sampling": {"candidates": self.cand[p], "restarts": self.rest[p]},
-                        "frames": frames})
+                        "camera_sampling": {"candidates": self.cand[p], "restarts": self.rest[p]}}
+                    if self.N > 1:
+                        rec["environments"] = [arr.lighting[n], *arr.environments[p]]
+                    rec["frames"] = orjson.Fragment(next(frames))
+                    exprs.append(rec)
                 asset = arr.assets[n]
-                idents.append({"identity_index": i, "identity_code": self.id_codes[n], "target": tgt,
-                               "assets": asset, "skin": dict(asset["skin"]["params"]) if asset.get("skin") else None,
+                idents.append({"identity_index": int(arr.identity[n]), "identity_code": self.id_codes[n],
+                               "target": self.targets[n], "assets": asset,
+                               "skin": dict(asset["skin"]["params"]) if asset.get("skin") else None,
                                "lighting": arr.lighting[n], "expressions": exprs})
             sid = shard_name(int(arr.identity[s0]) // S)
             yield sid, {"format": "synth-plan-shard", "format_version": 1, "shard_id": sid, "run_seed": self.seed,
                         "identities": idents}
 
+    @property
+    def frames_per_identity(self) -> int:
+        return self.E * self.N * self.V
+
 
 def replan_frame(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: int, identity: int,
-                 expression: int, view: int) -> dict[str, Any]:
+                 expression: int, view: int, environment: int = 0) -> dict[str, Any]:
     """Re-plan one frame alone (as plain JSON data): the same object as in any plan with this
     seed, config, model and catalogue that contains the frame."""
     import orjson
 
     arr = sample_plan(cfg, model, catalogue, seed, identity, 1)
     (_, spec), = ShardSpecs(cfg, arr, seed).specs()
-    frame = spec["identities"][0]["expressions"][expression]["frames"][view]
-    return orjson.loads(orjson.dumps(frame, option=orjson.OPT_SERIALIZE_NUMPY))
+    V = cfg.resolved().dataset.views_per_expression
+    frames = spec["identities"][0]["expressions"][expression]["frames"]
+    return orjson.loads(orjson.dumps(frames))[environment * V + view]
 
 
 def model_record(model_path) -> tuple[HeadModelData, dict[str, Any]]:
@@ -213,6 +305,18 @@ def model_record(model_path) -> tuple[HeadModelData, dict[str, Any]]:
                   "joint_names": list(data.joint_names)}
 
 
+def header_config(cfg: Config) -> dict[str, dict[str, Any]]:
+    """The resolved config as the plan header records it (``io.LATER_KEYS`` at their old value left out)."""
+    from synth.config import to_dict
+    from synth.plan.io import LATER_KEYS
+
+    out = to_dict(cfg, drop_none=False)
+    for (sec, key), old in LATER_KEYS.items():
+        if out[sec].get(key) == old:
+            del out[sec][key]
+    return out
+
+
 def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first_identity: int = 0,
              model_path=None, jobs: int | None = None) -> tuple[dict, dict]:
     """Sample and write a plan directory; returns (header, summary). With ``out=None`` nothing
@@ -224,7 +328,6 @@ def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first
     import dataclasses
 
     import synth
-    from synth.config import to_dict
     from synth.plan import io, stats
 
     if seed is not None:
@@ -255,11 +358,18 @@ def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first
         def chunk(r: tuple[int, int]):
             lo, hi = first_identity + r[0] * S, min(first_identity + r[1] * S, first_identity + n_identities)
             arr = sample_plan(cfg, model, cat, seed, lo, hi - lo, extremes)
-            listing = io.write_shards(tmp, ShardSpecs(cfg, arr, seed).specs())
+            specs = ShardSpecs(cfg, arr, seed)
+            listing = io.write_shards(tmp, specs.specs(), specs.frames_per_identity)
             return listing, stats.partial(arr)
 
         parts = parallel.chunks(n_shards, 1 if jobs == 1 else 2 * jobs)
-        res = parallel.fork_map(chunk, parts, jobs)
+        enabled = gc.isenabled()
+        gc.disable()  # millions of short-lived objects and no reference cycles: collections only cost time
+        try:
+            res = parallel.fork_map(chunk, parts, jobs)
+        finally:
+            if enabled:
+                gc.enable()
         return [x for listing, _ in res for x in listing], stats.merge(cfg, [p for _, p in res])
 
     header = {
@@ -267,7 +377,8 @@ def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first
         "run_seed": seed, "first_identity": first_identity, "num_identities": n_identities,
         "identities_per_shard": S, "expressions_per_identity": d.expressions_per_identity,
         "views_per_expression": d.views_per_expression,
-        "num_frames": n_identities * d.expressions_per_identity * d.views_per_expression,
-        "model": model_rec, "catalogue": {"sha256": cat.digest}, "config": to_dict(cfg, drop_none=False),
+        "num_frames": n_identities * d.expressions_per_identity * d.environments_per_expression
+        * d.views_per_expression,
+        "model": model_rec, "catalogue": {"sha256": cat.digest}, "config": header_config(cfg),
     }
     return io.write_plan(out, header, produce)

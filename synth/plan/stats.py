@@ -35,7 +35,7 @@ def partial(arr) -> dict[str, Any]:
 def merge(cfg, parts: list[dict[str, Any]]) -> dict[str, Any]:
     """The summary of a plan from the partial statistics of its chunks (in order)."""
     cam = cfg.camera
-    V = cfg.dataset.views_per_expression
+    V, N = cfg.dataset.views_per_expression, cfg.dataset.environments_per_expression
     n_id = sum(p["identities"] for p in parts)
     n_ex = sum(p["expressions"] for p in parts)
     kinds = np.sum([p["kinds"] for p in parts], axis=0).tolist()
@@ -49,8 +49,8 @@ def merge(cfg, parts: list[dict[str, Any]]) -> dict[str, Any]:
             for k, v in counts.items():
                 dst[k] = dst.get(k, 0) + v
     cand = sum(p["candidates"] for p in parts)
-    return {
-        "identities": n_id, "expressions": n_ex, "frames": n_ex * V,
+    out = {
+        "identities": n_id, "expressions": n_ex, "frames": n_ex * N * V,
         "expression_kinds": dict(zip(expressions.KINDS, map(int, kinds))),
         "expression_presets": presets,
         "presets_unavailable_in_model": parts[0]["skipped"] if parts else [],
@@ -68,3 +68,6 @@ def merge(cfg, parts: list[dict[str, Any]]) -> dict[str, Any]:
         # fsum is exactly rounded, so the mean does not depend on how the identities were chunked
         "identity_code_norm_mean": round(math.fsum(x for p in parts for x in p["code_norms"]) / max(1, n_id), 6),
     }
+    if N > 1:  # (a one-environment summary keeps its bytes)
+        out["environments_per_expression"] = N
+    return out

@@ -17,7 +17,7 @@ import numpy as np
 
 from synth.appearance.skin import individual_typology_angle
 from synth.assets.classes import RECORD_ORDER
-from synth.dataset.layout import LOGS_DIR, STAGING_DIR, parse_frame_key
+from synth.dataset.layout import LOGS_DIR, STAGING_DIR, parse_frame_key_env
 from synth.dataset.reader import list_frames
 from synth.dataset.shards import load_dataset
 from synth.io import loads_json
@@ -144,7 +144,7 @@ def collect(root, *, max_shards: int | None = None, progress=None) -> Collected:
     names: list[str] = list((ds.info.get("meta") or {}).get("model", {}).get("expression_names") or [])
     for n, ref in enumerate(refs):
         fj = ref.meta()
-        i, e, _ = parse_frame_key(ref.key)
+        i, e, k, _ = parse_frame_key_env(ref.key)
         m, cam = fj["model"], fj["camera"]
         if i not in ident_seen:
             ident_seen[i] = True
@@ -163,7 +163,8 @@ def collect(root, *, max_shards: int | None = None, progress=None) -> Collected:
                 presets[m["expression_preset"]] += 1
         az.append(float(cam.get("azimuth_deg", np.nan)))
         el.append(float(cam.get("elevation_deg", np.nan)))
-        views_of[(i, e)].append(cam)
+        if k == 0:  # every environment of an expression has the same cameras
+            views_of[(i, e)].append(cam)
         vis.append(float(np.mean(fj["landmarks_visible"])))
         if progress and n % 500 == 0:
             progress(n, len(refs))
