@@ -24,6 +24,11 @@ along the outline the 17 points sit is the model's definition). A maximum of con
 functions, so no discrete choice is made; ``n_j``'s side comes from the sign of the projected
 contour's area (a face-sized number), and a contour of under :data:`MIN_AREA_PX2` (seen edge-on)
 is left as it is.
+
+Used by the photo benchmark (benchmarks/photo_landmarks.py) to score the jaw as annotated. Not in
+the fit: its contour points are mediapipe's face-oval points, whose correspondence was derived from
+renders as fixed surface points; moving those detections' model points to the outline between
+refits (tried on the benchmark's photos) raised the landmark residual and the NME on three of four.
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ import dataclasses
 
 import numpy as np
 
+from synth.errors import SynthError
 from synth.geometry.normals import normalize
 from synth.geometry.raycast import first_hits
 from synth.model.meshutil import barycentric_points
@@ -48,11 +54,10 @@ MAX_GAP_FACTOR = 4.0
 
 @dataclasses.dataclass(frozen=True)
 class ContourLines:
-    """``landmarks`` (L,) indices into the landmark set; per line ``S`` samples, inner end first:
+    """Per contour point a line of ``S`` samples, inner end first:
     ``tri`` (L, S) triangle indices, ``bary`` (L, S, 3), ``count`` (L,) valid samples per line
     (the rest repeat the last valid one), ``fixed`` (L,) the sample at the fixed landmark."""
 
-    landmarks: tuple[int, ...]
     tri: np.ndarray
     bary: np.ndarray
     count: np.ndarray
@@ -69,18 +74,21 @@ def _skin_triangles(model) -> tuple[np.ndarray, np.ndarray]:
     return np.flatnonzero(skin[tris].all(1)), ear[tris].any(1)
 
 
-def contour_lines(model, landmark_set: str = "ibug68", points=IBUG68_CONTOUR, front: int = IBUG68_NOSE_TIP, *,
-                  step_deg: float = 1.0,
-                  inner_deg: float = 45.0, outer_deg: float = 0.0) -> ContourLines:
-    """The contour lines of ``points`` of ``landmark_set`` on ``model``'s template (module docstring)."""
+def contour_lines(model, points: np.ndarray | None = None, front: np.ndarray | None = None, *,
+                  step_deg: float = 1.0, inner_deg: float = 45.0, outer_deg: float = 0.0) -> ContourLines:
+    """The contour lines (module docstring) through ``points`` (L, 3), template positions in their
+    order along the contour (default: ibug68's jaw, :data:`IBUG68_CONTOUR`); ``front`` (3,) a
+    template point at the face's front (default: ibug68's nose tip)."""
     V = np.asarray(model.template, np.float64)
     T = np.asarray(model.triangles, np.int64)
-    tri0, bary0 = model.landmarks[landmark_set]
-    P = barycentric_points(V, T, np.asarray(tri0), np.asarray(bary0, np.float64))
+    tri0, bary0 = model.landmarks["ibug68"]
+    ibug = barycentric_points(V, T, np.asarray(tri0), np.asarray(bary0, np.float64))
+    P = ibug[list(IBUG68_CONTOUR)] if points is None else np.asarray(points, np.float64)
+    front = ibug[IBUG68_NOSE_TIP] if front is None else np.asarray(front, np.float64)
     skin_tris, ear_tri = _skin_triangles(model)
-    pts = list(points)
+    pts = list(range(len(P)))
     centre = 0.5 * (V[model.regions["ear_l"]].mean(0) + V[model.regions["ear_r"]].mean(0))
-    forward = normalize(P[front] - centre)  # from the head's centre towards the face
+    forward = normalize(front - centre)  # from the head's centre towards the face
     angles = np.deg2rad(np.arange(-inner_deg, outer_deg + 0.5 * step_deg, step_deg))
     lines_tri, lines_bary, counts, fixed = [], [], [], []
     for i, j in enumerate(pts):
@@ -106,7 +114,7 @@ def contour_lines(model, landmark_set: str = "ibug68", points=IBUG68_CONTOUR, fr
     S = max(counts)
     tri = np.stack([np.concatenate([a, np.repeat(a[-1:], S - len(a))]) for a in lines_tri])
     bary = np.stack([np.concatenate([b, np.repeat(b[-1:], S - len(b), 0)]) for b in lines_bary])
-    return ContourLines(tuple(pts), tri, bary, np.asarray(counts), np.asarray(fixed))
+    return ContourLines(tri, bary, np.asarray(counts), np.asarray(fixed))
 
 
 def _valid_run(hit: np.ndarray, ear_tri: np.ndarray, X: np.ndarray, k0: int) -> tuple[int, int]:
@@ -116,7 +124,8 @@ def _valid_run(hit: np.ndarray, ear_tri: np.ndarray, X: np.ndarray, k0: int) -> 
     typical = np.median(step[ok[1:] & ok[:-1]])
     gap = np.concatenate([step > MAX_GAP_FACTOR * typical, [False]])  # gap[k]: between k and k + 1
     if not ok[k0]:
-        raise ValueError("a contour line misses the skin at its own landmark")
+        raise SynthError("a contour line misses the skin at its own landmark", "head model",
+                         "contour lines need the landmark on the model's skin region, off the ears")
     lo = k0
     while lo > 0 and ok[lo - 1] and not gap[lo - 1]:
         lo -= 1
