@@ -248,10 +248,10 @@ def person_mask(mask: np.ndarray, faces: list[np.ndarray], best: int) -> np.ndar
         return m
     keep = np.isin(labels, touching)
     if len(faces) > 1:
-        yy, xx = np.mgrid[0:H, 0:W]
-        d2 = [(xx - c[0]) ** 2 + (yy - c[1]) ** 2 for c in (0.5 * (f.min(0) + f.max(0)) for f in faces)]
-        nearest = np.argmin(np.stack(d2), axis=0)  # ties go to the lower face index
-        keep &= nearest == best
+        yy, xx = np.nonzero(keep)
+        centres = np.array([0.5 * (f.min(0) + f.max(0)) for f in faces])
+        d2 = (xx[:, None] + 0.5 - centres[:, 0]) ** 2 + (yy[:, None] + 0.5 - centres[:, 1]) ** 2
+        keep[yy, xx] = np.argmin(d2, axis=1) == best  # ties go to the lower face index
     keep = ndimage.binary_dilation(keep, iterations=PERSON_EDGE_PX)
     return np.where(keep, m, 0.0).astype(np.float32)
 
