@@ -57,6 +57,11 @@ PHOTOS = {"breakingbad": ("breakingbad.jpg", "breakingbad.pts"), "einstein": ("e
 REGIONS = {"jaw": range(0, 17), "brows": range(17, 27), "nose": range(27, 36), "eyes": range(36, 48),
            "mouth": range(48, 68)}
 OUTER_EYE_CORNERS = (36, 45)
+#: mediapipe's brow and nose points, each set left out of one more fit to see how well the
+#: correspondence predicts real detections it was not fitted to
+HELD_OUT = {"brows": (70, 63, 105, 66, 107, 55, 65, 52, 53, 46, 300, 293, 334, 296, 336, 285, 295, 282, 283, 276),
+            "nose": (168, 6, 197, 195, 5, 4, 1, 19, 94, 2, 98, 97, 326, 327, 129, 358, 64, 294, 48, 278, 75, 305,
+                     60, 290, 99, 328, 240, 460)}
 #: (mediapipe, ibug68) points that mark the same place: eye corners, mouth corners, chin
 SAME_POINTS = ((33, 36), (263, 45), (133, 39), (362, 42), (61, 48), (291, 54), (152, 8))
 
@@ -104,6 +109,34 @@ def jaw_split(pred: np.ndarray, gt: np.ndarray) -> dict:
     return {"along": float(along.mean() / io), "across": float(across.mean() / io)}
 
 
+def held_out(model, hm, cfg, obs, corr, gt) -> dict:
+    """Per :data:`HELD_OUT` set: the fit again without those points, and the mean distance of their
+    model points' projections to mediapipe's detections (over the inter-ocular distance), and its
+    component away from the face's midline (along the eye line; + = outwards)."""
+    import copy
+
+    from prior.fit.landmarks_fit import FitOptions, fit_landmarks
+
+    axis = gt[OUTER_EYE_CORNERS[1]] - gt[OUTER_EYE_CORNERS[0]]
+    io = np.linalg.norm(axis)
+    pos = {int(m): k for k, m in enumerate(corr["index"])}
+    out = {}
+    for region, points in HELD_OUT.items():
+        sel = [pos[m] for m in points]
+        o = copy.copy(obs)
+        o.sigma = obs.sigma.copy()
+        o.sigma[0, sel] = np.inf
+        fit = fit_landmarks(model, o, FitOptions(per_image_expression=cfg.landmarks.per_image_expression,
+                                                 focal_init_fov_deg=cfg.landmarks.fov_init_deg))
+        V = hm.vertices(fit.identity, fit.expression[0], fit.joint_rotations[0])[0]
+        X = barycentric_points(V, model.triangles, corr["triangles"][sel], corr["bary"][sel])
+        e = project(fit.K[0], fit.world_to_camera[0], X)[0] - obs.mean[0, sel]
+        side = np.sign((obs.mean[0, sel] - obs.mean[0].mean(0)) @ axis)
+        out[region] = {"distance": float(np.linalg.norm(e, axis=1).mean() / io),
+                       "outwards": float(np.mean(side * (e @ axis)) / io ** 2)}
+    return out
+
+
 def run_photo(path: Path, gt_source: np.ndarray, model, hm, cfg, lines) -> dict:
     t0 = time.perf_counter()
     inputs = read_inputs([path], cfg.fit.max_side_px)
@@ -127,7 +160,8 @@ def run_photo(path: Path, gt_source: np.ndarray, model, hm, cfg, lines) -> dict:
     return {"fit_to_detector": float(np.linalg.norm(mapped - obs.mean[0], axis=1).mean() / io),"size": im.photo["source_size"], "faces": im.detection["faces"], "face_px": im.detection["face_px"],
             "rmse_px": float(fit.rmse_px[0]), "converged": bool(fit.converged), "nme": nme(pred, gt, detected),
             "nme_outline": nme(outline, gt, detected), "jaw_fixed": jaw_split(pred, gt),
-            "jaw_outline": jaw_split(outline, gt), "seconds": time.perf_counter() - t0}
+            "jaw_outline": jaw_split(outline, gt), "held_out": held_out(model, hm, cfg, obs, corr, gt),
+            "seconds": time.perf_counter() - t0}
 
 
 def main(argv=None) -> None:
@@ -192,6 +226,12 @@ def main(argv=None) -> None:
             f, o = r["jaw_fixed"], r["jaw_outline"]
             print(f"| {name} | {100 * f['along']:.1f} / {100 * o['along']:.1f} % | "
                   f"{100 * f['across']:.1f} / {100 * o['across']:.1f} % |")
+    print("\n| photo | brows held out: distance / outwards | nose held out: distance / outwards |")
+    print("|---|---|---|")
+    for name, r in rows.items():
+        if "error" not in r:
+            print(f"| {name} | " + " | ".join(f"{100 * r['held_out'][k]['distance']:.2f} / "
+                                              f"{100 * r['held_out'][k]['outwards']:+.2f} %" for k in HELD_OUT) + " |")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
 
