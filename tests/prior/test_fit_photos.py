@@ -14,7 +14,7 @@ from PIL import Image
 from PIL.TiffImagePlugin import IFDRational
 
 from prior.fit.inputs import read_inputs, to_canvas
-from prior.fit.landmark_sources import MIN_FACE_PX, choose_face
+from prior.fit.landmark_sources import MIN_FACE_PX, choose_face, person_mask
 from prior.fit.photos import FULL_FRAME_DIAGONAL_MM, read_photo
 from synth.dataset.preview import srgb_to_linear
 from synth.errors import SynthError
@@ -238,6 +238,29 @@ def test_choose_face():
         choose_face([], "p")
 
 
+def _box_face(x0, y0, x1, y1) -> np.ndarray:
+    return np.array([[x0, y0], [x1, y1]] * 239, np.float64)
+
+
+def test_person_mask_keeps_the_chosen_face_person():
+    """Two people apart: the other one's region goes; two people touching: the pixels nearer the
+    other face go; the soft edge of the kept region stays; no region at the face keeps the mask."""
+    m = np.zeros((100, 200), np.float32)
+    m[10:100, 10:70] = 1.0   # person A: face box 20..60 x 15..50
+    m[10:100, 120:190] = 1.0  # person B
+    m[10:100, 9] = 0.3  # A's soft edge
+    faces = [_box_face(20, 15, 60, 50), _box_face(130, 15, 180, 50)]
+    a = person_mask(m, faces, 0)
+    assert a[:, 100:].max() == 0 and np.array_equal(a[:, :100], m[:, :100])
+    b = person_mask(m, faces, 1)
+    assert b[:, :100].max() == 0 and np.array_equal(b[:, 100:], m[:, 100:])
+    joined = m.copy()
+    joined[60:100, 60:130] = 1.0  # shoulders touching
+    a = person_mask(joined, faces, 0)
+    assert a[:, :90].sum() == joined[:, :90].sum() and a[:, 110:].max() == 0
+    assert np.array_equal(person_mask(m, [_box_face(80, 0, 110, 5)], 0), m)  # no region reaches the face
+
+
 def test_mediapipe_on_photos_people_take(astronaut, tmp_path, default_model):
     """Sideways, grey, CMYK and huge photos through read_inputs + mediapipe on one canvas; of two
     faces the clearly larger one is fitted; a small face and two similar faces are refused with one
@@ -271,6 +294,8 @@ def test_mediapipe_on_photos_people_take(astronaut, tmp_path, default_model):
     two = read_inputs([tmp_path / "two.png"], 2048)
     obs = observations(two, "mediapipe", default_model)
     assert two[0].detection["faces"] == 2 and two[0].detection["face_px"] > 150 and obs.mean[0, :, 0].max() < 320
+    # the mask is the fitted (left) person's: the segmentation covers both, the mask the left one only
+    assert two[0].mask[:, :300].mean() > 0.3 and two[0].mask[:, 360:].max() == 0
     for name, arr, match in (("small.png", astronaut[::3, ::3], "the face is"),
                              ("twins.png", np.concatenate([crop, crop], 1), "2 faces of similar size")):
         Image.fromarray(np.ascontiguousarray(arr)).save(tmp_path / name)
