@@ -306,7 +306,7 @@ def make_figure(work: Path, p: dict, path: Path, scenes_shown: int = 2) -> None:
     ground truth, depth, normals, and the predictions of the 1-identity prior and no pre-training."""
     from PIL import Image, ImageDraw
 
-    from synth.dataset.preview import linear_to_srgb
+    from synth.appearance.srgb import linear_to_srgb
     from synth.dataset.reader import read_frame
 
     big, S = max(p["rungs"]), p["test_res"]

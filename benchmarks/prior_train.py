@@ -38,11 +38,12 @@ sys.path.insert(0, str(ROOT))
 
 from prior.data import RaySampler  # noqa: E402
 from prior.data.stream import load_identity  # noqa: E402
-from prior.render_views import png_bytes, render_image, to_srgb8  # noqa: E402
+from prior.render_views import png_bytes, render_image  # noqa: E402
 from prior.train import checkpoint as ckpt  # noqa: E402
 from prior.train.loop import Trainer  # noqa: E402
 from prior.train.optim import clip_per_group, learning_rate, set_learning_rate  # noqa: E402
 from prior.train.run import prepare  # noqa: E402
+from synth.appearance.srgb import srgb8  # noqa: E402
 from prior.train.setup import build_model  # noqa: E402
 
 HOLDOUT = 5
@@ -112,8 +113,8 @@ def evaluate(run: Path, dataset: Path, sheet: Path | None, threads: int) -> dict
         err = (pred - ref) ** 2
         fg_mse.append(float(err[fg].mean()))
         all_mse.append(float(err.mean()))
-        srgb_mse.append(float(((to_srgb8(pred) / 255.0 - to_srgb8(ref) / 255.0) ** 2)[fg].mean()))
-        rows.append((to_srgb8(ref), to_srgb8(pred)))
+        srgb_mse.append(float(((srgb8(pred) / 255.0 - srgb8(ref) / 255.0) ** 2)[fg].mean()))
+        rows.append((srgb8(ref), srgb8(pred)))
     res = {"step": ck.step, "views": len(held), "fg_psnr_mean": float(np.mean([_psnr(x) for x in fg_mse])),
            "fg_psnr_pooled": _psnr(float(np.mean(fg_mse))), "psnr_mean": float(np.mean([_psnr(x) for x in all_mse])),
            "fg_psnr_srgb_mean": float(np.mean([_psnr(x) for x in srgb_mse]))}

@@ -532,9 +532,9 @@ def beard_table(args) -> dict:
 
 def _srgb8(fr) -> np.ndarray:
     """(H, W, 3) uint8 sRGB of a frame composited over mid grey."""
-    rgb = fr.rgb_premultiplied + (1.0 - fr.alpha[..., None]) * 0.5  # linear
-    srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * np.clip(rgb, 0, None) ** (1 / 2.4) - 0.055)
-    return (np.clip(srgb, 0, 1) * 255 + 0.5).astype(np.uint8)
+    from synth.appearance.srgb import srgb8
+
+    return srgb8(fr.rgb_premultiplied + (1.0 - fr.alpha[..., None]) * 0.5)  # composited in linear
 
 
 def _png(fr, path: Path) -> None:

@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 def _save(path: Path, rgba: np.ndarray) -> None:
     import imageio.v3 as iio
 
-    from synth.dataset.preview import linear_to_srgb
+    from synth.appearance.srgb import linear_to_srgb
 
     a = rgba[..., 3:4]
     rgb = np.clip(rgba[..., :3], 0, None) * a + 0.214 * (1 - a)  # linear 0.214 = sRGB mid-grey

@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import resource
 import sys
 import tempfile
 import time
@@ -97,7 +96,7 @@ def _scene(plan, shard_id: str, hm, render_cfg: dict | None = None):
 
 
 def psnr_masked(img: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> float:
-    from synth.dataset.preview import linear_to_srgb
+    from synth.appearance.srgb import linear_to_srgb
 
     a = np.clip(linear_to_srgb(np.clip(img[..., :3].astype(np.float64), 0, None)), 0, 1)[mask]
     b = np.clip(linear_to_srgb(np.clip(ref[..., :3].astype(np.float64), 0, None)), 0, 1)[mask]
@@ -267,15 +266,8 @@ def settings(args) -> None:
 
 # --------------------------------------------------------------------------- memory
 
-def rss_mb() -> float:
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024.0
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
-
 def memory(args) -> None:
+    from synth.io.process import rss_mb
     from synth.model.head import HeadModel
 
     with tempfile.TemporaryDirectory(prefix="synth-bench-") as d:

@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import resource
 import sys
 import tempfile
 import time
@@ -35,17 +34,7 @@ from renderer_jobs.events import EXIT_DISK_FULL, EXIT_INPUT, Commit, Error, Fram
 from synth.assets.classes import RECORD_ORDER
 from synth.dataset.exr import camera_attributes
 from synth.errors import SynthError
-
-
-def rss_mb() -> float:
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith("VmRSS:"):
-                    return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+from synth.io.process import rss_mb
 
 
 def software_versions() -> dict:

@@ -252,9 +252,9 @@ def register(root: typer.Typer) -> None:
 
 def main() -> int:
     """``python -m prior.cli ...`` (for torchrun): the same commands and error handling as ``synth prior``."""
-    from synth.cli.main import main as synth_main
+    from synth.cli.boundary import run
 
-    return synth_main(["prior", *sys.argv[1:]])
+    return run(app, sys.argv[1:], prog_name="synth prior")
 
 
 if __name__ == "__main__":

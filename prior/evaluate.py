@@ -26,7 +26,7 @@ from prior.fit.align import align_cameras
 from prior.fit.fitdir import load_fit
 from prior.fit.novel import render_fit_view
 from synth.dataset.layout import parse_frame_key_env
-from synth.dataset.preview import linear_to_srgb
+from synth.appearance.srgb import linear_to_srgb
 from synth.errors import SynthError
 
 FRONTAL_DEG = 90.0

@@ -20,8 +20,9 @@ import torch
 
 from prior.data.bounds import intersect_sphere
 from prior.data.sampler import pixel_radius
-from synth.io import atomic_place, atomic_write_bytes, atomic_write_json
+from synth.appearance.srgb import srgb8
 from synth.dataset.reader import camera_rays
+from synth.io import atomic_place, atomic_write_bytes, atomic_write_json
 from synth.errors import SynthError
 
 #: opacity above which a pixel counts as surface in depth and normal maps
@@ -95,12 +96,6 @@ def render_image(model, K, c2w, width: int, height: int, code: np.ndarray, laten
             "normals": nrm.reshape(height, width, 3).astype(np.float32)}
 
 
-def to_srgb8(linear: np.ndarray) -> np.ndarray:
-    x = np.clip(linear, 0.0, 1.0)
-    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-    return (s * 255 + 0.5).astype(np.uint8)
-
-
 def png_bytes(img8: np.ndarray) -> bytes:
     from PIL import Image
 
@@ -119,7 +114,7 @@ def _write_depth_exr(path: Path, depth: np.ndarray) -> None:
 
 def write_view(out_dir: Path, key: str, img: dict[str, np.ndarray]) -> list[Path]:
     """The four files of one rendered view (see the module docstring), each written atomically."""
-    files = {f"{key}_colour.png": png_bytes(to_srgb8(img["rgb"])),
+    files = {f"{key}_colour.png": png_bytes(srgb8(img["rgb"])),
              f"{key}_opacity.png": png_bytes((np.clip(img["acc"], 0, 1) * 255 + 0.5).astype(np.uint8)),
              f"{key}_normals.png": png_bytes(((img["normals"] + 1) * 0.5 * 255 + 0.5).astype(np.uint8)
                                              * (np.linalg.norm(img["normals"], axis=-1, keepdims=True) > 0))}

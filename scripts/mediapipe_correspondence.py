@@ -75,14 +75,14 @@ def export(dataset: Path, work: Path) -> None:
     _setup_path()
     from PIL import Image
 
+    from synth.appearance.srgb import srgb8
     from synth.dataset.reader import iter_frames
 
     (work / "png").mkdir(parents=True, exist_ok=True)
     truth = {}
     for fr in iter_frames(dataset):
         rgb = fr.rgb_premultiplied + (1.0 - fr.alpha[..., None]) * 0.5  # over mid grey, linear
-        srgb = np.where(rgb <= 0.0031308, 12.92 * rgb, 1.055 * np.clip(rgb, 0, None) ** (1 / 2.4) - 0.055)
-        Image.fromarray((np.clip(srgb, 0, 1) * 255 + 0.5).astype(np.uint8)).save(work / "png" / f"{fr.key}.png")
+        Image.fromarray(srgb8(rgb)).save(work / "png" / f"{fr.key}.png")
         truth[fr.key] = {"identity_index": fr.identity_index, "K": fr.K.tolist(),
                          "world_to_camera": fr.world_to_camera.tolist(), "width": fr.width, "height": fr.height,
                          "identity": fr.meta["model"]["identity"], "expression": fr.meta["model"]["expression"],

@@ -7,7 +7,9 @@ import x``) is an edge to ``a.b.c`` and to the packages ``a`` and ``a.b`` that a
 the project (have an ``__init__.py``), because importing it runs their ``__init__`` first;
 except a package that contains the importing module, which is already being imported by then.
 ``from a.b import name`` is an edge to ``a.b.name`` when that is a module, else to ``a.b``.
-Imports by string (``importlib.import_module``) are not seen.
+In a file that calls ``importlib.import_module``, every string constant that names a project
+module counts as ``import`` of it (a table of names imported in a loop, too); a name built at run
+time is not seen.
 """
 
 from __future__ import annotations
@@ -39,7 +41,12 @@ def _imported_names(name: str, path: Path, mods: dict[str, Path]) -> list[str]:
     """The module names one file's import statements name (before the package rule)."""
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     out = []
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    if any(isinstance(n, ast.Call) and _is_import_module(n.func) for n in ast.walk(tree)):
+        # a file that imports by name: every string naming a project module is an edge (names
+        # kept in a table and passed to import_module in a loop, too)
+        out.extend(n.value for n in ast.walk(tree) if isinstance(n, ast.Constant) and n.value in mods)
+    for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             out.extend(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom):
@@ -52,6 +59,11 @@ def _imported_names(name: str, path: Path, mods: dict[str, Path]) -> list[str]:
                 sub = f"{base}.{a.name}"
                 out.append(sub if sub in mods else base)
     return out
+
+
+def _is_import_module(func: ast.expr) -> bool:
+    return (isinstance(func, ast.Attribute) and func.attr == "import_module") or \
+        (isinstance(func, ast.Name) and func.id == "import_module")
 
 
 def import_graph(root: Path = ROOT, packages=PACKAGES) -> dict[str, set[str]]:
@@ -167,9 +179,12 @@ def test_the_checker_finds_cycles(tmp_path):
         "pkg/ok/__init__.py": "from .x import X\n",                   # re-exports are not cycles
         "pkg/ok/x.py": "from pkg.ok.y import Y\nX = 1\n",
         "pkg/ok/y.py": "Y = 2\n",
+        "pkg/f.py": "import importlib\nfor m in ('pkg.g',):\n    importlib.import_module(m)\n",
+        "pkg/g.py": "def main():\n    from pkg.f import x\n",              # by string one way, plainly back
     })
     graph = import_graph(tmp_path, ("pkg",))
     assert graph["pkg.b"] == {"pkg.a"} and graph["pkg.c"] == {"pkg.sub", "pkg.sub.m"}
     assert graph["pkg.ok.x"] == {"pkg.ok.y"} and graph["pkg.ok"] == {"pkg.ok.x"}
     cycles = sorted(find_cycles(graph))
-    assert cycles == [["pkg.a", "pkg.b", "pkg.a"], ["pkg.c", "pkg.sub", "pkg.c"], ["pkg.d", "pkg.e", "pkg.d"]]
+    assert cycles == [["pkg.a", "pkg.b", "pkg.a"], ["pkg.c", "pkg.sub", "pkg.c"], ["pkg.d", "pkg.e", "pkg.d"],
+                      ["pkg.f", "pkg.g", "pkg.f"]]

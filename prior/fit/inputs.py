@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from prior.fit.landmarks_fit import MIN_LANDMARKS, Observations
-from synth.dataset.preview import linear_to_srgb
+from synth.appearance.srgb import linear_to_srgb
 from synth.errors import SynthError
 
 PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg")

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from synth.dataset.preview import srgb_to_linear
+from synth.appearance.srgb import srgb_to_linear
 from synth.errors import SynthError
 
 TAG_ORIENTATION = 0x0112

@@ -32,12 +32,13 @@ from prior import losses
 from prior.data.sampler import RaySampler
 from prior.precision import resolve_bf16
 from prior.data.stream import Loader
-from prior.render_views import render_image, scaled_camera, to_srgb8
+from prior.render_views import render_image, scaled_camera
 from prior.train import checkpoint as ckpt
 from prior.train.logs import RunLog
 from prior.train.optim import build_optimizer, clip_per_group, learning_rate, set_learning_rate
 from prior.train.run import RunSetup, write_run_files
 from prior.train.setup import Dist, build_model
+from synth.appearance.srgb import srgb8
 from synth.errors import SynthError
 
 #: first word of the seeds of the stratified-sampling generators
@@ -298,8 +299,8 @@ class Trainer:
                 K = scaled_camera(d.K[n], W, H, size)
                 img = render_image(self.model, K, d.c2w[n], size, size, d.codes[n], m, tb.info.centre[m],
                                    float(tb.info.radius[m]), chunk=t.render_chunk, device=self.dev, bf16=self.bf16)
-                gt = Image.fromarray(to_srgb8(d.rgba[n, ..., :3].astype(np.float32))).resize((size, size))
+                gt = Image.fromarray(srgb8(d.rgba[n, ..., :3].astype(np.float32))).resize((size, size))
                 self.log.image(f"preview/identity_{int(tb.info.identity_index[m])}",
-                               np.concatenate([to_srgb8(img["rgb"]), np.asarray(gt)], axis=1), done)
+                               np.concatenate([srgb8(img["rgb"]), np.asarray(gt)], axis=1), done)
         finally:
             self.model.train()

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from synth.appearance.srgb import linear_to_srgb, srgb_to_linear
 from synth.dataset.exr import read_frame_exr
 from synth.dataset.layout import parse_frame_key, parse_frame_key_env
 from synth.dataset.reader import FrameRef, list_frames
@@ -23,16 +24,6 @@ from synth.io import atomic_write_bytes
 GREY_SRGB = 0.5
 BG = (24, 24, 24)
 LABEL = (220, 220, 220)
-
-
-def linear_to_srgb(x: np.ndarray) -> np.ndarray:
-    x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-
-
-def srgb_to_linear(x: np.ndarray | float) -> np.ndarray:
-    x = np.asarray(x, dtype=np.float64)
-    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
 
 
 def colour_tile(rgba: np.ndarray) -> np.ndarray:

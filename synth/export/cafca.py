@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from synth.dataset.preview import linear_to_srgb
+from synth.appearance.srgb import linear_to_srgb
 from synth.errors import SynthError
 from synth.export.select import check_new_output, png_bytes, select_frames
 from synth.io import atomic_dir

@@ -35,7 +35,7 @@ import numpy as np
 
 from synth.conventions import nerfstudio_camera
 from synth.dataset.layout import held_out, parse_frame_key
-from synth.dataset.preview import linear_to_srgb
+from synth.appearance.srgb import linear_to_srgb
 from synth.errors import SynthError
 from synth.export.select import check_new_output, png_bytes, select_frames
 from synth.io import atomic_dir, atomic_write_json

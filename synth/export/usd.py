@@ -35,7 +35,7 @@ import numpy as np
 
 from synth.conventions import opencv_to_opengl_c2w, usd_camera_params
 from synth.dataset.layout import SHARDS_DIR, parse_frame_key
-from synth.dataset.preview import srgb_to_linear
+from synth.appearance.srgb import srgb_to_linear
 from synth.dataset.segmentation import NAMES, PALETTE, polygon_classes
 from synth.errors import SynthError
 from synth.export.select import select_frames

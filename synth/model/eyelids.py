@@ -46,6 +46,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from synth.geometry import exact
+from synth.model.meshutil import smoothstep
 
 #: upper / lower lid rotation per unit of gaze pitch (see docs/default-model.md, "Eyelids")
 FOLLOW_UPPER = 0.8
@@ -128,7 +129,7 @@ def build_eyelid_rig(template: np.ndarray, regions: dict, joint_rest: np.ndarray
         s = np.clip((x[cand] - x0) / (x1 - x0), 0.0, 1.0)
         taper = np.sin(np.pi * s) ** 0.5
         medial = np.clip(((x1 - x[cand]) if c[0] < 0 else (x[cand] - x0)) / CANTHAL_HOLD_M, 0.0, 1.0)
-        lacrimal = LACRIMAL_GAP_M * (1.0 - medial * medial * (3.0 - 2.0 * medial))  # the nose side's end
+        lacrimal = LACRIMAL_GAP_M * (1.0 - smoothstep(medial))  # the nose side's end
         pos = {int(v): k for k, v in enumerate(cand)}
         ui = _lerp_table(x[up], x[cand])
         li = _lerp_table(x[lo], x[cand])

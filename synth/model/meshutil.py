@@ -212,10 +212,11 @@ def convex_hull_2d(points: np.ndarray) -> np.ndarray:
     return np.asarray(lower[:-1] + upper[:-1])
 
 
-def smoothstep(x: np.ndarray) -> np.ndarray:
-    """3x^2 - 2x^3 on [0, 1], clamped outside."""
-    x = np.clip(x, 0.0, 1.0)
-    return x * x * (3.0 - 2.0 * x)
+def smoothstep(x, e0: float = 0.0, e1: float = 1.0) -> np.ndarray:
+    """3t^2 - 2t^3 of t = (x - e0) / (e1 - e0) clamped to [0, 1]: 0 at e0, 1 at e1 (the one
+    smoothstep of the project; with the default edges t is x itself, bit for bit)."""
+    t = np.clip((np.asarray(x, np.float64) - e0) / (e1 - e0), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
 
 
 def mesh_mirror(template: np.ndarray, tris: np.ndarray, tol: float = 1e-6):

@@ -32,7 +32,8 @@ from synth.assets.fit.garment import CLEARANCE as GARMENT_CLEARANCE
 from synth.assets.fit.garment import garment_shell
 from synth.assets.fit.headwear import CLEARANCE as HEADWEAR_CLEARANCE
 from synth.assets.fit.headwear import headwear_shell
-from synth.assets.fit.meshops import boundary_loops, clip_by_field, grid_faces, icosphere, subdivide, sweep_tube
+from synth.assets.fit.meshops import (clip_by_field, grid_faces, icosphere, oriented_boundary_loops, subdivide,
+                                      sweep_tube)
 from synth.geometry.normals import normalize, vertex_normals
 from tests.support import asset_scene
 
@@ -133,7 +134,7 @@ def test_clip_by_field_cuts_exactly_and_subdivides():
     area2 = 0.5 * np.linalg.norm(np.cross(P2[faces2[:, 1]] - P2[faces2[:, 0]], P2[faces2[:, 2]] - P2[faces2[:, 0]]), axis=1).sum()
     assert len(faces2) == 4 * len(faces) and area2 == pytest.approx(0.37, abs=1e-9)
     assert np.allclose(P2[cut2, 0], 0.37)
-    loops = boundary_loops(faces)
+    loops = oriented_boundary_loops(faces)
     assert len(loops) == 1 and np.all(np.isin(np.nonzero(cut)[0], loops[0]))
 
 
@@ -263,7 +264,7 @@ def test_hem_is_smooth_and_closed(fitted):
     for case, stage, cls, aid, params, v, f, _ in fitted:
         if cls != "garment":
             continue
-        loops = [lo for lo in boundary_loops(f) if len(lo) >= 8]
+        loops = [lo for lo in oriented_boundary_loops(f) if len(lo) >= 8]
         zs = np.array([v[lo, 2].mean() for lo in loops])
         bottom = [lo for lo, z in zip(loops, zs) if z < zs.min() + 0.01]
         assert len(bottom) >= 2, (case, stage, aid, len(bottom))

@@ -11,11 +11,12 @@ import pytest
 
 from synth.assets.fit import keepout as ko_mod
 from synth.assets.fit.groom import head_frame
-from synth.assets.fit.keepout import FaceKeepOut, _smoothstep, follow_the_leader, keep_out
+from synth.assets.fit.keepout import FaceKeepOut, follow_the_leader, keep_out
 from synth.assets.fit.occlusion import inner_face_triangles, occluding_points
 from synth.assets.fit.strands import Surface
 from synth.conventions import spherical_offset
 from synth.geometry.raycast import RayGrid
+from synth.model.meshutil import smoothstep
 from tests.support import asset_scene
 
 
@@ -29,7 +30,7 @@ def _max_turn(P):
 def _wedge():
     """A 70 degree wedge from z = -0.16 to 0.04 about the Z axis (tapered at both ends)."""
     z = np.linspace(-0.16, 0.04, 41)
-    lim = np.radians(70.0) * _smoothstep((z + 0.16) / 0.03) * _smoothstep((0.04 - z) / 0.02)
+    lim = np.radians(70.0) * smoothstep((z + 0.16) / 0.03) * smoothstep((0.04 - z) / 0.02)
     return FaceKeepOut(np.zeros(2), z, lim, np.full(41, 0.09), 0.02)
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from synth.assets.fit import hem
-from synth.assets.fit.meshops import boundary_loops, grid_faces
+from synth.assets.fit.meshops import grid_faces, oriented_boundary_loops
 
 
 def _slow_segment_distance(p, A, B):
@@ -88,7 +88,7 @@ def test_cap_closes_the_loop_facing_down():
         assert (n[:, 2] < 0).all()
         rim = np.linalg.norm(Vc[:30, :2], axis=1)
         assert np.all(rim < np.linalg.norm(P[order, :2], axis=1))  # tucked inside the loop
-        assert len(boundary_loops(Fc)) == 1
+        assert len(oriented_boundary_loops(Fc)) == 1
 
 
 def test_smooth_loops_straightens_a_zigzag_only_on_the_hem():

@@ -91,7 +91,7 @@ import json, os, sys, time
 from pathlib import Path
 from renderer_jobs.local import LocalBackend
 from renderer_jobs.submit import prepare_plan, render_plan
-from synth.cli.main import translate
+from synth.cli.boundary import translate
 from synth.dataset.shards import load_dataset
 from tests.support import dataset_worker, datasets
 

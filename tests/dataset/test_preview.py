@@ -9,7 +9,8 @@ import pytest
 
 from tests.support import fake_frames as ff
 from synth.cli.main import main
-from synth.dataset.preview import colour_tile, contact_sheet, depth_tile, linear_to_srgb, seg_tile, srgb_to_linear
+from synth.appearance.srgb import linear_to_srgb, srgb_to_linear
+from synth.dataset.preview import colour_tile, contact_sheet, depth_tile, seg_tile
 from synth.errors import SynthError
 from synth.dataset.segmentation import PALETTE
 from synth.dataset.shards import open_dataset

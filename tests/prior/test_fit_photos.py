@@ -16,7 +16,7 @@ from PIL.TiffImagePlugin import IFDRational
 from prior.fit.inputs import read_inputs, to_canvas
 from prior.fit.landmark_sources import MIN_FACE_PX, choose_face, person_mask
 from prior.fit.photos import FULL_FRAME_DIAGONAL_MM, read_photo
-from synth.dataset.preview import srgb_to_linear
+from synth.appearance.srgb import srgb_to_linear
 from synth.errors import SynthError
 
 skd = pytest.importorskip("skimage.data", reason="scikit-image (test extra) provides the photo")

@@ -19,7 +19,7 @@ import numpy as np
 
 from synth.assets.fit.attach import Binding, body_query, push_out
 from synth.assets.fit.masks import region_mask
-from synth.assets.fit.meshops import boundary_loops, clip_by_field, level_points, resample_loop, subdivide
+from synth.assets.fit.meshops import clip_by_field, level_points, oriented_boundary_loops, resample_loop, subdivide
 from synth.assets.fit.trim import Rim, add_rims, place_rims, push_out_edges, trim_part
 from synth.geometry.normals import normalize, vertex_normals
 
@@ -253,7 +253,7 @@ def fit_shell(body: Body, shell: Shell, clearance: float) -> FittedShell:
             trimmed += n
         parts.add(P, F, int(M[0]), bool(T.any()), bool(R.any()), S, rim)
     P, F, M, _, R, S = parts.merged()
-    loops = [lo for lo in boundary_loops(F) if S[lo].all()]
+    loops = [lo for lo in oriented_boundary_loops(F) if S[lo].all()]
     P = push_out_edges(P, body.query, clearance, R, loops)
     owner = np.repeat(np.arange(len(parts.P)), [len(p) for p in parts.P])
     specs = [(lo, parts.rim[owner[lo[0]]]) for lo in loops if parts.rim[owner[lo[0]]] is not None]

@@ -39,7 +39,8 @@ from synth.assets.fit.body import Body, Cloth, Parts, Shell
 from synth.assets.fit.garment_parts import (crew_neckline, front_weight, hanging_strip, hood_up, neck_tube,
                                             necktie, shirt_collar, torso_shell, vee_neckline,
                                             wrinkle_offset)
-from synth.assets.fit.meshops import icosphere, smooth_max, smooth_min, smoothstep
+from synth.assets.fit.meshops import icosphere, smooth_max, smooth_min
+from synth.model.meshutil import smoothstep
 
 #: minimum distance (m) kept between every garment vertex and the skin
 CLEARANCE = 0.0015
@@ -181,7 +182,7 @@ def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
         wrf = wr(base, 0.002)
 
         def off(P, N):
-            up = smoothstep(0.0, 0.02, P[:, 2] - (fr.z_ring(fr.theta(P)) + 0.005))
+            up = smoothstep(P[:, 2] - (fr.z_ring(fr.theta(P)) + 0.005), 0.0, 0.02)
             return wrf(P, N) + 0.003 * up
         def z(t):  # the collar's top: h above the neck base, under the jaw, the corner between rounded
             top = fr.z_ring(t) + h
@@ -226,7 +227,7 @@ def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
             frac = np.clip((zr - P[:, 2]) / depth, 0.0, 1.0)
             edge = half * (1.0 - frac)  # theta of the V edge at this height
             s = (np.abs(th) - edge) * r
-            band = smoothstep(-0.002, 0.004, s) * (1.0 - smoothstep(lw - 0.008, lw, s))
+            band = smoothstep(s, -0.002, 0.004) * (1.0 - smoothstep(s, lw - 0.008, lw))
             band = band * (np.cos(th) > 0.2) * (frac < 0.999)
             return wrf(P, N) + 0.005 * band
         torso_shell(body, parts, zfn, off, rim=0.003, rim_flatten=0.7)

@@ -24,8 +24,8 @@ NECK_SMOOTHING = 12
 V_TIP_RADIUS = 0.01
 #: an opening of a torso shell's field must span this many body vertices (smaller ones are closed)
 MIN_OPENING = 8
-from synth.assets.fit.meshops import (boundary_loops, grid_faces, icosphere, laplacian_smooth, negative_regions,
-                                     sweep_tube)
+from synth.assets.fit.meshops import (grid_faces, icosphere, laplacian_smooth, negative_regions,
+                                      oriented_boundary_loops, sweep_tube)
 
 
 def front_weight(th):
@@ -199,7 +199,7 @@ def hood_up(body: Body, parts: Parts, slot: int, base_off: float):
     P = laplacian_smooth(P, F, 4, 0.5)
     P = push_out(P, body.query, 0.008)
     parts.add(P, F, slot)
-    for loop in boundary_loops(F):
+    for loop in oriented_boundary_loops(F):
         if cut[loop].mean() > 0.5 and len(loop) > 8:
             Vt, Ft = sweep_tube(P[loop][::2], 0.006, 8, closed=True)
             parts.add(push_out(Vt, body.query, 0.004), Ft, slot)

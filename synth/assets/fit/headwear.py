@@ -24,10 +24,11 @@ import numpy as np
 
 from synth.assets.fit.attach import push_out
 from synth.assets.fit.body import Body, Cloth, Parts, Shell, WaveNoise
-from synth.assets.fit.meshops import boundary_loops, grid_faces, icosphere, laplacian_smooth, smoothstep, sweep_tube
+from synth.assets.fit.meshops import grid_faces, icosphere, laplacian_smooth, oriented_boundary_loops, sweep_tube
 
 CLEARANCE = 0.0015
 from synth.geometry.normals import normalize
+from synth.model.meshutil import smoothstep
 
 
 #: cut plane of each headwear (metres): the brow centre raised by the first, the top of each
@@ -89,12 +90,12 @@ def headwear_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
         noise = WaveNoise(rng, 0.04, 10)
 
         def off(P, N, h):
-            slack = 0.006 * smoothstep(0.03, 0.12, h)
-            cuff = 0.004 * (1.0 - smoothstep(fold - 0.003, fold, h)) if fold > 0.002 else 0.0
+            slack = 0.006 * smoothstep(h, 0.03, 0.12)
+            cuff = 0.004 * (1.0 - smoothstep(h, fold - 0.003, fold)) if fold > 0.002 else 0.0
             return 0.005 + slack + cuff + 0.001 * (0.5 + 0.5 * noise(P))
         P, F, cut, o, n = _crown(body, *CUT_RAISE_M["beanie"], off)
         parts.add(P, F, 0)
-        loops = [lp for lp in boundary_loops(F) if cut[lp].mean() > 0.5 and len(lp) > 8]
+        loops = [lp for lp in oriented_boundary_loops(F) if cut[lp].mean() > 0.5 and len(lp) > 8]
         for lp in loops:
             Vt, Ft = sweep_tube(P[lp], 0.005 if fold > 0.002 else 0.003, 8, closed=True)
             parts.add(push_out(Vt, body.query, CLEARANCE + 0.001), Ft, 0)
@@ -112,10 +113,10 @@ def headwear_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
         cloths = [Cloth("headwear_cap", colour, "cotton_twill", 0.005, seed)]
 
         def off(P, N, h):
-            return 0.003 + 0.006 * smoothstep(0.0, 0.08, h)
+            return 0.003 + 0.006 * smoothstep(h, 0.0, 0.08)
         P, F, cut, o, n = _crown(body, *CUT_RAISE_M["baseball_cap"], off)
         parts.add(P, F, 0)
-        loops = [lp for lp in boundary_loops(F) if cut[lp].mean() > 0.5 and len(lp) > 8]
+        loops = [lp for lp in oriented_boundary_loops(F) if cut[lp].mean() > 0.5 and len(lp) > 8]
         for lp in loops:
             Vt, Ft = sweep_tube(P[lp], 0.0025, 6, closed=True)
             parts.add(push_out(Vt, body.query, CLEARANCE + 0.001), Ft, 0)

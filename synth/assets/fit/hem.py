@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from synth.assets.fit.meshops import boundary_loops
+from synth.assets.fit.meshops import oriented_boundary_loops
 from synth.geometry.normals import normalize
 
 #: distance (m) from the bust's cut at which every garment ends
@@ -40,7 +40,7 @@ CAP_INSET = 0.0005
 def cut_loop(F: np.ndarray, V: np.ndarray) -> np.ndarray:
     """The bust's open boundary: the lowest of the mesh's boundary loops (eyes and mouth leave
     smaller loops higher up). Vertex indices, in order."""
-    loops = boundary_loops(F)
+    loops = oriented_boundary_loops(F)
     if not loops:
         raise ValueError("the head mesh has no open boundary (no bust cut)")
     return min(loops, key=lambda lo: float(np.asarray(V)[lo, 2].mean()))
@@ -108,7 +108,7 @@ def smooth_loops(P: np.ndarray, F: np.ndarray, on_cut: np.ndarray, iterations: i
     the kinks they make. ``resample``: then spread the loop's vertices evenly along it
     (:func:`relax_loop`)."""
     P = np.array(P, np.float64, copy=True)
-    for loop in boundary_loops(F):
+    for loop in oriented_boundary_loops(F):
         if on_cut[loop].mean() < min_fraction or not on_cut[loop].any():
             continue
         if resample:
@@ -151,7 +151,7 @@ def _respace(Q: np.ndarray) -> np.ndarray:
 
 
 def hem_loops(F: np.ndarray, on_hem: np.ndarray) -> list[np.ndarray]:
-    return [lo for lo in boundary_loops(F) if on_hem[lo].mean() >= 0.8 and len(lo) >= 8]
+    return [lo for lo in oriented_boundary_loops(F) if on_hem[lo].mean() >= 0.8 and len(lo) >= 8]
 
 
 def cap(P: np.ndarray, loop: np.ndarray, inset: float) -> tuple[np.ndarray, np.ndarray]:

@@ -36,6 +36,7 @@ import numpy as np
 
 from synth.assets.fit.occlusion import inner_face_triangles
 from synth.assets.fit.strands import arc_length, resample_fast
+from synth.model.meshutil import smoothstep
 
 
 @dataclass
@@ -66,11 +67,6 @@ class FaceKeepOut:
         return np.abs(th) < self.limits(pts[..., 2], r)
 
 
-def _smoothstep(t):
-    t = np.clip(t, 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
-
-
 def face_keep_out(data, vertices: np.ndarray, landmarks68: np.ndarray, centre, margin_deg: float = 6.0,
                   above: float = 0.02, below: float = 0.03, step: float = 0.004) -> FaceKeepOut:
     """The wedge of a head: the inner face's angular half-width per ``step`` of height (the
@@ -97,7 +93,7 @@ def face_keep_out(data, vertices: np.ndarray, landmarks68: np.ndarray, centre, m
     zb = np.linspace(zc[0] - below, zc[0], 9)[:-1]
     za = np.linspace(zc[-1], zc[-1] + above, 9)[1:]
     zs = np.concatenate([zb, zc, za])
-    lims = np.concatenate([lim[0] * _smoothstep((zb - zb[0]) / below), lim, lim[-1] * _smoothstep((za[-1] - za) / above)])
+    lims = np.concatenate([lim[0] * smoothstep((zb - zb[0]) / below), lim, lim[-1] * smoothstep((za[-1] - za) / above)])
     rads = np.concatenate([np.full(len(zb), rad[0]), rad, np.full(len(za), rad[-1])])
     return FaceKeepOut(axis, zs, lims, rads, z1)
 
@@ -131,7 +127,7 @@ def envelope(F: np.ndarray, s: np.ndarray, ahead: float, behind: float) -> np.nd
     back after leaving it). The bumps are flat at their peaks, so the envelope has no corner
     there."""
     d = s[:, None, :] - s[:, :, None]  # [n, k, j]: s_j - s_k
-    K = np.where(d >= 0.0, _smoothstep(1.0 - d / ahead), _smoothstep(1.0 + d / behind))
+    K = np.where(d >= 0.0, smoothstep(1.0 - d / ahead), smoothstep(1.0 + d / behind))
     return (F[:, None, :] * K).max(2)
 
 
@@ -153,7 +149,7 @@ def _turn(ko: FaceKeepOut, pts: np.ndarray, side: np.ndarray | None, width: floa
     # strand so that it starts turning before the wedge and eases back after it
     need = np.where(near & (u > -lim - 2.0 * width), np.maximum(_soft_max(u, lim + width, width) - u, 0.0), 0.0)
     # roots stay put: the turn fades in over the first ``root`` metres of a strand
-    move = envelope(need, s, ahead, behind) * _smoothstep(s / root)
+    move = envelope(need, s, ahead, behind) * smoothstep(s / root)
     a = th + side[:, None] * move
     out = np.stack([ko.axis[0] + r * np.sin(a), ko.axis[1] - r * np.cos(a), pts[..., 2]], -1)
     out[:, 0] = pts[:, 0]

@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from synth.model.meshutil import smoothstep
+
 
 def region_mask(regions: dict, names, n: int) -> np.ndarray:
     """True on the ``n`` vertices of any of the named regions (absent regions: none)."""
@@ -30,8 +32,7 @@ def distance_to(V: np.ndarray, pts: np.ndarray) -> np.ndarray:
 
 def feather(d: np.ndarray, inner: float, outer: float) -> np.ndarray:
     """1 within ``inner``, smooth falloff to 0 at ``outer``."""
-    t = np.clip((d - inner) / max(outer - inner, 1e-9), 0.0, 1.0)
-    return 1.0 - t * t * (3 - 2 * t)
+    return 1.0 - smoothstep(d, inner, inner + max(outer - inner, 1e-9))
 
 
 def segment_distance(V, a, b):

@@ -19,11 +19,6 @@ from scipy import sparse
 from synth.geometry.normals import normalize
 
 
-def smoothstep(e0: float, e1: float, x):
-    t = np.clip((np.asarray(x, np.float64) - e0) / (e1 - e0), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
-
-
 def smooth_max(a, b, k: float):
     """max(a, b) with the corner rounded over about ``k`` (same units): a hyperbola that is
     never below the maximum and at most k/2 above it (where a == b)."""
@@ -132,8 +127,10 @@ def subdivide(W, faces: np.ndarray, is_cut: np.ndarray | None = None):
     return W2, nf, cut2
 
 
-def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
-    """Ordered boundary vertex loops of a triangle mesh (manifold boundaries)."""
+def oriented_boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
+    """Boundary vertex loops of a triangle mesh (manifold boundaries), each in the direction of its
+    half-edges (so a loop's order says which side the mesh is on). :func:`synth.model.meshutil.boundary_loops`
+    is the unoriented one (non-manifold boundaries split, longest first)."""
     faces = np.asarray(faces, np.int64)
     he = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     key = he[:, 0] * (he.max() + 1) + he[:, 1]

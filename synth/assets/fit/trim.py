@@ -36,7 +36,7 @@ import numpy as np
 
 from synth.assets.fit.attach import push_out
 from synth.assets.fit.hem import neighbour_mean_matrix, relax_loop, smooth_loops
-from synth.assets.fit.meshops import boundary_loops, clip_by_field, negative_regions, remove_faces, sweep_tube
+from synth.assets.fit.meshops import clip_by_field, negative_regions, oriented_boundary_loops, remove_faces, sweep_tube
 from synth.geometry.normals import normalize
 
 #: vertices of trimmable parts deeper than this inside the skin after shaping are cut away
@@ -99,7 +99,7 @@ def _open_only(F: np.ndarray, g: np.ndarray, smooth: np.ndarray) -> np.ndarray:
     lab = negative_regions(F, g)
     n = len(g)
     edge = np.zeros(n, bool)
-    for lo in boundary_loops(F):
+    for lo in oriented_boundary_loops(F):
         edge[lo] = smooth[lo]
     opening = np.zeros(lab.max() + 1, bool)
     opening[lab[neg & edge]] = True

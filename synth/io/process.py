@@ -1,0 +1,18 @@
+"""Facts about the running process."""
+
+from __future__ import annotations
+
+import resource
+
+
+def rss_mb() -> float:
+    """Resident memory of this process now (MiB), from /proc; where that cannot be read, the
+    peak so far (``getrusage``)."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
