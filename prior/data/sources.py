@@ -136,16 +136,10 @@ def open_source(args) -> Source:
         if p.is_dir() and (p / SHARDS_DIR).is_dir():
             planned, plan_hash = None, None
             if (p / DATASET_FILE).is_file():
-                from synth.dataset.shards import load_dataset
+                from prior.data.plan import read_plan
 
-                ds = load_dataset(p)
-                plan_hash, planned = ds.plan_hash, {}
-                for sid, keys in ds.expected.items():
-                    for k in keys:
-                        if FRAME_KEY_RE.match(k):
-                            s = planned.setdefault(parse_frame_key(k)[0], [])
-                            if sid not in s:
-                                s.append(sid)
+                top, planned = read_plan(p)
+                plan_hash = top["plan_hash"]
             return Source(p, planned=planned, plan_hash=plan_hash)
     paths = [Path(x) for a in args for x in expand_braces(a)]
     for p in paths:
