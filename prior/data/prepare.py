@@ -25,6 +25,7 @@ from __future__ import annotations
 import io
 import json
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -141,17 +142,48 @@ def summarise_shard(ref: ShardRef, signature: str) -> dict[str, np.ndarray]:
             "joint_names": np.array(jn, dtype="U32"), "joints": joints}
 
 
-def record_meta(rec: dict) -> dict:
+def record_meta(rec) -> dict:
     return json.loads(str(rec["meta"]))
 
 
-def _read_record(path: Path) -> dict | None:
-    """A record, or None when it cannot be read (cut short, foreign): it is then computed again."""
+class Record(Mapping):
+    """A shard's record on disk: its ``meta`` and ``identities`` held, the rest read when asked
+    (:meth:`load`), so that a run holds a few hundred bytes per shard, not the record."""
+
+    def __init__(self, path: Path, meta, identities: np.ndarray):
+        self.path, self._meta, self._ids = Path(path), meta, identities
+
+    def load(self) -> dict:
+        with np.load(self.path, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+
+    def __getitem__(self, k: str):
+        if k == "meta":
+            return self._meta
+        if k == "identities":
+            return self._ids
+        return self.load()[k]
+
+    def __iter__(self):
+        return iter(self.load())
+
+    def __len__(self) -> int:
+        return len(self.load())
+
+
+def loaded(rec) -> dict:
+    """Every array of a record (a :class:`Record` is read from its file)."""
+    return rec.load() if isinstance(rec, Record) else rec
+
+
+def _read_record(path: Path) -> Record | None:
+    """A record's meta and identities, or None when it cannot be read (cut short, foreign): it
+    is then computed again."""
     import zipfile
 
     try:
         with np.load(path, allow_pickle=False) as z:
-            rec = {k: z[k] for k in z.files}
+            rec = Record(path, z["meta"], z["identities"])
         return rec if record_meta(rec).get("format") == FORMAT else None
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
         return None
@@ -159,7 +191,7 @@ def _read_record(path: Path) -> dict | None:
 
 @dataclass
 class PrepareResult:
-    records: list[dict]  # in shard order
+    records: list  # in shard order: Record (on disk) or dict (its arrays)
     refs: list[ShardRef]  # the shards of the records
     written: int = 0
     reused: int = 0
@@ -167,15 +199,16 @@ class PrepareResult:
     skipped_shards: list[str] = field(default_factory=list)  # their ids
 
 
-def _compute(ref: ShardRef, out_dir: Path) -> tuple[dict | None, str | None]:
+def _compute(ref: ShardRef, out_dir: Path) -> tuple[Record | None, str | None]:
     """Summarise one shard and write its record (atomically): (record, None) or (None, warning)."""
     try:
         rec = summarise_shard(ref, shard_signature(ref))
         buf = io.BytesIO()
         np.savez(buf, **rec)
         out_dir.mkdir(parents=True, exist_ok=True)
-        atomic_write_bytes(out_dir / f"{ref.shard}.npz", buf.getvalue(), durable=False)
-        return rec, None
+        path = out_dir / f"{ref.shard}.npz"
+        atomic_write_bytes(path, buf.getvalue(), durable=False)
+        return Record(path, rec["meta"], rec["identities"]), None
     except (ShardDamaged, OSError) as e:
         return None, f"skipping damaged shard {ref.shard} ({ref.path}): {e}"
 
@@ -263,14 +296,14 @@ def build_table(result: PrepareResult, *, joints: tuple[str, ...], margin: float
     if not result.records:
         raise SynthError("dataset has no committed frames", where,
                          "render it first (synth render ... --out DIR) or pass the --out directory of a render")
-    metas = [record_meta(r) for r in result.records]
-    head, size, sizes = metas[0]["head_model"], tuple(metas[0]["size"]), tuple(metas[0]["code_sizes"])
-    for m in metas[1:]:
+    meta0 = record_meta(result.records[0])
+    head, size, sizes = meta0["head_model"], tuple(meta0["size"]), tuple(meta0["code_sizes"])
+    for m in map(record_meta, result.records[1:]):
         _check_same(m["head_model"], head, "head models", where, "train on a dataset of one head model")
         _check_same(tuple(m["size"]), size, "resolutions", where, "train on a dataset rendered at one resolution")
         _check_same(tuple(m["code_sizes"]), sizes, "code sizes", where, "use one head model for the whole dataset")
-    seen = sorted({int(i) for r in result.records for i in r["identities"]})
-    uniq = np.array(sorted(set(planned or []) | set(seen)), np.int64)
+    seen = np.unique(np.concatenate([np.asarray(r["identities"], np.int64) for r in result.records]))
+    uniq = np.union1d(np.asarray(planned or [], np.int64), seen)
     M = len(uniq)
     frames = np.zeros(M, np.int64)
     fg = np.zeros(M, np.int64)
@@ -278,9 +311,9 @@ def build_table(result: PrepareResult, *, joints: tuple[str, ...], margin: float
     front_score = np.full(M, np.nan)  # nan: no front camera yet
     front_K, front_c2w = np.tile(np.eye(3), (M, 1, 1)), np.tile(np.eye(4), (M, 1, 1))
     shards_of: dict[int, list[ShardRef]] = {}
-    code_parts: dict[tuple[int, int], tuple] = {}
-    views: dict[tuple[int, int], int] = {}
-    for rec, ref in zip(result.records, result.refs):
+    pair_keys, pair_codes, pair_views = [], [], []  # per record: (latent id, expression), codes, views
+    for r, ref in zip(result.records, result.refs):
+        rec = loaded(r)
         lat = np.searchsorted(uniq, rec["identities"])
         for a, m in enumerate(lat.tolist()):
             frames[m] += rec["frames"][a]
@@ -291,17 +324,22 @@ def build_table(result: PrepareResult, *, joints: tuple[str, ...], margin: float
             if np.isnan(front_score[m]) or rec["front_score"][a] < front_score[m]:
                 front_score[m], front_K[m], front_c2w[m] = rec["front_score"][a], rec["front_K"][a], rec["front_c2w"][a]
         jn = [str(j) for j in rec["joint_names"]]
-        for q, (ident, e) in enumerate(rec["pairs"].tolist()):
-            key = (int(np.searchsorted(uniq, ident)), int(e))
-            views[key] = views.get(key, 0) + int(rec["views"][q])
-            if key not in code_parts:
-                missing = [j for j in joints if j not in jn or not np.isfinite(rec["joints"][q, jn.index(j)]).all()]
-                if missing:
-                    raise SynthError(f"frames of identity {ident} have no rotation for joint(s) {', '.join(missing)} "
-                                     f"(they have: {', '.join(jn) or 'none'})", ref.shard,
-                                     "set data.joints to joints the dataset records")
-                parts = [rec["beta"][q], rec["expr"][q]] + [rec["joints"][q, jn.index(j)] for j in joints]
-                code_parts[key] = np.concatenate(parts).astype(np.float32)
+        pairs = rec["pairs"].reshape(-1, 2)
+        ok = [np.isfinite(rec["joints"][:, jn.index(j)]).all(1) if j in jn else np.zeros(len(pairs), bool)
+              for j in joints]
+        missing = [j for j, o in zip(joints, ok) if not o.all()]
+        if missing:
+            raise SynthError(f"frames of identity {pairs[~np.logical_and.reduce(ok)][0, 0]} have no rotation for "
+                             f"joint(s) {', '.join(missing)} (they have: {', '.join(jn) or 'none'})", ref.shard,
+                             "set data.joints to joints the dataset records")
+        cols = [rec["joints"][:, jn.index(j)] for j in joints]
+        pair_keys.append(np.stack([np.searchsorted(uniq, pairs[:, 0]), pairs[:, 1]], 1))
+        pair_codes.append(np.concatenate([rec["beta"], rec["expr"], *cols], 1).astype(np.float32))
+        pair_views.append(np.asarray(rec["views"], np.int64))
+    keys, first, inv = np.unique(np.concatenate(pair_keys), axis=0, return_index=True, return_inverse=True)
+    codes = np.concatenate(pair_codes)[first]  # each (identity, expression)'s first shard's codes
+    views = np.bincount(inv.reshape(-1), np.concatenate(pair_views), len(keys)).astype(np.int64)
+    del pair_codes
     centre, radius = np.zeros((M, 3)), np.zeros(M)
     for m in np.nonzero(frames)[0].tolist():
         parts = spheres.get(m)
@@ -315,19 +353,16 @@ def build_table(result: PrepareResult, *, joints: tuple[str, ...], margin: float
             c = 0.5 * (box[:, 0].min(0) + box[:, 1].max(0))
             r = max(float(np.linalg.norm(c - p[1])) + p[2] for p in parts)
         centre[m], radius[m] = c, grow(r, margin)
-    if holdout_views:
-        for (m, e), v in sorted(views.items()):
-            if v <= holdout_views:
-                raise SynthError(f"identity {uniq[m]} expression {e} has {v} views, not more than "
-                                 f"data.holdout_views = {holdout_views}", where,
-                                 "lower data.holdout_views or render more views")
-    keys = sorted(code_parts)
+    if holdout_views and (views <= holdout_views).any():
+        (m, e), v = keys[np.argmax(views <= holdout_views)], views[np.argmax(views <= holdout_views)]
+        raise SynthError(f"identity {uniq[m]} expression {e} has {v} views, not more than "
+                         f"data.holdout_views = {holdout_views}", where,
+                         "lower data.holdout_views or render more views")
     layout = CodeLayout(int(sizes[0]), int(sizes[1]), tuple(joints))
     info = IdentityInfo(identity_index=uniq, centre=centre, radius=radius, front_K=front_K, front_c2w=front_c2w,
                         front_size=np.where(frames[:, None] > 0, [size[0], size[1]], 0).astype(np.int64),
-                        code_keys=np.array(keys, np.int64).reshape(-1, 2),
-                        codes=np.stack([code_parts[k] for k in keys]) if keys else np.zeros((0, layout.size), np.float32))
+                        code_keys=keys.astype(np.int64).reshape(-1, 2), codes=codes.reshape(len(keys), layout.size))
     return Table(layout, info, shards_of, frames, (int(size[1]), int(size[0])), head or {})
 
 
-__all__ = ["FORMAT", "PrepareResult", "Table", "build_table", "prepare", "summarise_shard"]
+__all__ = ["FORMAT", "PrepareResult", "Record", "Table", "build_table", "loaded", "prepare", "summarise_shard"]
