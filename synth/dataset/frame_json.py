@@ -15,6 +15,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
+import orjson
 
 from synth.dataset.exr import CHANNELS
 from synth.dataset.layout import MAX_FRAME_JSON_BYTES, frame_files, parse_frame_key
@@ -89,11 +90,42 @@ def _split(schema: dict, path: tuple, checks: list) -> dict:
     return {**schema, "properties": out}
 
 
+#: root keywords under which each property's value is valid or not on its own
+_ROOT_KEYS = frozenset({"$schema", "$id", "title", "description", "type", "required", "properties", "$defs"})
+
+
 @functools.lru_cache(maxsize=1)
 def _fast_validator():
+    """(a validator of the root without its properties, property -> a validator of its value,
+    the plain-array checks): the schema of :func:`_split`, taken apart where that is exact."""
     checks: list = []
     light = _split(frame_schema(), (), checks)
-    return _validator().evolve(schema=light), tuple(checks)
+    full = _validator()
+    if set(light) - _ROOT_KEYS:
+        return full.evolve(schema=light), {}, tuple(checks)
+    defs = {"$defs": light["$defs"]} if "$defs" in light else {}
+    props = {name: full.evolve(schema={**sub, **defs}) for name, sub in light["properties"].items()
+             if isinstance(sub, dict) and sub}
+    root = full.evolve(schema={**light, "properties": {name: {} for name in light["properties"]}})
+    return root, props, tuple(checks)
+
+
+@functools.lru_cache(maxsize=4096)
+def _value_valid(name: str, value: bytes) -> bool:
+    """Whether a property's value (its JSON bytes) is valid: frames of a shard repeat most of
+    their objects (assets, render settings, software), so each is checked once."""
+    return _fast_validator()[1][name].is_valid(orjson.loads(value))
+
+
+def _fast_valid(obj) -> bool:
+    """Valid under the whole schema (see :func:`_split`); False may still be valid."""
+    root, props, checks = _fast_validator()
+    if not _plain_values_ok(obj, checks) or not root.is_valid(obj):
+        return False
+    try:
+        return all(_value_valid(k, orjson.dumps(v)) for k, v in obj.items() if k in props)
+    except (TypeError, orjson.JSONEncodeError):  # not plain JSON: the whole schema says why
+        return False
 
 
 def _plain_values_ok(obj, checks) -> bool:
@@ -178,8 +210,7 @@ def build_frame_record(planned_frame: Mapping, *, shard_id: str, width: int, hei
 
 def validate_frame_json(obj) -> list[str]:
     """All problems with a frame object, as ``"json/path: message"`` strings; ``[]`` when valid."""
-    light, checks = _fast_validator()
-    if _plain_values_ok(obj, checks) and light.is_valid(obj):  # valid under the whole schema (see _split)
+    if _fast_valid(obj):
         return _semantic_errors(obj)
     errors = sorted(_validator().iter_errors(obj), key=lambda e: (list(map(str, e.absolute_path)), e.message))
     out = [f"{_path(e)}: {e.message if len(e.message) < 200 else e.message[:200] + '...'}" for e in errors]
