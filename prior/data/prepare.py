@@ -17,7 +17,9 @@ centre of the merged box (exact) and the smallest radius the per-shard spheres g
 nothing else: a rerun with nothing new writes nothing. Memory: one identity's points of one
 shard at a time, reduced to their convex-hull vertices (which keep the box and the farthest
 point from any centre: exact) beyond :data:`REDUCE_AT` points; records are a few kB per
-identity. :func:`build_table` merges records into the run's :class:`Table`.
+identity and stay on disk (a :class:`Record` holds a shard's meta and identities; the rest is
+read when merged). Per frame the pass reads the frame JSON (orjson) and the EXR's depth and
+alpha only. :func:`build_table` merges records, one at a time, into the run's :class:`Table`.
 """
 
 from __future__ import annotations

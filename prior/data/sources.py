@@ -6,7 +6,8 @@ A source is one of (``synth prior train SOURCE...``):
   or tar, i.e. a manifest under ``shards/`` that a commit signed (commit record or
   ``index.json`` entry, :mod:`synth.dataset.index`) with the manifest's sha256 the signature
   names. Staging areas are never read. The plan (``dataset.json``) names every identity that
-  will ever be rendered, so latent ids are fixed before the farm has finished and shards
+  will ever be rendered (read by :func:`prior.data.plan.read_plan` without holding its frame
+  keys), so latent ids are fixed before the farm has finished and shards
   committed later are picked up (:meth:`Source.committed` lists them again each time);
 - shard paths: tar shards (``.../shard_000042.tar``, read with their manifest
   ``shard_000042.tar.json`` beside them when it is there) or shard directories, given as a list
