@@ -12,17 +12,24 @@ from __future__ import annotations
 
 import numpy as np
 
-from synth.dataset.reader import rays
+from synth.dataset.reader import camera_rays
 
 
 def foreground_points(frame) -> np.ndarray:
     """(M, 3) float64 world points of a frame's foreground depth pixels."""
-    fg = (frame.depth > 0) & (frame.alpha > 0) & np.isfinite(frame.depth)
+    return depth_points(frame.depth, frame.alpha, frame.K, frame.camera_to_world)
+
+
+def depth_points(depth: np.ndarray, alpha: np.ndarray, K, camera_to_world) -> np.ndarray:
+    """(M, 3) float64 world points of the foreground depth pixels (depth > 0, alpha > 0) of an
+    (H, W) depth and alpha seen by camera ``K``, ``camera_to_world``."""
+    fg = (depth > 0) & (alpha > 0) & np.isfinite(depth)
     rows, cols = np.nonzero(fg)
     if rows.size == 0:
         return np.zeros((0, 3))
-    o, d, cos_z = rays(frame, pixels=(rows, cols), dtype=np.float64)
-    t = frame.depth[rows, cols].astype(np.float64) / cos_z
+    o, d, cos_z = camera_rays(K, camera_to_world, depth.shape[1], depth.shape[0], pixels=(rows, cols),
+                              dtype=np.float64)
+    t = depth[rows, cols].astype(np.float64) / cos_z
     return o + t[:, None] * d
 
 

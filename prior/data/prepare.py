@@ -17,7 +17,9 @@ centre of the merged box (exact) and the smallest radius the per-shard spheres g
 nothing else: a rerun with nothing new writes nothing. Memory: one identity's points of one
 shard at a time, reduced to their convex-hull vertices (which keep the box and the farthest
 point from any centre: exact) beyond :data:`REDUCE_AT` points; records are a few kB per
-identity. :func:`build_table` merges records into the run's :class:`Table`.
+identity and stay on disk (a :class:`Record` holds a shard's meta and identities; the rest is
+read when merged). Per frame the pass reads the frame JSON (orjson) and the EXR's depth and
+alpha only. :func:`build_table` merges records, one at a time, into the run's :class:`Table`.
 """
 
 from __future__ import annotations
@@ -25,17 +27,19 @@ from __future__ import annotations
 import io
 import json
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
+import orjson
 
-from prior.data.bounds import foreground_points, grow, tight_sphere
+from prior.data.bounds import depth_points, grow, tight_sphere
 from prior.data.codes import CodeLayout
 from prior.data.identities import IdentityInfo
 from prior.data.sources import ShardDamaged, ShardRef, Source, read_shard
-from synth.dataset.reader import decode_frame
+from synth.dataset.exr import DEPTH_CHANNEL, decode_channels
 from synth.errors import SynthError
 from synth.io import atomic_write_bytes, sha256_bytes
 
@@ -76,25 +80,30 @@ def summarise_shard(ref: ShardRef, signature: str) -> dict[str, np.ndarray]:
     """The record of one shard (see the module docstring). Raises ShardDamaged."""
     per: dict[int, dict] = {}
     pairs: dict[tuple[int, int], dict] = {}
-    head = size = sizes = joints_seen = None
+    head = size = sizes = None
     n = 0
     for key, jb, eb in read_shard(ref):
-        try:
-            f = decode_frame(jb, eb, key=key, shard=ref.shard, where=f"{ref.path}:{key}")
-            meta = f.meta
-            ident, expr, view = f.identity_index, f.expression_index, f.view_index
-            beta, ex = f.identity_code.reshape(-1), f.expression_code.reshape(-1)
-            rots = f.joint_rotations
-            hm = {k: meta.get("model", {}).get(k) for k in ("name", "sha256")}
-            pts = foreground_points(f).astype(np.float32)
-            K, c2w = f.K, f.camera_to_world
-        except (SynthError, KeyError, TypeError, ValueError) as e:
-            raise ShardDamaged(f"frame {key} cannot be read ({str(e)[:120]})") from None
+        try:  # the frame JSON and the EXR's depth and alpha: all a record needs (not the colours)
+            meta = orjson.loads(jb)  # strict (no NaN), 1024 levels at most; 4x json.loads here
+            if not isinstance(meta, dict) or meta.get("frame_id") != key:
+                raise ValueError(f"its JSON is not the JSON of frame {key}")
+            model, cam = meta["model"], meta["camera"]
+            ident, expr = int(meta["identity_index"]), int(meta["expression_index"])
+            beta = np.asarray(model["identity"], np.float32).reshape(-1)
+            ex = np.asarray(model["expression"], np.float32).reshape(-1)
+            hm = {k: model.get(k) for k in ("name", "sha256")}
+            K, c2w = np.asarray(cam["K"], np.float64), np.asarray(cam["camera_to_world"], np.float64)
+            width, height, (alpha, depth) = decode_channels(eb, ("A", DEPTH_CHANNEL), f"{ref.path}:{key}")
+            pts = depth_points(depth, alpha, K, c2w).astype(np.float32)
+        except (SynthError, KeyError, TypeError, ValueError, RecursionError) as e:
+            raise ShardDamaged(f"frame {key} cannot be read ({str(getattr(e, 'what', e))[:120]})") from None
         if head is None:
-            head, size, sizes, joints_seen = hm, (f.width, f.height), (beta.size, ex.size), sorted(rots)
-        if hm != head or (f.width, f.height) != size or (beta.size, ex.size) != sizes:
+            head, size, sizes = hm, (width, height), (beta.size, ex.size)
+        if hm != head or (width, height) != size or (beta.size, ex.size) != sizes:
             raise ShardDamaged(f"frame {key} has another head model, code size or resolution than the shard's first")
-        p = per.setdefault(ident, {"frames": 0, "pts": [], "npts": 0, "fg": 0, "front": (np.inf, None, None)})
+        p = per.get(ident)
+        if p is None:
+            p = per[ident] = {"frames": 0, "pts": [], "npts": 0, "fg": 0, "front": (np.inf, None, None)}
         p["frames"] += 1
         p["pts"].append(pts)
         p["npts"] += len(pts)
@@ -105,9 +114,12 @@ def summarise_shard(ref: ShardRef, signature: str) -> dict[str, np.ndarray]:
         score = _front_score(meta)
         if p["front"][1] is None or score < p["front"][0]:
             p["front"] = (score, K, c2w)
-        q = pairs.setdefault((ident, expr), {"views": 0, "beta": beta, "expr": ex,
-                                             "joints": {j: np.asarray(r, np.float32).reshape(-1)[:3]
-                                                        for j, r in rots.items() if np.asarray(r).size == 3}})
+        q = pairs.get((ident, expr))
+        if q is None:
+            rots = model.get("joint_rotations") or {}
+            q = pairs[ident, expr] = {"views": 0, "beta": beta, "expr": ex,
+                                      "joints": {j: np.asarray(r, np.float32).reshape(-1)[:3]
+                                                 for j, r in rots.items() if np.asarray(r).size == 3}}
         q["views"] += 1
         n += 1
     if n == 0:
@@ -141,17 +153,48 @@ def summarise_shard(ref: ShardRef, signature: str) -> dict[str, np.ndarray]:
             "joint_names": np.array(jn, dtype="U32"), "joints": joints}
 
 
-def record_meta(rec: dict) -> dict:
+def record_meta(rec) -> dict:
     return json.loads(str(rec["meta"]))
 
 
-def _read_record(path: Path) -> dict | None:
-    """A record, or None when it cannot be read (cut short, foreign): it is then computed again."""
+class Record(Mapping):
+    """A shard's record on disk: its ``meta`` and ``identities`` held, the rest read when asked
+    (:meth:`load`), so that a run holds a few hundred bytes per shard, not the record."""
+
+    def __init__(self, path: Path, meta, identities: np.ndarray):
+        self.path, self._meta, self._ids = Path(path), meta, identities
+
+    def load(self) -> dict:
+        with np.load(self.path, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+
+    def __getitem__(self, k: str):
+        if k == "meta":
+            return self._meta
+        if k == "identities":
+            return self._ids
+        return self.load()[k]
+
+    def __iter__(self):
+        return iter(self.load())
+
+    def __len__(self) -> int:
+        return len(self.load())
+
+
+def loaded(rec) -> dict:
+    """Every array of a record (a :class:`Record` is read from its file)."""
+    return rec.load() if isinstance(rec, Record) else rec
+
+
+def _read_record(path: Path) -> Record | None:
+    """A record's meta and identities, or None when it cannot be read (cut short, foreign): it
+    is then computed again."""
     import zipfile
 
     try:
         with np.load(path, allow_pickle=False) as z:
-            rec = {k: z[k] for k in z.files}
+            rec = Record(path, z["meta"], z["identities"])
         return rec if record_meta(rec).get("format") == FORMAT else None
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
         return None
@@ -159,7 +202,7 @@ def _read_record(path: Path) -> dict | None:
 
 @dataclass
 class PrepareResult:
-    records: list[dict]  # in shard order
+    records: list  # in shard order: Record (on disk) or dict (its arrays)
     refs: list[ShardRef]  # the shards of the records
     written: int = 0
     reused: int = 0
@@ -167,15 +210,16 @@ class PrepareResult:
     skipped_shards: list[str] = field(default_factory=list)  # their ids
 
 
-def _compute(ref: ShardRef, out_dir: Path) -> tuple[dict | None, str | None]:
+def _compute(ref: ShardRef, out_dir: Path) -> tuple[Record | None, str | None]:
     """Summarise one shard and write its record (atomically): (record, None) or (None, warning)."""
     try:
         rec = summarise_shard(ref, shard_signature(ref))
         buf = io.BytesIO()
         np.savez(buf, **rec)
         out_dir.mkdir(parents=True, exist_ok=True)
-        atomic_write_bytes(out_dir / f"{ref.shard}.npz", buf.getvalue(), durable=False)
-        return rec, None
+        path = out_dir / f"{ref.shard}.npz"
+        atomic_write_bytes(path, buf.getvalue(), durable=False)
+        return Record(path, rec["meta"], rec["identities"]), None
     except (ShardDamaged, OSError) as e:
         return None, f"skipping damaged shard {ref.shard} ({ref.path}): {e}"
 
@@ -263,14 +307,14 @@ def build_table(result: PrepareResult, *, joints: tuple[str, ...], margin: float
     if not result.records:
         raise SynthError("dataset has no committed frames", where,
                          "render it first (synth render ... --out DIR) or pass the --out directory of a render")
-    metas = [record_meta(r) for r in result.records]
-    head, size, sizes = metas[0]["head_model"], tuple(metas[0]["size"]), tuple(metas[0]["code_sizes"])
-    for m in metas[1:]:
+    meta0 = record_meta(result.records[0])
+    head, size, sizes = meta0["head_model"], tuple(meta0["size"]), tuple(meta0["code_sizes"])
+    for m in map(record_meta, result.records[1:]):
         _check_same(m["head_model"], head, "head models", where, "train on a dataset of one head model")
         _check_same(tuple(m["size"]), size, "resolutions", where, "train on a dataset rendered at one resolution")
         _check_same(tuple(m["code_sizes"]), sizes, "code sizes", where, "use one head model for the whole dataset")
-    seen = sorted({int(i) for r in result.records for i in r["identities"]})
-    uniq = np.array(sorted(set(planned or []) | set(seen)), np.int64)
+    seen = np.unique(np.concatenate([np.asarray(r["identities"], np.int64) for r in result.records]))
+    uniq = np.union1d(np.asarray(planned or [], np.int64), seen)
     M = len(uniq)
     frames = np.zeros(M, np.int64)
     fg = np.zeros(M, np.int64)
@@ -278,9 +322,9 @@ def build_table(result: PrepareResult, *, joints: tuple[str, ...], margin: float
     front_score = np.full(M, np.nan)  # nan: no front camera yet
     front_K, front_c2w = np.tile(np.eye(3), (M, 1, 1)), np.tile(np.eye(4), (M, 1, 1))
     shards_of: dict[int, list[ShardRef]] = {}
-    code_parts: dict[tuple[int, int], tuple] = {}
-    views: dict[tuple[int, int], int] = {}
-    for rec, ref in zip(result.records, result.refs):
+    pair_keys, pair_codes, pair_views = [], [], []  # per record: (latent id, expression), codes, views
+    for r, ref in zip(result.records, result.refs):
+        rec = loaded(r)
         lat = np.searchsorted(uniq, rec["identities"])
         for a, m in enumerate(lat.tolist()):
             frames[m] += rec["frames"][a]
@@ -291,17 +335,22 @@ def build_table(result: PrepareResult, *, joints: tuple[str, ...], margin: float
             if np.isnan(front_score[m]) or rec["front_score"][a] < front_score[m]:
                 front_score[m], front_K[m], front_c2w[m] = rec["front_score"][a], rec["front_K"][a], rec["front_c2w"][a]
         jn = [str(j) for j in rec["joint_names"]]
-        for q, (ident, e) in enumerate(rec["pairs"].tolist()):
-            key = (int(np.searchsorted(uniq, ident)), int(e))
-            views[key] = views.get(key, 0) + int(rec["views"][q])
-            if key not in code_parts:
-                missing = [j for j in joints if j not in jn or not np.isfinite(rec["joints"][q, jn.index(j)]).all()]
-                if missing:
-                    raise SynthError(f"frames of identity {ident} have no rotation for joint(s) {', '.join(missing)} "
-                                     f"(they have: {', '.join(jn) or 'none'})", ref.shard,
-                                     "set data.joints to joints the dataset records")
-                parts = [rec["beta"][q], rec["expr"][q]] + [rec["joints"][q, jn.index(j)] for j in joints]
-                code_parts[key] = np.concatenate(parts).astype(np.float32)
+        pairs = rec["pairs"].reshape(-1, 2)
+        ok = [np.isfinite(rec["joints"][:, jn.index(j)]).all(1) if j in jn else np.zeros(len(pairs), bool)
+              for j in joints]
+        missing = [j for j, o in zip(joints, ok) if not o.all()]
+        if missing:
+            raise SynthError(f"frames of identity {pairs[~np.logical_and.reduce(ok)][0, 0]} have no rotation for "
+                             f"joint(s) {', '.join(missing)} (they have: {', '.join(jn) or 'none'})", ref.shard,
+                             "set data.joints to joints the dataset records")
+        cols = [rec["joints"][:, jn.index(j)] for j in joints]
+        pair_keys.append(np.stack([np.searchsorted(uniq, pairs[:, 0]), pairs[:, 1]], 1))
+        pair_codes.append(np.concatenate([rec["beta"], rec["expr"], *cols], 1).astype(np.float32))
+        pair_views.append(np.asarray(rec["views"], np.int64))
+    keys, first, inv = np.unique(np.concatenate(pair_keys), axis=0, return_index=True, return_inverse=True)
+    codes = np.concatenate(pair_codes)[first]  # each (identity, expression)'s first shard's codes
+    views = np.bincount(inv.reshape(-1), np.concatenate(pair_views), len(keys)).astype(np.int64)
+    del pair_codes
     centre, radius = np.zeros((M, 3)), np.zeros(M)
     for m in np.nonzero(frames)[0].tolist():
         parts = spheres.get(m)
@@ -315,19 +364,16 @@ def build_table(result: PrepareResult, *, joints: tuple[str, ...], margin: float
             c = 0.5 * (box[:, 0].min(0) + box[:, 1].max(0))
             r = max(float(np.linalg.norm(c - p[1])) + p[2] for p in parts)
         centre[m], radius[m] = c, grow(r, margin)
-    if holdout_views:
-        for (m, e), v in sorted(views.items()):
-            if v <= holdout_views:
-                raise SynthError(f"identity {uniq[m]} expression {e} has {v} views, not more than "
-                                 f"data.holdout_views = {holdout_views}", where,
-                                 "lower data.holdout_views or render more views")
-    keys = sorted(code_parts)
+    if holdout_views and (views <= holdout_views).any():
+        (m, e), v = keys[np.argmax(views <= holdout_views)], views[np.argmax(views <= holdout_views)]
+        raise SynthError(f"identity {uniq[m]} expression {e} has {v} views, not more than "
+                         f"data.holdout_views = {holdout_views}", where,
+                         "lower data.holdout_views or render more views")
     layout = CodeLayout(int(sizes[0]), int(sizes[1]), tuple(joints))
     info = IdentityInfo(identity_index=uniq, centre=centre, radius=radius, front_K=front_K, front_c2w=front_c2w,
                         front_size=np.where(frames[:, None] > 0, [size[0], size[1]], 0).astype(np.int64),
-                        code_keys=np.array(keys, np.int64).reshape(-1, 2),
-                        codes=np.stack([code_parts[k] for k in keys]) if keys else np.zeros((0, layout.size), np.float32))
+                        code_keys=keys.astype(np.int64).reshape(-1, 2), codes=codes.reshape(len(keys), layout.size))
     return Table(layout, info, shards_of, frames, (int(size[1]), int(size[0])), head or {})
 
 
-__all__ = ["FORMAT", "PrepareResult", "Table", "build_table", "prepare", "summarise_shard"]
+__all__ = ["FORMAT", "PrepareResult", "Record", "Table", "build_table", "loaded", "prepare", "summarise_shard"]

@@ -6,7 +6,8 @@ A source is one of (``synth prior train SOURCE...``):
   or tar, i.e. a manifest under ``shards/`` that a commit signed (commit record or
   ``index.json`` entry, :mod:`synth.dataset.index`) with the manifest's sha256 the signature
   names. Staging areas are never read. The plan (``dataset.json``) names every identity that
-  will ever be rendered, so latent ids are fixed before the farm has finished and shards
+  will ever be rendered (read by :func:`prior.data.plan.read_plan` without holding its frame
+  keys), so latent ids are fixed before the farm has finished and shards
   committed later are picked up (:meth:`Source.committed` lists them again each time);
 - shard paths: tar shards (``.../shard_000042.tar``, read with their manifest
   ``shard_000042.tar.json`` beside them when it is there) or shard directories, given as a list
@@ -136,16 +137,10 @@ def open_source(args) -> Source:
         if p.is_dir() and (p / SHARDS_DIR).is_dir():
             planned, plan_hash = None, None
             if (p / DATASET_FILE).is_file():
-                from synth.dataset.shards import load_dataset
+                from prior.data.plan import read_plan
 
-                ds = load_dataset(p)
-                plan_hash, planned = ds.plan_hash, {}
-                for sid, keys in ds.expected.items():
-                    for k in keys:
-                        if FRAME_KEY_RE.match(k):
-                            s = planned.setdefault(parse_frame_key(k)[0], [])
-                            if sid not in s:
-                                s.append(sid)
+                top, planned = read_plan(p)
+                plan_hash = top["plan_hash"]
             return Source(p, planned=planned, plan_hash=plan_hash)
     paths = [Path(x) for a in args for x in expand_braces(a)]
     for p in paths:

@@ -317,6 +317,23 @@ def decode_frame_exr(data: bytes, where: str = "<bytes>", *, verify: bool = Fals
     return desc
 
 
+def decode_channels(data: bytes, names: tuple[str, ...], where: str = "<bytes>") -> tuple[int, int, list]:
+    """(width, height, the (H, W) pixels of each of ``names``) of a frame EXR in memory: what a
+    pass that needs a few channels (depth and alpha for bounds) reads, without stacking the
+    frame's arrays or converting its header. The same checks as :func:`decode_frame_exr`."""
+    hdr, chans = _open(data, where, header_only=False, verify=False)
+    (x0, y0), (x1, y1) = (np.asarray(hdr["dataWindow"][0]).tolist(), np.asarray(hdr["dataWindow"][1]).tolist())
+    w, h = int(x1 - x0 + 1), int(y1 - y0 + 1)
+    out = []
+    for name in names:
+        p = chans[name].pixels if name in chans else None
+        if p is None or p.shape != (h, w):
+            raise SynthError(f"EXR channel {name} has no pixel data of size {w}x{h}", where,
+                             "the file is corrupt or was not written by synth; re-render the frame")
+        out.append(p)
+    return w, h, out
+
+
 def pixel_defects(px: dict) -> list[str]:
     """Problems in the pixels of a frame read by :func:`synth.dataset.exr.read_frame_exr`."""
     out = []
@@ -346,5 +363,5 @@ def pixel_defects(px: dict) -> list[str]:
 
 
 __all__ = ["CHANNELS", "REC709_CHROMATICITIES", "HALF_MAX", "BACKGROUND_DEPTH", "camera_attributes",
-           "encode_frame_exr", "read_camera_attributes", "write_frame_exr", "read_frame_exr", "decode_frame_exr",
+           "encode_frame_exr", "read_camera_attributes", "write_frame_exr", "read_frame_exr", "decode_frame_exr", "decode_channels",
            "read_frame_exr_header", "pixel_defects"]

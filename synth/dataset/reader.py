@@ -250,11 +250,18 @@ def _tar_refs(manifest_path: Path, shard: str) -> list[FrameRef]:
 def list_frames(source, *, shards: Iterable[str] | None = None) -> list[FrameRef]:
     """Every frame of a dataset directory (committed shards, directories or tars) or of one
     shard directory, sorted by (shard, key). ``shards`` restricts a dataset to those shard ids."""
+    return [r for refs in shard_frames(source, shards=shards) for r in refs]
+
+
+def shard_frames(source, *, shards: Iterable[str] | None = None) -> Iterator[list[FrameRef]]:
+    """:func:`list_frames` one shard at a time (a list per shard, in shard order): a pass over a
+    large dataset holds one shard's references, not 585,000. Missing ``shards`` are refused
+    before the first list."""
     root = Path(source)
     if not root.is_dir():
         raise SynthError("not a dataset or shard directory", str(root), "pass the --out directory of synth render")
     if not (root / SHARDS_DIR).is_dir():
-        return [FrameRef(root.name, k, root / f"{k}.json") for k in _shard_keys(root)]
+        return iter([[FrameRef(root.name, k, root / f"{k}.json") for k in _shard_keys(root)]])
     wanted = set(shards) if shards is not None else None
     found: dict[str, Path] = {}
     for sid, mp in manifest_paths(root):  # a shard in both forms (a defect): its directory
@@ -264,13 +271,9 @@ def list_frames(source, *, shards: Iterable[str] | None = None) -> list[FrameRef
         missing = sorted(wanted - set(found))
         raise SynthError(f"shard(s) not committed in this dataset: {', '.join(missing[:5])}", str(root),
                          "render them first, or leave them out")
-    refs = []
-    for sid, mp in sorted(found.items()):
-        if mp.name.endswith(TAR_MANIFEST_SUFFIX):
-            refs += _tar_refs(mp, sid)
-        else:
-            refs += [FrameRef(sid, k, mp.parent / f"{k}.json") for k in _shard_keys(mp.parent)]
-    return refs
+    return (_tar_refs(mp, sid) if mp.name.endswith(TAR_MANIFEST_SUFFIX)
+            else [FrameRef(sid, k, mp.parent / f"{k}.json") for k in _shard_keys(mp.parent)]
+            for sid, mp in sorted(found.items()))
 
 
 # --------------------------------------------------------------------------- iteration
@@ -408,4 +411,4 @@ def rays(frame: Frame, *, pixels=None, dtype=np.float32) -> Rays:
 
 
 __all__ = ["Frame", "FrameRef", "Rays", "TarMembers", "by_worker", "camera_rays", "decode_frame", "decode_sample",
-           "iter_frames", "list_frames", "read_frame", "rays"]
+           "iter_frames", "list_frames", "read_frame", "rays", "shard_frames"]

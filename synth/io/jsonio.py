@@ -3,7 +3,8 @@
 - ``NaN`` and ``Infinity`` are not JSON, so they are refused both ways (Python's ``json``
   writes and reads them by default). Text is UTF-8 with a trailing newline.
 - Reading is bounded: nesting deeper than ``max_depth`` (default :data:`MAX_DEPTH`) is refused
-  before the parser sees it, so no input can exhaust the interpreter's recursion (a
+  (orjson, tried first, nests at most 1,024 deep without recursing in Python; the ``json``
+  fallback never sees deeper input), so no input can exhaust the interpreter's recursion (a
   ``RecursionError`` deep inside the parser, or in code walking the result); files are read
   through :func:`synth.io.files.read_bounded` (a size bound, regular files only, optionally no
   symbolic links), so ``/dev/zero`` or a 50 GB file is refused, not read.
@@ -18,12 +19,15 @@ import json
 import re
 from pathlib import Path
 
+import orjson
+
 from synth.io.files import atomic_write_bytes, read_bounded
 
 #: Deepest nesting of arrays and objects accepted (synth's own files nest at most ~8 deep).
 MAX_DEPTH = 64
 
 _STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.S)
+_LONG_DIGITS = re.compile(rb"\d{19}")
 _NOT_BRACKETS = bytes(b for b in range(256) if b not in b"[]{}")
 
 
@@ -53,10 +57,31 @@ def json_depth(data: bytes) -> int:
     return int(np.cumsum(steps).max())
 
 
+def _deeper_than(obj, limit: int) -> bool:
+    """Whether a parsed value nests arrays and objects more than ``limit`` deep (no recursion)."""
+    stack = [(obj, 1)] if type(obj) in (dict, list) else []
+    while stack:
+        o, d = stack.pop()
+        if d > limit:
+            return True
+        for v in (o.values() if type(o) is dict else o):
+            if type(v) is dict or type(v) is list:
+                stack.append((v, d + 1))
+    return False
+
+
 def loads_json(data: bytes | str, *, max_depth: int = MAX_DEPTH):
     """Parse strict JSON: UTF-8, no ``NaN``/``Infinity``, nesting at most ``max_depth``.
     Raises :class:`JSONError`."""
     raw = data.encode("utf-8", "surrogatepass") if isinstance(data, str) else bytes(data)
+    if not _LONG_DIGITS.search(raw):  # orjson reads integers past 64 bits as floats: json below
+        try:  # orjson first (5x faster): it accepts a subset of what json does, with the same values
+            obj = orjson.loads(raw)
+        except orjson.JSONDecodeError:
+            pass  # the path below says why, as it always has
+        else:
+            if not _deeper_than(obj, max_depth):
+                return obj
     depth = json_depth(raw)
     if depth > max_depth:
         raise JSONError(f"nested {depth} levels deep (at most {max_depth} allowed)")

@@ -9,7 +9,8 @@ frames). :func:`collect` returns a :class:`Collected` of plain arrays and tables
 from __future__ import annotations
 
 import os
-from collections import Counter, defaultdict
+from array import array
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,7 +19,7 @@ import numpy as np
 from synth.appearance.skin import individual_typology_angle
 from synth.assets.classes import RECORD_ORDER
 from synth.dataset.layout import LOGS_DIR, STAGING_DIR, parse_frame_key_env
-from synth.dataset.reader import list_frames
+from synth.dataset.reader import shard_frames
 from synth.dataset.shards import load_dataset
 from synth.io import loads_json
 
@@ -109,65 +110,85 @@ def _min_separation(root: Path) -> float | None:
         return None
 
 
-def _smallest_angle(cams: list[dict]) -> float:
-    """The smallest angle between two views' viewing directions (camera -> look-at target)."""
-    if len(cams) < 2:
-        return float("nan")
-    d = []
-    for c in cams:
-        pos = np.asarray(c["camera_to_world"], np.float64)[:3, 3]
-        target = np.asarray(c.get("target", (0.0, 0.0, 0.0)), np.float64)
-        v = target - pos
-        d.append(v / np.linalg.norm(v))
-    d = np.asarray(d)
-    cos = np.clip(d @ d.T, -1.0, 1.0)
-    iu = np.triu_indices(len(d), 1)
-    return float(np.degrees(np.arccos(cos[iu].max())))
+def _view_direction(cam: dict) -> tuple[float, float, float]:
+    """The unit viewing direction (camera -> look-at target) of a frame's camera."""
+    pos = np.asarray(cam["camera_to_world"], np.float64)[:3, 3]
+    v = np.asarray(cam.get("target", (0.0, 0.0, 0.0)), np.float64) - pos
+    return tuple((v / np.linalg.norm(v)).tolist())
+
+
+def _smallest_angles(dirs: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """Per (identity, expression) of ``keys`` (N, 2), sorted: the smallest angle between two of
+    its views' unit directions ``dirs`` (N, 3); NaN for a single view."""
+    if not len(keys):
+        return np.zeros(0)
+    order = np.lexsort((keys[:, 1], keys[:, 0]))
+    k, d = keys[order], dirs[order]
+    starts = np.flatnonzero(np.r_[True, (k[1:] != k[:-1]).any(1)])
+    out = []
+    for a, b in zip(starts, np.r_[starts[1:], len(k)]):
+        if b - a < 2:
+            out.append(float("nan"))
+            continue
+        cos = np.clip(d[a:b] @ d[a:b].T, -1.0, 1.0)
+        out.append(float(np.degrees(np.arccos(cos[np.triu_indices(b - a, 1)].max()))))
+    return np.array(out)
 
 
 def collect(root, *, max_shards: int | None = None, progress=None) -> Collected:
     """Read a dataset (committed shards only; the first ``max_shards`` of them when given) into
-    a :class:`Collected`. The progress counts always cover the whole dataset."""
+    a :class:`Collected`. The progress counts always cover the whole dataset. Memory: per frame
+    a few numbers (angles, landmark visibility, view direction), one shard's references at a
+    time."""
     from synth.report.logs import render_log_stats
 
     root = Path(root)
     ds = load_dataset(root)
     committed = sorted(ds.committed_shards())
-    refs = list_frames(root, shards=committed[:max_shards]) if committed else []
+    shards = committed[:max_shards]
+    total = sum(len(ds.expected[s]) for s in shards)
     ident_codes, ident_seen = {}, {}
     expr_rows, expr_seen = [], set()
     kinds, presets = Counter(), Counter()
-    az, el, vis = [], [], []
-    views_of: dict[tuple[int, int], list[dict]] = defaultdict(list)
+    az, el, vis, dirs, dir_keys = array("d"), array("d"), array("d"), array("d"), array("q")
+    key_shard: dict[str, str] | None = {} if (root / LOGS_DIR).is_dir() else None  # for the render times
     assets = {c: Counter() for c in RECORD_ORDER}
     ita = {}
     names: list[str] = list((ds.info.get("meta") or {}).get("model", {}).get("expression_names") or [])
-    for n, ref in enumerate(refs):
-        fj = ref.meta()
-        i, e, k, _ = parse_frame_key_env(ref.key)
-        m, cam = fj["model"], fj["camera"]
-        if i not in ident_seen:
-            ident_seen[i] = True
-            ident_codes[i] = np.asarray(m["identity"], np.float64)
-            for c in RECORD_ORDER:
-                rec = (fj.get("assets") or {}).get(c)
-                assets[c][rec.get("id") if rec else None] += 1
-            alb = (fj.get("skin") or {}).get("albedo_linear_srgb")
-            if alb is not None:
-                ita[i] = float(individual_typology_angle(alb))
-        if (i, e) not in expr_seen:
-            expr_seen.add((i, e))
-            expr_rows.append(np.asarray(m["expression"], np.float64))
-            kinds[m.get("expression_kind") or "unknown"] += 1
-            if m.get("expression_preset"):
-                presets[m["expression_preset"]] += 1
-        az.append(float(cam.get("azimuth_deg", np.nan)))
-        el.append(float(cam.get("elevation_deg", np.nan)))
-        if k == 0:  # every environment of an expression has the same cameras
-            views_of[(i, e)].append(cam)
-        vis.append(float(np.mean(fj["landmarks_visible"])))
-        if progress and n % 500 == 0:
-            progress(n, len(refs))
+    n = 0
+    read_shards = set()
+    for refs in (shard_frames(root, shards=shards) if shards else ()):
+        for ref in refs:
+            fj = ref.meta()
+            i, e, k, _ = parse_frame_key_env(ref.key)
+            read_shards.add(ref.shard)
+            if key_shard is not None:
+                key_shard[ref.key] = ref.shard
+            m, cam = fj["model"], fj["camera"]
+            if i not in ident_seen:
+                ident_seen[i] = True
+                ident_codes[i] = np.asarray(m["identity"], np.float64)
+                for c in RECORD_ORDER:
+                    rec = (fj.get("assets") or {}).get(c)
+                    assets[c][rec.get("id") if rec else None] += 1
+                alb = (fj.get("skin") or {}).get("albedo_linear_srgb")
+                if alb is not None:
+                    ita[i] = float(individual_typology_angle(alb))
+            if (i, e) not in expr_seen:
+                expr_seen.add((i, e))
+                expr_rows.append(np.asarray(m["expression"], np.float64))
+                kinds[m.get("expression_kind") or "unknown"] += 1
+                if m.get("expression_preset"):
+                    presets[m["expression_preset"]] += 1
+            az.append(float(cam.get("azimuth_deg", np.nan)))
+            el.append(float(cam.get("elevation_deg", np.nan)))
+            if k == 0:  # every environment of an expression has the same cameras
+                dirs.extend(_view_direction(cam))
+                dir_keys.extend((i, e))
+            vis.append(float(np.mean(fj["landmarks_visible"])))
+            if progress and n % 500 == 0:
+                progress(n, total)
+            n += 1
     ki = len(next(iter(ident_codes.values()))) if ident_codes else 0
     ke = len(expr_rows[0]) if expr_rows else len(names)
     if len(names) != ke:
@@ -176,8 +197,9 @@ def collect(root, *, max_shards: int | None = None, progress=None) -> Collected:
         root=str(root), progress=_progress(root, ds), min_separation_deg=_min_separation(root),
         identity_codes=np.array([ident_codes[i] for i in sorted(ident_codes)]).reshape(len(ident_codes), ki),
         expression_codes=np.array(expr_rows).reshape(len(expr_rows), ke), expression_names=names, expression_kinds=kinds,
-        expression_presets=presets, azimuth_deg=np.array(az), elevation_deg=np.array(el),
-        smallest_angle_deg=np.array([_smallest_angle(v) for _, v in sorted(views_of.items())]),
+        expression_presets=presets, azimuth_deg=np.array(az, np.float64), elevation_deg=np.array(el, np.float64),
+        smallest_angle_deg=_smallest_angles(np.frombuffer(dirs).reshape(-1, 3),
+                                            np.frombuffer(dir_keys, np.int64).reshape(-1, 2)),
         assets=assets, ita_deg=np.array([ita[i] for i in sorted(ita)]), visible_landmarks=np.array(vis),
-        render=render_log_stats(root / LOGS_DIR, committed={r.key: r.shard for r in refs}),
-        read={"shards": len({r.shard for r in refs}), "frames": len(refs)})
+        render=render_log_stats(root / LOGS_DIR, committed=key_shard),
+        read={"shards": len(read_shards), "frames": n})

@@ -10,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from synth.errors import SynthError
-from synth.dataset.exr import (CHANNELS, HALF_MAX, REC709_CHROMATICITIES, decode_frame_exr, encode_frame_exr,
+from synth.dataset.exr import (CHANNELS, HALF_MAX, REC709_CHROMATICITIES, decode_channels, decode_frame_exr,
+                               encode_frame_exr,
                                read_frame_exr, read_frame_exr_header, write_frame_exr)
 
 OpenEXR = pytest.importorskip("OpenEXR")
@@ -214,6 +215,19 @@ def test_truncated_file_is_rejected_silently_without_verify(tmp_path, capfd):
         with pytest.raises(SynthError, match="does not decode"):
             read_frame_exr(data[:n])
     assert capfd.readouterr() == ("", "")
+
+
+def test_decode_channels_gives_the_frames_channels_and_refuses_what_decode_refuses(tmp_path):
+    data = encode_frame_exr(*frame(h=12, w=20))
+    full = decode_frame_exr(data)
+    w, h, (alpha, depth) = decode_channels(data, ("A", "depth.Z"))
+    assert (w, h) == (20, 12)
+    np.testing.assert_array_equal(alpha, full["rgba"][..., 3])
+    np.testing.assert_array_equal(depth, full["depth"])
+    with pytest.raises(SynthError, match="channel nope has no pixel data"):
+        decode_channels(data, ("nope",))
+    with pytest.raises(SynthError, match="does not decode"):
+        decode_channels(data[:len(data) // 2], ("A",))
 
 
 def test_bytes_and_path_reads_agree(tmp_path):

@@ -84,3 +84,28 @@ def test_a_new_frame_validates_and_is_plain_json():
     assert list(record["model"]["joint_rotations"]) == ["jaw", "head"]
     assert record["landmarks_3d"][0] == [float(x) for x in lm3[0]]
     json.dumps(record, allow_nan=False)  # plain JSON types only: no numpy left
+
+
+def _schema_errors(obj) -> list[str]:
+    """The whole schema's messages, jsonschema over every element (no fast path)."""
+    from synth.dataset import frame_json
+
+    errs = sorted(frame_json._validator().iter_errors(obj), key=lambda e: (list(map(str, e.absolute_path)), e.message))
+    return [f"{frame_json._path(e)}: {e.message if len(e.message) < 200 else e.message[:200] + '...'}" for e in errs]
+
+
+def test_the_fast_path_of_plain_arrays_finds_what_the_whole_schema_finds():
+    fj = json.loads(RENDERED.read_bytes())
+    assert validate_frame_json(fj) == _schema_errors(fj) == []
+    damage = [("landmarks_3d", 5, [0.0, 0.0]), ("landmarks_3d", 5, [0.0, True, 1.0]), ("landmarks_2d", 0, "x"),
+              ("landmarks_visible", 3, 1), ("landmarks_2d", 67, [1.0, None])]
+    for field, i, value in damage:
+        bad = copy.deepcopy(fj)
+        bad[field][i] = value
+        assert validate_frame_json(bad) == _schema_errors(bad) != [], (field, value)
+    for mutate in (lambda f: f["landmarks_3d"].pop(), lambda f: f["camera"]["K"][1].append(0.0),
+                   lambda f: f["model"].__setitem__("identity", 3), lambda f: f["camera"].pop("K"),
+                   lambda f: f["model"]["expression"].append(False), lambda f: f.__setitem__("camera", [1])):
+        bad = copy.deepcopy(fj)
+        mutate(bad)
+        assert validate_frame_json(bad) == _schema_errors(bad) != []

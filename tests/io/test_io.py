@@ -170,3 +170,20 @@ def test_cache_dir_from_environment(tmp_path, monkeypatch):
     monkeypatch.delenv("SYNTH_CACHE_DIR")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     assert sio.cache_dir().is_dir()
+
+
+@pytest.mark.parametrize("text", [b'{"a": [1.5, -0.0, 1e-320, 2.2250738585072011e-308], "b": {"c": null}}',
+                                  b"[18446744073709551615, -9223372036854775808]", b"123456789012345678901234567890",
+                                  b'{"a": 1e400}', b'"\\ud800"', b'{"k": 1, "k": 2}', b"[" * 64 + b"]" * 64])
+def test_loads_json_gives_what_json_gives(text):
+    import json
+
+    assert repr(sio.loads_json(text)) == repr(json.loads(text))  # repr: int stays int, -0.0 stays -0.0
+
+
+@pytest.mark.parametrize("text, says", [(b"[" * 65 + b"]" * 65, "nested 65 levels deep"),
+                                        (b"[" * 2000 + b"]" * 2000, "nested 2000 levels deep"),
+                                        (b"[1, 2", "Expecting ','"), (b'"\xff"', "not UTF-8")])
+def test_loads_json_refuses_with_the_same_reasons(text, says):
+    with pytest.raises(sio.JSONError, match=says):
+        sio.loads_json(text)
