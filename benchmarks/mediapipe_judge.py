@@ -5,7 +5,7 @@ besides, so any environment with those three does)::
 
     .venv/bin/python benchmarks/mediapipe_judge.py PNG_DIR OUT.json
 
-``benchmarks/realism.py judge`` writes the PNGs, calls this script as a subprocess and reads
+``python -m benchmarks.realism judge`` writes the PNGs, calls this script as a subprocess and reads
 the JSON: per image, ``detected`` (face detection, short-range model, confidence >= 0.5),
 ``score``, ``mesh`` (the 478 refined face-mesh points in pixels, or null) and ``mesh_mirrored``
 (the same on the left-right mirrored image, in the mirrored image's pixels, or null: the judge's
@@ -14,7 +14,7 @@ presence score on the grid ``PRESENCE_GRID``; the face mesh is found when that s
 threshold, which the legacy solution sets from ``min_tracking_confidence``, 0.5 by default, also in
 static mode; so ``mesh`` is null exactly when the score is below 0.5). Pixels are mediapipe's
 ``x * W``, ``y * H``: pixel centres at integers (the judge adds 0.5 px to reach synth's
-convention, benchmarks/realism_judge.py).
+convention, benchmarks/realism/judge.py).
 """
 
 from __future__ import annotations

@@ -42,7 +42,7 @@ CORRESPONDENCE_DIR = Path(__file__).resolve().parent / "data"
 FACE_SIDES = (234, 454)
 
 #: mediapipe's ``x * W`` has pixel centres at integers, synth's at +0.5 (docs/conventions.md):
-#: mediapipe points are shifted by this many pixels (measured by resampling: benchmarks/realism_judge.py)
+#: mediapipe points are shifted by this many pixels (measured by resampling: benchmarks/realism/judge.py)
 MP_PIXEL_OFFSET = 0.5
 #: faces looked for per photo; the largest is fitted
 MAX_FACES = 4

@@ -1,14 +1,15 @@
-"""`benchmarks/realism.py body-end`: which frames show the body ending inside the image."""
+"""`python -m benchmarks.realism body-end` (benchmarks/realism/frames.py): which frames show the body
+ending inside the image, and the scalp measure."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from tests.support.benchmarks import realism_module as _realism
+from benchmarks.realism import frames
 
 
 def test_body_ends_in_frame():
-    r = _realism()
+    r = frames
     seg = np.zeros((8, 8), np.uint32)
     assert not r.body_ends_in_frame(seg)  # no body at all: not counted
     seg[2:5, 3:5] = 9  # a garment floating in the frame
@@ -22,7 +23,7 @@ def test_body_ends_in_frame():
 def test_scalp_measure_compares_skin_above_the_brows_with_the_face():
     from synth.dataset.segmentation import CLASSES as SEG
 
-    r = _realism()
+    r = frames
     H = W = 64
     lm = np.zeros((68, 2))
     lm[36], lm[45] = (20, 30), (44, 30)  # inter-ocular distance 24 px

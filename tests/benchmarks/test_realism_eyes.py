@@ -1,16 +1,16 @@
-"""benchmarks/realism_eyes.py: the eyes' proportions against published measurements (issue 13)."""
+"""benchmarks/realism/eyes.py: the eyes' proportions against published measurements (issue 13)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from tests.support.scripts import load_script
+from benchmarks.realism import eyes
 
 
 @pytest.fixture(scope="module")
 def E():
-    return load_script("benchmarks/realism_eyes.py", "realism_eyes")
+    return eyes
 
 def _eyes(fissure_mm, gap_mm, height_mm):
     """(1, 68, 3) points in metres: two eyes on the x axis, medial corners ``gap_mm`` apart, each

@@ -1,4 +1,4 @@
-"""benchmarks/realism_judge.py: the mediapipe -> ibug68 mapping and the judge's error metric
+"""benchmarks/realism/judge.py: the mediapipe -> ibug68 mapping and the judge's error metric
 (pure numpy; mediapipe itself is never needed here)."""
 
 from __future__ import annotations
@@ -6,12 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from benchmarks.realism import judge
 from tests.support.scripts import load_script
 
 
 @pytest.fixture(scope="module")
 def J():
-    return load_script("benchmarks/realism_judge.py", "realism_judge")
+    return judge
 
 def _faces(n, seed=0):
     """(n, 68, 2) random point sets with the outer eye corners 36, 45 apart."""

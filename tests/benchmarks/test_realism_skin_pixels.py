@@ -1,15 +1,15 @@
-"""`benchmarks/realism.py skin --frames`: the lips' pixels are left out of the mean skin pixel
+"""`python -m benchmarks.realism skin --frames` (benchmarks/realism/skin.py): the lips' pixels are left out of the mean skin pixel
 (they have their own colour, synth.appearance.lips) by the ibug68 outer lip contour."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from tests.support.benchmarks import realism_module as _realism
+from benchmarks.realism import skin
 
 
 def test_polygon_mask_takes_the_pixels_whose_centres_are_inside():
-    mask = _realism()._polygon_mask
+    mask = skin._polygon_mask
     # synth's pixel centres are at +0.5: a box from 1 to 5 by 1 to 4 holds columns 1-4, rows 1-3
     m = mask(np.array([[1.0, 1.0], [5.0, 1.0], [5.0, 4.0], [1.0, 4.0]]), 6, 7)
     want = np.zeros((6, 7), bool)

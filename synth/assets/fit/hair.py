@@ -142,7 +142,7 @@ AFRO_DENSITY = 2.0
 #: down to 3 cm below the centre (it takes them round the face), as does the backward part of the
 #: sweep everywhere. Before 2026-12-01 the whole sweep held down to 3 cm below the centre and the
 #: volume was 0.15, as for the buzz cut, undercut and afro (unchanged): long hair left the head
-#: sideways at the temples and hung as a tent (`benchmarks/realism.py drape`: at eye level
+#: sideways at the temples and hung as a tent (`python -m benchmarks.realism drape`: at eye level
 #: 85 mm past the head, now 34 mm).
 LOOSE_SWEEP_FLOOR_M = 0.03
 LOOSE_VOLUME = 0.05

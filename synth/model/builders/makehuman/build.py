@@ -32,7 +32,7 @@ GMM_ITERS = 60
 #: margins on the eyeballs the template's eye fissure (ex-en) goes from 22.2 to 24.2 mm, the
 #: intercanthal width from 38.6 to 36.5 mm and the biocular width from 82.5 to 84.4 mm, toward
 #: published adult means (docs/default-model.md "Identity space" 6, docs/realism.md "Eye
-#: proportions", ``benchmarks/realism.py eyes``). The identity basis is unchanged.
+#: proportions", ``python -m benchmarks.realism eyes``). The identity basis is unchanged.
 EYE_OPENING = 1.0
 
 

@@ -1,6 +1,6 @@
 """mediapipe as a judge of realism (issue 13): the mediapipe -> ibug68 mapping and the error metric.
 
-``benchmarks/realism.py judge`` runs mediapipe (benchmarks/mediapipe_judge.py, in a subprocess)
+``python -m benchmarks.realism judge`` runs mediapipe (benchmarks/mediapipe_judge.py, in a subprocess)
 on the frames and compares its face mesh with the frames' ``landmarks_2d``. This module holds
 what that comparison is made of, all plain numpy (tested in tests/benchmarks/test_realism_judge.py):
 
@@ -279,7 +279,7 @@ def presence_report(det: dict, names: list) -> dict | None:
 
 
 def judge(args, png, categories) -> dict:
-    """``realism.py judge`` (see its doc and docs/realism.md); ``png(frame, path)`` writes a frame
+    """``benchmarks.realism judge`` (see its doc and docs/realism.md); ``png(frame, path)`` writes a frame
     composited over grey, ``categories`` names the six ITA categories."""
     import json
     import os
@@ -306,7 +306,7 @@ def judge(args, png, categories) -> dict:
             det = json.loads(Path(args.detections).read_text())["images"]
         else:
             out = args.detections or f"{d}/mp.json"
-            subprocess.run([args.mp_python, str(Path(__file__).with_name("mediapipe_judge.py")), f"{d}/png", out],
+            subprocess.run([args.mp_python, str(Path(__file__).resolve().parents[1] / "mediapipe_judge.py"), f"{d}/png", out],
                            check=True, env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"})
             det = json.loads(Path(out).read_text())["images"]
     keys = [k for k in truth if det[k]["mesh"] is not None]
@@ -368,7 +368,7 @@ def judge(args, png, categories) -> dict:
 
 
 def mapping_table(args) -> dict:
-    """``realism.py mapping``: the mapping's residual on held-out model samples (seed 1, 20
+    """``benchmarks.realism mapping``: the mapping's residual on held-out model samples (seed 1, 20
     identities x 6 views: other identities and cameras than the fit's) for each ``--relax``
     ("convex" for the convex weights), and, with ``--dataset`` and ``--detections`` (a judge's
     cached mediapipe JSON), what each gives on those frames (shown, not used to choose)."""
@@ -414,7 +414,7 @@ _JAW_MIRROR = list(range(16, -1, -1))
 
 
 def jaw_table(args) -> dict:
-    """``realism.py jaw``: where our jaw labels sit against the pixels and against mediapipe.
+    """``benchmarks.realism jaw``: where our jaw labels sit against the pixels and against mediapipe.
     (1) The chin: for frames within 15 degrees of frontal (azimuth and elevation) without a beard,
     the first depth step over 1.5 cm going down the image column of ibug68 point 8 (the chin's
     outline over the neck) against the label's row, in inter-ocular distances (+ = outline

@@ -9,13 +9,15 @@ lower lid margins at a third and two thirds of the eye's width (the lid opening 
 for palpebrale superius - inferius, ps-pi, which is taken at the opening's highest point: ours
 reads a little lower).
 
-Plain numpy; the command is ``benchmarks/realism.py eyes`` (tested in
+Plain numpy; the command is ``python -m benchmarks.realism eyes`` (tested in
 tests/benchmarks/test_realism_eyes.py).
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from .common import _planned_heads
 
 #: measurement -> (what it is, its ibug68 pairs: the mean of their distances)
 MEASURES = {
@@ -151,3 +153,14 @@ def eyes_table(args, ibug: np.ndarray, mrd: dict | None = None, eyeball: np.ndar
               f"transverse, {lo}-{hi} mm")
         out["eyeball_mm"] = q
     return out
+
+
+def eyes(args) -> dict:
+    """The eyes' proportions of the first planned identities (neutral, rest pose) against
+    published measurements (benchmarks/realism/eyes.py)."""
+
+    model, hm, ids, codes = _planned_heads(args.seed, args.identities)
+    n = len(ids)
+    ev = hm.evaluate(codes, np.zeros((n, model.expression_dims)), np.zeros((n, hm.J, 3)))
+    return eyes_table(args, np.asarray(ev.landmarks["ibug68"], np.float64),
+                      margin_reflex_distances(ev.vertices, model.regions), eyeball_diameters(ev.vertices, model.regions))

@@ -1,7 +1,7 @@
 """Before/after figures for the eyes, skin detail and garments (docs/realism-eyes-garments.md).
 
-    .venv/bin/python benchmarks/realism_eyes_garments.py crops OUT_DIR [--tag after] [--spp 16]
-    .venv/bin/python benchmarks/realism_eyes_garments.py cost [--identities 3 --views 2 --repeats 2]
+    .venv/bin/python -m benchmarks.realism.eyes_garments crops OUT_DIR [--tag after] [--spp 16]
+    .venv/bin/python -m benchmarks.realism.eyes_garments cost [--identities 3 --views 2 --repeats 2]
 
 Run it once on the tree to measure and once with ``PYTHONPATH`` pointing at the tree before the
 change (the script uses only interfaces both have) for the "before" column.
@@ -18,23 +18,19 @@ cost: the `preview` preset's Cycles time per frame (scene sync, sampling, denois
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
 
 def _save(path: Path, rgba: np.ndarray) -> None:
     import imageio.v3 as iio
 
-    from synth.appearance.srgb import linear_to_srgb
+    from synth.appearance.srgb import srgb8
 
     a = rgba[..., 3:4]
-    rgb = np.clip(rgba[..., :3], 0, None) * a + 0.214 * (1 - a)  # linear 0.214 = sRGB mid-grey
-    iio.imwrite(path, (np.clip(linear_to_srgb(rgb), 0, 1) * 255 + 0.5).astype(np.uint8))
+    iio.imwrite(path, srgb8(np.clip(rgba[..., :3], 0, None) * a + 0.214 * (1 - a)))  # linear 0.214: sRGB mid-grey
 
 
 def crops(args) -> None:
