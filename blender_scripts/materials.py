@@ -81,7 +81,7 @@ def skin_material(albedo, params: dict | None = None, pixel_m: float | None = No
     links.new(mix.outputs["Result"], bsdf.inputs["Base Color"])
     # fine bump layers, as far as the resolution shows them
     layers = {"pores": (so.PORES, float(p.get("pore_scale", 1.0)), float(p.get("pore_strength", 0.15)), 0.0003),
-              "fine_lines": (so.FINE_LINES, 1.0, 0.1 + 0.25 * float(p.get("wrinkle_depth", 0.5)), 0.0002)}
+              "fine_lines": (so.FINE_LINES, 1.0, 0.1 + 0.25 * float(p.get("wrinkle_depth", so.DEFAULT_WRINKLE_DEPTH)), 0.0002)}
     unresolved, normal = [], None
     for name, ((period, var), scale, strength, dist) in layers.items():
         w = 1.0 if pixel_m is None else so.detail_weight(pixel_m, period * scale)

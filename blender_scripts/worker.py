@@ -106,7 +106,7 @@ class IdentityScene:
         from blender_scripts import scene as bscene
         from blender_scripts.assets import HeadContext
         from synth.appearance.lips import lip_albedo
-        from synth.appearance.skin import skin_albedo
+        from synth.appearance.skin import DEFAULT_HAEMOGLOBIN, DEFAULT_MELANIN, skin_albedo
         from synth.appearance.skin_optics import pixel_footprint_m
 
         self.ident, self.hm, self.render_cfg = ident, hm, render_cfg
@@ -117,7 +117,8 @@ class IdentityScene:
         self.effective = bscene.configure_render(render_cfg, self.width, self.height)
         self.env = _set_environment(ident.get("lighting") or plan.lighting())
         skin = dict(ident.get("skin") or {})
-        mel, hb = float(skin.get("melanin", 0.05)), float(skin.get("haemoglobin", 0.015))
+        mel = float(skin.get("melanin", DEFAULT_MELANIN))
+        hb = float(skin.get("haemoglobin", DEFAULT_HAEMOGLOBIN))
         albedo, lips = skin_albedo(mel, hb), lip_albedo(mel, hb)
         self.skin_record = {**skin, "albedo_linear_srgb": [round(a, 6) for a in albedo],
                             "lip_albedo_linear_srgb": [round(a, 6) for a in lips]}

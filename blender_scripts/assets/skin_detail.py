@@ -32,7 +32,8 @@ import numpy as np
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
 from synth.appearance import skin_optics as so
-from synth.appearance.skin_optics import WRINKLES, detail_weight, sharp_lobe
+from synth.appearance.skin import DEFAULT_HAEMOGLOBIN
+from synth.appearance.skin_optics import DEFAULT_WRINKLE_DEPTH, WRINKLES, detail_weight, sharp_lobe
 from synth.appearance.pigment import pigment, shaft_darkness
 from synth.assets.fit.eyes import lid_margin
 from synth.assets.fit.groom import colour_of, head_frame
@@ -119,7 +120,7 @@ def build(ctx, entry: dict) -> Rig:
     rec = {"id": entry.get("id")}
     pore = float(p.get("pore_scale", 1.0))  # the base material builds the pores (materials.skin_material)
     # redness from blood volume
-    red = float(np.clip(float(p.get("haemoglobin", 0.02)) / 0.07, 0, 1))
+    red = float(np.clip(float(p.get("haemoglobin", DEFAULT_HAEMOGLOBIN)) / 0.07, 0, 1))
     bmat.layer_over(mat, "Base Color", (0.75, 0.3, 0.3), bmat.math_node(mat, "MULTIPLY", cheeks, 0.35 * red),
                     blend="MULTIPLY")
     # freckles: small cells, random per cell, thresholded by the amount
@@ -145,7 +146,7 @@ def build(ctx, entry: dict) -> Rig:
     nt.links.new(bmat.attribute(mat, "tear_line").outputs["Vector"], tear.inputs[0])
     for name, value in (("Coat Weight", 1.0), ("Coat Roughness", 0.03), ("Roughness", 0.15)):
         bmat.layer_over(mat, name, value, tear.outputs["X"])
-    wd = float(p.get("wrinkle_depth", 0.0))
+    wd = float(p.get("wrinkle_depth", DEFAULT_WRINKLE_DEPTH))
     w_wr = 1.0 if ctx.pixel_m is None else detail_weight(ctx.pixel_m, WRINKLES[0])
     if wd > 0.01 and w_wr > 0.0:
         wave = _tex_node(mat, "ShaderNodeTexWave", 90.0, seed)

@@ -35,6 +35,11 @@ from functools import lru_cache
 import numpy as np
 
 from synth.appearance.cie_srgb import SPECTRUM_TO_LINEAR_SRGB, WAVELENGTHS
+#: The skin parameters where a plan gives none (a frame of an identity without a skin pick, a
+#: hand-written plan); planned skins draw both from the catalogue (assets_manifest/skin.toml).
+DEFAULT_MELANIN = 0.05
+DEFAULT_HAEMOGLOBIN = 0.015
+
 EPIDERMIS_CM = 0.006
 PACKAGING_CM = 0.0015
 CAROTENOID_PER_CM = 45.0

@@ -45,6 +45,10 @@ import numpy as np
 SIGMA_S_REDUCED = (0.74, 0.88, 1.01)
 SIGMA_A = (0.032, 0.17, 0.48)
 
+#: Wrinkle depth (0..1) where a plan gives none: the middle of the catalogue's range
+#: (assets_manifest/skin.toml), which planned skins draw from.
+DEFAULT_WRINKLE_DEPTH = 0.5
+
 #: sharp lobe roughness / broad lobe roughness; sharp lobe IOR (sebum); its weight
 SHARP_LOBE_RATIO = 0.45
 SHARP_LOBE_IOR = 1.45
