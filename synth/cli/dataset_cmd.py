@@ -9,6 +9,7 @@ from typing import Optional
 import typer
 
 from synth.errors import SynthError
+from synth.io.process import default_jobs
 
 
 def validate_cmd(
@@ -16,7 +17,8 @@ def validate_cmd(
     quick: bool = typer.Option(False, "--quick", help="Skip sha256 hashing (sizes are still checked)."),
     partial: bool = typer.Option(False, "--partial", help="Planned shards not yet committed are warnings, "
                                                          "not defects (check a render in progress)."),
-    jobs: int = typer.Option(1, "--jobs", "-j", min=1, max=256, help="Check shards in this many processes."),
+    jobs: Optional[int] = typer.Option(None, "--jobs", "-j", min=1, max=256,
+                                       help="Check shards in this many processes (default: up to 4 cores)."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON report instead of lines."),
     repair_index: bool = typer.Option(False, "--repair-index", help="First rebuild index.json from the shards' "
                                       "manifests (signing what they now say), print and log every change "
@@ -32,6 +34,7 @@ def validate_cmd(
     from synth.dataset.validate_index import describe_change, repair
 
     load_dataset(directory)  # not a dataset: one line, exit 2
+    jobs = default_jobs() if jobs is None else jobs
     if repair_index:
         changes = repair(directory)
         for c in changes:

@@ -10,6 +10,7 @@ of landmarks_3d, ...). The writer, the reader and ``synth validate`` all use it.
 from __future__ import annotations
 
 import functools
+import itertools
 import json
 from collections.abc import Mapping
 from pathlib import Path
@@ -19,6 +20,7 @@ import orjson
 
 from synth.dataset.exr import CHANNELS
 from synth.dataset.layout import MAX_FRAME_JSON_BYTES, frame_files, parse_frame_key_env
+from synth.dataset.schema_fast import compile_sufficient
 from synth.errors import SynthError
 from synth.io import atomic_write_json, read_json
 
@@ -48,12 +50,8 @@ def _validator():
 _PLAIN_KEYS = frozenset({"type", "minItems", "maxItems", "items", "description", "title"})
 
 
-def _is_number(x) -> bool:
-    return type(x) is float or type(x) is int  # JSON Schema's number: not a bool
-
-
-def _is_bool(x) -> bool:
-    return type(x) is bool
+_NUMBER_TYPES = frozenset({int, float})  # JSON Schema's number: not a bool
+_BOOL_TYPES = frozenset({bool})
 
 
 def _plain_check(sub):
@@ -61,15 +59,33 @@ def _plain_check(sub):
     array, ``minItems``/``maxItems``, ``items`` a plain array schema or ``{"type": "number"}``
     or ``{"type": "boolean"}``), else None. jsonschema takes about 30 us per array element; the
     frame's landmarks, codes and matrices are most of its elements."""
-    if not isinstance(sub, dict) or set(sub) - _PLAIN_KEYS:
+    dims: list[tuple[int, int | None]] = []
+    while isinstance(sub, dict) and not set(sub) - _PLAIN_KEYS and sub.get("type") == "array":
+        lo, hi = sub.get("minItems", 0), sub.get("maxItems")
+        if type(lo) is not int or (hi is not None and type(hi) is not int):
+            return None
+        dims.append((lo, hi))
+        sub = sub.get("items")
+    if not isinstance(sub, dict) or set(sub) - {"description", "title"} != {"type"} or sub["type"] not in (
+            "number", "boolean"):
         return None
-    if set(sub) - {"description", "title"} == {"type"} and sub["type"] in ("number", "boolean"):
-        return _is_number if sub["type"] == "number" else _is_bool
-    inner = _plain_check(sub.get("items")) if sub.get("type") == "array" else None
-    lo, hi = sub.get("minItems", 0), sub.get("maxItems")
-    if inner is None or type(lo) is not int or (hi is not None and type(hi) is not int):
-        return None
-    return lambda x: type(x) is list and lo <= len(x) and (hi is None or len(x) <= hi) and all(map(inner, x))
+    leaf = _NUMBER_TYPES if sub["type"] == "number" else _BOOL_TYPES
+    if not dims:
+        return lambda x: type(x) in leaf
+    return functools.partial(_nested_ok, dims=tuple(dims), leaf=leaf)
+
+
+def _nested_ok(x, dims: tuple, leaf: frozenset) -> bool:
+    """Whether ``x`` is nested lists with the item counts of ``dims`` (one (min, max) per level)
+    whose innermost values all have a type in ``leaf``; the types are collected by ``map`` in C,
+    not by a Python call per value."""
+    level = [x]
+    for lo, hi in dims:
+        for v in level:
+            if type(v) is not list or len(v) < lo or (hi is not None and len(v) > hi):
+                return False
+        level = level[0] if len(level) == 1 else list(itertools.chain.from_iterable(level))
+    return set(map(type, level)) <= leaf
 
 
 def _split(schema: dict, path: tuple, checks: list) -> dict:
@@ -96,17 +112,21 @@ _ROOT_KEYS = frozenset({"$schema", "$id", "title", "description", "type", "requi
 
 @functools.lru_cache(maxsize=1)
 def _fast_validator():
-    """(a validator of the root without its properties, property -> a validator of its value,
-    the plain-array checks): the schema of :func:`_split`, taken apart where that is exact."""
+    """(the root's check, property -> (its compiled check or None, a validator of its value),
+    the plain-array checks): the schema of :func:`_split`, taken apart where that is exact.
+    A check is :func:`synth.dataset.schema_fast.compile_sufficient`'s: True means valid."""
     checks: list = []
     light = _split(frame_schema(), (), checks)
     full = _validator()
+    defs = light.get("$defs", {})
     if set(light) - _ROOT_KEYS:
-        return full.evolve(schema=light), {}, tuple(checks)
-    defs = {"$defs": light["$defs"]} if "$defs" in light else {}
-    props = {name: full.evolve(schema={**sub, **defs}) for name, sub in light["properties"].items()
-             if isinstance(sub, dict) and sub}
-    root = full.evolve(schema={**light, "properties": {name: {} for name in light["properties"]}})
+        return full.evolve(schema=light).is_valid, {}, tuple(checks)
+    props = {name: (compile_sufficient(sub, defs), full.evolve(schema={**sub, "$defs": defs}))
+             for name, sub in light["properties"].items() if isinstance(sub, dict) and sub}
+    root_schema = {**light, "properties": {name: {} for name in light["properties"]}}
+    root = compile_sufficient(root_schema, defs)
+    if root is None:
+        root = full.evolve(schema=root_schema).is_valid
     return root, props, tuple(checks)
 
 
@@ -114,16 +134,21 @@ def _fast_validator():
 def _value_valid(name: str, value: bytes) -> bool:
     """Whether a property's value (its JSON bytes) is valid: frames of a shard repeat most of
     their objects (assets, render settings, software), so each is checked once."""
-    return _fast_validator()[1][name].is_valid(orjson.loads(value))
+    return _fast_validator()[1][name][1].is_valid(orjson.loads(value))
 
 
 def _fast_valid(obj) -> bool:
     """Valid under the whole schema (see :func:`_split`); False may still be valid."""
     root, props, checks = _fast_validator()
-    if not _plain_values_ok(obj, checks) or not root.is_valid(obj):
+    if not _plain_values_ok(obj, checks) or not root(obj):
         return False
     try:
-        return all(_value_valid(k, orjson.dumps(v)) for k, v in obj.items() if k in props)
+        for k, v in obj.items():
+            if k in props:
+                quick = props[k][0]
+                if not ((quick is not None and quick(v)) or _value_valid(k, orjson.dumps(v))):
+                    return False
+        return True
     except (TypeError, orjson.JSONEncodeError):  # not plain JSON: the whole schema says why
         return False
 
@@ -219,6 +244,16 @@ def validate_frame_json(obj) -> list[str]:
     return _semantic_errors(obj)
 
 
+_EYE3, _EYE4 = np.eye(3), np.eye(4)
+_LAST_ROW, _K_ROW = np.array([0.0, 0.0, 0.0, 1.0]), np.array([0.0, 0.0, 1.0])
+
+
+def _close(a: np.ndarray, b: np.ndarray, atol: float) -> bool:
+    """``np.allclose(a, b, atol=atol)`` for finite ``b`` (rtol 1e-5; NaN is never close),
+    without its general-case cost: this runs several times per frame in ``synth validate``."""
+    return bool((np.abs(a - b) <= atol + 1e-5 * np.abs(b)).all())
+
+
 def _semantic_errors(f: dict) -> list[str]:
     out: list[str] = []
     key = f["frame_id"]
@@ -239,16 +274,16 @@ def _semantic_errors(f: dict) -> list[str]:
     K = np.asarray(cam["K"], dtype=np.float64)
     w2c = np.asarray(cam["world_to_camera"], dtype=np.float64)
     c2w = np.asarray(cam["camera_to_world"], dtype=np.float64)
-    if not (K[0, 0] > 0 and K[1, 1] > 0 and np.allclose(K[2], [0, 0, 1]) and K[1, 0] == 0):
+    if not (K[0, 0] > 0 and K[1, 1] > 0 and _close(K[2], _K_ROW, 1e-8) and K[1, 0] == 0):
         out.append("camera/K: not an intrinsics matrix (fx, fy > 0, last row [0, 0, 1], K[1][0] = 0)")
     for name, M in (("world_to_camera", w2c), ("camera_to_world", c2w), ("model/head_pose",
                                                                         np.asarray(f["model"]["head_pose"], float))):
         R = M[:3, :3]
-        if not (np.allclose(M[3], [0, 0, 0, 1], atol=MATRIX_TOL) and np.allclose(R @ R.T, np.eye(3), atol=MATRIX_TOL)
+        if not (_close(M[3], _LAST_ROW, MATRIX_TOL) and _close(R @ R.T, _EYE3, MATRIX_TOL)
                 and np.linalg.det(R) > 0):
             out.append(f"{name if '/' in name else 'camera/' + name}: not a rigid transform "
                        "(rotation not orthonormal with det +1, or last row not [0, 0, 0, 1])")
-    if not np.allclose(w2c @ c2w, np.eye(4), atol=MATRIX_TOL * max(1.0, float(np.abs(c2w[:3, 3]).max()))):
+    if not _close(w2c @ c2w, _EYE4, MATRIX_TOL * max(1.0, float(np.abs(c2w[:3, 3]).max()))):
         out.append("camera: world_to_camera @ camera_to_world is not the identity")
     X = np.asarray(f["landmarks_3d"], dtype=np.float64)
     x2 = np.asarray(f["landmarks_2d"], dtype=np.float64)

@@ -9,7 +9,6 @@ function of the item, so the output never depends on ``jobs``: tests compare 1 a
 from __future__ import annotations
 
 import multiprocessing as mp
-import os
 import signal
 from typing import Any, Callable, Sequence
 
@@ -27,14 +26,6 @@ def _child_init() -> None:
     on the task queue) and leave Ctrl-C to the parent."""
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def default_jobs() -> int:
-    try:
-        n = len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        n = os.cpu_count() or 1
-    return max(1, min(4, n))
 
 
 def fork_map(fn: Callable[[Any], Any], items: Sequence[Any], jobs: int) -> list:

@@ -22,6 +22,7 @@ from synth.config import Config
 from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
 from synth.dataset.layout import frame_keys, shard_name
 from synth.errors import SynthError
+from synth.io.process import default_jobs
 from synth.model.format import HeadModelData
 from synth.plan import assets as assets_mod
 from synth.plan import cameras, expressions, identities, parallel, skin
@@ -349,7 +350,7 @@ def run_plan(cfg: Config, n_identities: int, out, seed: int | None = None, first
     d = cfg.dataset
     S = d.identities_per_shard
     n_shards = -(-n_identities // S)
-    jobs = parallel.default_jobs() if jobs is None else max(1, int(jobs))
+    jobs = default_jobs() if jobs is None else max(1, int(jobs))
     extremes = None  # searched once here (cached per model), not in every forked chunk
     if cfg.camera.target == "head" or cfg.camera.distance == "fit":
         extremes = identities.extreme_vertices(model, model_rec["sha256"])
