@@ -11,14 +11,18 @@ import numpy as np
 
 from blender_scripts.scene import VIEW_LAYER
 from synth.dataset.alpha import merge_denoised_alpha
+from synth.dataset.exr import BACKGROUND_DEPTH_THRESHOLD
 
-BACKGROUND_DEPTH = np.inf  # depth stored for background pixels (alpha == 0): see docs/frame-format.md
+#: Depth of background pixels (alpha == 0) in the pass arrays a render returns. A stored frame
+#: EXR holds :data:`synth.dataset.exr.STORED_BACKGROUND_DEPTH` (0.0) there instead: the writer
+#: maps one to the other (docs/frame-format.md).
+PASS_BACKGROUND_DEPTH = np.inf
 
 
 def render_view(tmp_dir: Path, seed: int) -> dict:
     """Render with the given Cycles seed; returns rgba (H,W,4), depth (H,W) camera z in metres
-    (background: inf), normals (H,W,3) world space, segmentation (H,W) uint32 class IDs, and the
-    time Cycles spent (seconds)."""
+    (background: :data:`PASS_BACKGROUND_DEPTH`), normals (H,W,3) world space, segmentation
+    (H,W) uint32 class IDs, and the time Cycles spent (seconds)."""
     import OpenEXR
 
     scene = bpy.context.scene
@@ -39,7 +43,8 @@ def render_view(tmp_dir: Path, seed: int) -> dict:
     background = alpha <= 0.0  # no surface hit by any sample: the geometry passes' background
     if "Composite.Combined.R" in ch:  # the compositor's denoised alpha (scene._alpha_denoiser)
         rgba[..., 3] = merge_denoised_alpha(alpha, ch["Composite.Combined.R"].pixels)
-    depth = np.where(background | (depth >= 1e9), BACKGROUND_DEPTH, depth).astype(np.float32)
+    no_surface = background | (depth >= BACKGROUND_DEPTH_THRESHOLD)
+    depth = np.where(no_surface, PASS_BACKGROUND_DEPTH, depth).astype(np.float32)
     seg[background] = 0
     normals[background] = 0.0
     return {"rgba": rgba.astype(np.float32), "depth": depth, "normals": normals, "segmentation": seg,

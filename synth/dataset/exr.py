@@ -44,8 +44,10 @@ FORMAT = "synth-frame-exr/1"
 HALF_MAX = 65504.0
 #: Depth values at or above this (and +inf) are background: Cycles writes 1e10 there.
 BACKGROUND_DEPTH_THRESHOLD = 1e9
-#: The value stored for "no surface" in ``depth.Z``.
-BACKGROUND_DEPTH = 0.0
+#: The value a stored frame EXR holds for "no surface" in ``depth.Z`` (and what the readers
+#: return). The worker's pass arrays use +inf (``blender_scripts.passes.PASS_BACKGROUND_DEPTH``);
+#: the writer maps every value at or above :data:`BACKGROUND_DEPTH_THRESHOLD` to this one.
+STORED_BACKGROUND_DEPTH = 0.0
 
 RGBA_CHANNELS = ("R", "G", "B", "A")
 DEPTH_CHANNEL = "depth.Z"
@@ -117,7 +119,7 @@ def encode_frame_exr(rgba, depth, normals, segmentation, header: dict | None = N
     if (d < 0).any():
         raise SynthError(f"depth has {int((d < 0).sum())} negative value(s) (camera-space z must be >= 0)",
                          where, "store z along the optical axis in metres (background: 0 or +inf)")
-    d = np.where(d >= BACKGROUND_DEPTH_THRESHOLD, np.float32(BACKGROUND_DEPTH), d).astype(np.float32)
+    d = np.where(d >= BACKGROUND_DEPTH_THRESHOLD, np.float32(STORED_BACKGROUND_DEPTH), d).astype(np.float32)
 
     c = rgba.astype(np.float32)
     c[..., :3] = np.clip(c[..., :3], -HALF_MAX, HALF_MAX)
@@ -362,6 +364,7 @@ def pixel_defects(px: dict) -> list[str]:
     return out
 
 
-__all__ = ["CHANNELS", "REC709_CHROMATICITIES", "HALF_MAX", "BACKGROUND_DEPTH", "camera_attributes",
+__all__ = ["CHANNELS", "REC709_CHROMATICITIES", "HALF_MAX", "STORED_BACKGROUND_DEPTH", "BACKGROUND_DEPTH_THRESHOLD",
+           "camera_attributes",
            "encode_frame_exr", "read_camera_attributes", "write_frame_exr", "read_frame_exr", "decode_frame_exr", "decode_channels",
            "read_frame_exr_header", "pixel_defects"]
