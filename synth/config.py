@@ -109,10 +109,11 @@ class IdentityConfig:
     the untruncated prior: sqrt(chi2.ppf(q, dims)); 1 = no truncation"""
     max_mahalanobis: Annotated[float | None, Bounds(0.01, 1000.0)] = None
     """truncation radius in absolute terms (overrides the quantile)"""
-    head_shape: Annotated[str, Choices("anthropometric", "none")] = "anthropometric"
+    head_shape: Annotated[str, Choices("auto", "anthropometric", "none")] = "auto"
     """'anthropometric': a code whose neutral head leaves one of the ranges below (head breadth and length, face
     height and width, cephalic and facial index) is redrawn, up to head_shape_attempts times (docs/plan-format.md,
-    docs/realism.md 'Head shapes'); 'none': every draw is kept"""
+    docs/realism.md 'Head shapes'); 'auto': the same where the model's mean head lies inside every range (else
+    every draw is kept: a model not of adult heads at their size); 'none': every draw is kept"""
     head_breadth_mm: Annotated[Interval, Bounds(1.0, 1000.0)] = (131.0, 180.0)
     """range of the head breadth (eurion-eurion, mm): the smallest and largest of ANSUR II's 6,068 adults"""
     head_length_mm: Annotated[Interval, Bounds(1.0, 1000.0)] = (168.0, 225.0)

@@ -66,7 +66,7 @@ def measure_sets(model: HeadModelData) -> MeasureSets:
     if need or "ibug68" not in model.landmarks or len(model.landmarks["ibug68"][0]) < 68:
         raise SynthError(f"the model has no {' or '.join(need) or 'ibug68'} "
                          f"{'region' if need else 'landmarks'}: head shapes cannot be measured", model.name,
-                         "set identity.head_shape = 'none' for this model")
+                         "set identity.head_shape = 'auto' or 'none' for this model")
     from synth.plan.identities import landmark_basis
 
     t = model.template.astype(np.float64)
@@ -87,7 +87,7 @@ def measure_sets(model: HeadModelData) -> MeasureSets:
     sets = MeasureSets(np.sort(breadth), np.sort(length), np.sort(width), point(_NASION), point(_MENTON))
     if min(len(sets.breadth), len(sets.length), len(sets.width)) < 2:
         raise SynthError("the model's template leaves a head-shape vertex set (nearly) empty", model.name,
-                         "set identity.head_shape = 'none' for this model")
+                         "set identity.head_shape = 'auto' or 'none' for this model")
     return sets
 
 
@@ -157,3 +157,16 @@ def excess(m: dict[str, np.ndarray], bounds: dict[str, tuple[float, float]]) -> 
     for n, (lo, hi) in bounds.items():
         out = out + (np.maximum(lo - m[n], 0.0) + np.maximum(m[n] - hi, 0.0)) / max(hi - lo, 1e-12)
     return out
+
+
+def unmet(model: HeadModelData, centre_code, bounds: dict[str, tuple[float, float]]) -> str | None:
+    """Why no identity of ``model`` could be kept inside ``bounds``, or None: the model cannot be
+    measured, or its head at ``centre_code`` (the prior's mean) lies outside a range."""
+    try:
+        m = measure_codes(model, np.asarray(centre_code, np.float64)[None])
+    except SynthError as e:
+        return e.what
+    for n, (lo, hi) in bounds.items():
+        if not lo <= m[n][0] <= hi:
+            return f"the model's mean head has {n} {m[n][0]:.1f}, outside identity.{n} = [{lo:g}, {hi:g}]"
+    return None

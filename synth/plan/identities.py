@@ -52,13 +52,19 @@ def sample_identities(seed: int, identity: np.ndarray, prior: GaussianMixture,
 
 def planned_codes(seed: int, identity: np.ndarray, model: HeadModelData, cfg) -> np.ndarray:
     """(N, Ki) the plan's identity codes for an IdentityConfig ``cfg``: :func:`sample_identities`
-    truncated at :func:`truncation_radius`, then :func:`redraw_outside_ranges` unless
-    ``cfg.head_shape == 'none'``."""
+    truncated at :func:`truncation_radius`, then :func:`redraw_outside_ranges`: with
+    ``cfg.head_shape`` 'anthropometric' always, with 'auto' (the default) when the model's mean
+    head can be measured and lies inside every range (:func:`head_shapes.unmet`), with 'none' never."""
     prior = prior_of(model)
     radius = truncation_radius(model.identity_dims, cfg)
     codes = sample_identities(seed, identity, prior, radius)
     if cfg.head_shape == "none":
         return codes
+    if cfg.head_shape == "auto":
+        from synth.plan import head_shapes as hs
+
+        if hs.unmet(model, prior.mean(), hs.bounds_of(cfg)) is not None:
+            return codes  # not a model of adult heads at their real size (e.g. a test ellipsoid)
     return redraw_outside_ranges(seed, identity, codes, prior, radius, model, cfg)
 
 
@@ -73,15 +79,13 @@ def redraw_outside_ranges(seed: int, identity: np.ndarray, codes: np.ndarray, pr
     (about 1e-17). Refuses ranges that exclude the prior's mean head: no redraw could meet them."""
     from synth.plan import head_shapes as hs
 
-    sets = hs.measure_sets(model)
     bounds = hs.bounds_of(cfg)
-    centre = hs.measure_codes(model, prior.mean()[None], sets)
-    if not hs.inside(centre, bounds)[0]:
-        n = next(n for n in hs.NAMES if not bounds[n][0] <= centre[n][0] <= bounds[n][1])
-        raise SynthError(f"identity.{n} = {list(bounds[n])} excludes the model's mean head ({centre[n][0]:.1f}): "
-                         "no identity could meet it", f"identity.{n}",
-                         "widen the range (docs/realism.md 'Head shapes' lists the model's figures) or set "
-                         "identity.head_shape = 'none'")
+    why = hs.unmet(model, prior.mean(), bounds)
+    if why is not None:
+        raise SynthError(f"identity.head_shape = 'anthropometric' cannot be met: {why}", model.name,
+                         "widen the identity ranges (docs/realism.md 'Head shapes' lists the default model's "
+                         "figures) or set identity.head_shape = 'auto' or 'none'")
+    sets = hs.measure_sets(model)
     ids = np.asarray(identity, np.int64)
     best = np.array(codes, np.float64, copy=True)
     m = hs.measure_codes(model, best, sets)
