@@ -73,6 +73,7 @@ def figure(model, first: np.ndarray, final: np.ndarray, ids: np.ndarray, excess:
     from matplotlib.collections import PolyCollection
 
     from synth.model.head import HeadModel
+    from synth.plan.head_shapes import measure_codes
 
     pick = [int(i) for i in np.argsort(-excess, kind="stable")[:count]]
     hm = HeadModel(model, np.float64)
@@ -82,15 +83,19 @@ def figure(model, first: np.ndarray, final: np.ndarray, ids: np.ndarray, excess:
     def verts(code):
         return hm.evaluate(code, np.zeros(model.expression_dims), np.zeros((hm.J, 3)), landmarks=False).vertices[0]
 
-    fig, axes = plt.subplots(2, 2 * count, figsize=(2.0 * count * 2, 4.6))
+    fig, axes = plt.subplots(2, 2 * count, figsize=(2.0 * count * 2, 5.0))
     for col, j in enumerate(pick):
         for row, code in enumerate((first[j], final[j])):
             v = verts(code)
+            m = {n: float(x[0]) for n, x in measure_codes(model, code[None]).items()}
+            notes = (f"B {m['head_breadth_mm']:.0f} L {m['head_length_mm']:.0f} CI {m['cephalic_index']:.0f}",
+                     f"FH {m['face_height_mm']:.0f} FW {m['face_width_mm']:.0f} FI {m['facial_index']:.0f}")
             for k, (a, b, name) in enumerate(((0, 2, "front"), (1, 2, "side"))):
                 ax = axes[row, 2 * col + k]
                 ax.add_collection(PolyCollection(v[tri][:, :, [a, b]], facecolors="0.25", edgecolors="0.25", linewidths=0.3))
                 ax.set_xlim(-0.13, 0.13) if a == 0 else ax.set_xlim(-0.2, 0.08)
                 ax.set_ylim(0.56, 0.88)
+                ax.set_xlabel(notes[k], fontsize=6.5)
                 ax.set_aspect("equal")
                 ax.set_xticks([])
                 ax.set_yticks([])
@@ -98,7 +103,8 @@ def figure(model, first: np.ndarray, final: np.ndarray, ids: np.ndarray, excess:
                     ax.set_title(f"id {int(ids[j])} {name}", fontsize=8)
         axes[0, 2 * col].set_ylabel("drawn" if col == 0 else "", fontsize=8)
         axes[1, 2 * col].set_ylabel("planned" if col == 0 else "", fontsize=8)
-    fig.suptitle("identities farthest outside the adult ranges: first draw (top), planned (bottom)", fontsize=9)
+    fig.suptitle("identities farthest outside the adult ranges: first draw (top), planned (bottom); B/L head breadth/"
+                 "length, FH/FW face height/width (mm), CI/FI cephalic/facial index", fontsize=9)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
