@@ -109,6 +109,26 @@ class IdentityConfig:
     the untruncated prior: sqrt(chi2.ppf(q, dims)); 1 = no truncation"""
     max_mahalanobis: Annotated[float | None, Bounds(0.01, 1000.0)] = None
     """truncation radius in absolute terms (overrides the quantile)"""
+    head_shape: Annotated[str, Choices("auto", "anthropometric", "none")] = "auto"
+    """'anthropometric': a code whose neutral head leaves one of the ranges below (head breadth and length, face
+    height and width, cephalic and facial index) is redrawn, up to head_shape_attempts times (docs/plan-format.md,
+    docs/realism.md 'Head shapes'); 'auto': the same where the model's mean head lies inside every range (else
+    every draw is kept: a model not of adult heads at their size); 'none': every draw is kept"""
+    head_breadth_mm: Annotated[Interval, Bounds(1.0, 1000.0)] = (131.0, 180.0)
+    """range of the head breadth (eurion-eurion, mm): the smallest and largest of ANSUR II's 6,068 adults"""
+    head_length_mm: Annotated[Interval, Bounds(1.0, 1000.0)] = (168.0, 225.0)
+    """range of the head length (glabella-opisthocranion, mm): ANSUR II's smallest and largest"""
+    face_height_mm: Annotated[Interval, Bounds(1.0, 1000.0)] = (91.0, 156.0)
+    """range of the face height (sellion-menton, mm): ANSUR II's smallest and largest"""
+    face_width_mm: Annotated[Interval, Bounds(1.0, 1000.0)] = (116.0, 174.0)
+    """range of the face width (bizygomatic, mm): ANSUR II's smallest and largest"""
+    cephalic_index: Annotated[Interval, Bounds(1.0, 1000.0)] = (70.0, 90.0)
+    """range of 100 x head breadth / head length (adults: 77.5 at ANSUR II's means)"""
+    facial_index: Annotated[Interval, Bounds(1.0, 1000.0)] = (65.0, 100.0)
+    """range of 100 x face height / face width (adults: 85.5 at ANSUR II's means; the default model's template
+    has 73.7, so the lower end sits below the adults')"""
+    head_shape_attempts: Annotated[int, Bounds(1, 1000)] = 32
+    """redraws per identity; if all leave the ranges, the draw closest to them is kept"""
 
 
 @section

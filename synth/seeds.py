@@ -56,6 +56,7 @@ class Stream(enum.IntEnum):
     ASSET_GEOMETRY = 8  # per-identity, per-class geometry randomness of asset rigs (strand roots, ...)
     SKIN = 9  # per-identity skin tone (the ITA target, synth.plan.skin)
     ENVIRONMENT = 10  # environments 1.. of an expression (identity, expression, environment in the view slot)
+    IDENTITY_REDRAW = 11  # redraws of an identity code outside the head-shape ranges (attempt in the expression slot)
 
 
 def check_seed(seed: int) -> int:

@@ -43,7 +43,13 @@ MAX_HEADER_BYTES = 256 << 20
 #: value the plan's header leaves the key out, so plans made without it keep their bytes and
 #: ``plan_hash`` (readers take the value from here when the key is absent: :func:`planned`;
 #: the writer: ``planner.header_config``).
-LATER_KEYS = {("dataset", "environments_per_expression"): 1}
+LATER_KEYS = {("dataset", "environments_per_expression"): 1,
+              # the head-shape rule (synth.plan.head_shapes): plans made before it kept every draw ("none");
+              # its ranges at their first defaults are left out too, so a plan with "none" keeps its bytes
+              ("identity", "head_shape"): "none", ("identity", "head_breadth_mm"): [131.0, 180.0],
+              ("identity", "head_length_mm"): [168.0, 225.0], ("identity", "face_height_mm"): [91.0, 156.0],
+              ("identity", "face_width_mm"): [116.0, 174.0], ("identity", "cephalic_index"): [70.0, 90.0],
+              ("identity", "facial_index"): [65.0, 100.0], ("identity", "head_shape_attempts"): 32}
 
 
 def planned(config: dict, section: str, key: str):

@@ -74,8 +74,7 @@ def sample_plan(cfg: Config, model: HeadModelData, catalogue: Catalogue, seed: i
     E, V = d.expressions_per_identity, d.views_per_expression
     cameras.check_feasible(cam, V)
     ids = np.arange(first_identity, first_identity + n_identities, dtype=np.int64)
-    radius = identities.truncation_radius(model.identity_dims, cfg.identity)
-    codes = identities.sample_identities(seed, ids, identities.prior_of(model), radius)
+    codes = identities.planned_codes(seed, ids, model, cfg.identity)
     assets = assets_mod.sample_assets_batch(seed, ids, catalogue, cfg.assets.disabled_classes)
     skin.apply_skin_tones(seed, ids, assets, cfg.skin)
     if cam.target == "head" or cam.distance == "fit":  # one hull search for both

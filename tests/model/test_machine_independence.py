@@ -47,6 +47,7 @@ from synth.model.default import default_model_path
 from synth.model.format import read_model
 from synth.plan.cameras import uniforms_to_spherical
 from synth.plan.expressions import truncated_normal_ppf
+from synth.plan.head_shapes import measure_codes
 from synth.plan.identities import look_at_targets, prior_of, sample_identities
 # the plan rounds its floats to 8 decimals, which hides most last-bit differences: hash the values
 # before rounding too
@@ -56,6 +57,7 @@ u = np.random.default_rng(1).random((2000, 3))
 cam = SimpleNamespace(azimuth_deg=(-90.0, 90.0), elevation_deg=(-35.0, 55.0), radius_m=(0.6, 1.2),
                       elevation_sampling="area")
 raw = hashlib.sha256(codes.tobytes() + look_at_targets(d, codes, "eyes", 0.0).tobytes()
+                     + b"".join(v.tobytes() for v in measure_codes(d, codes).values())  # head-shape redraws
                      + b"".join(a.tobytes() for a in uniforms_to_spherical(u, cam))
                      + truncated_normal_ppf(u[:, 0], -2.5, 1.7).tobytes()).hexdigest()
 out = tempfile.mkdtemp()
