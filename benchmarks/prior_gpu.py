@@ -31,11 +31,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from prior import losses  # noqa: E402
 from prior.config import preset  # noqa: E402
 from prior.model import PriorField, num_parameters  # noqa: E402
+from prior.rays import RayBundle  # noqa: E402
 
 CODE_DIM, LATENTS = 48 + 52 + 9, 1500
 
 
-def rays(n: int, device, seed: int = 0):
+def rays(n: int, device, seed: int = 0) -> tuple[RayBundle, torch.Tensor]:
+    """``n`` random rays through a 0.3 m ball and random target colours."""
     g = torch.Generator().manual_seed(seed)
     o = torch.nn.functional.normalize(torch.randn(n, 3, generator=g), dim=-1) * 1.1
     target = torch.randn(n, 3, generator=g) * 0.1
@@ -46,16 +48,16 @@ def rays(n: int, device, seed: int = 0):
     ids = torch.randint(0, LATENTS, (n,), generator=g)
     radii = torch.full((n,), 2 / 12 ** 0.5 / 100.0)
     rgb = torch.rand(n, 3, generator=g)
-    return [x.to(device) for x in (o, d, near, far, codes, ids, radii, rgb)]
+    return RayBundle(o, d, near, far, codes, latent_ids=ids, radii=radii).to(device), rgb.to(device)
 
 
 def step_fn(model, fwd, opt, batch, clip: float, bf16: bool, device):
-    o, d, near, far, codes, ids, radii, rgb = batch
+    bundle, rgb = batch
     gen = torch.Generator(device=device).manual_seed(1)
 
     def step():
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
-            out = fwd(o, d, near, far, codes, ids, radii=radii, train_frac=0.5, randomized=True, generator=gen)
+            out = fwd(bundle, train_frac=0.5, randomized=True, generator=gen)
         loss = losses.l1_loss(out["rgb"], rgb) + losses.proposal_loss(out["history"])
         loss.backward()
         for ps in model.param_groups().values():
@@ -83,16 +85,15 @@ def agreement(model, device, n: int = 512) -> dict:
     """Max |CUDA - CPU| of rgb, acc, depth (float32, deterministic sampling), and bf16 - fp32 on device."""
     cpu = PriorField(model.model_cfg, model.sampling_cfg, model.code_dim, LATENTS)
     cpu.load_state_dict({k: v.detach().cpu() for k, v in model.state_dict().items()})
-    o, d, near, far, codes, ids, radii, _ = rays(n, "cpu", seed=3)
-    args = (o, d, near, far, codes, ids)
+    bundle, _ = rays(n, "cpu", seed=3)
     torch.backends.cuda.matmul.allow_tf32 = False
     torch.backends.cudnn.allow_tf32 = False
     with torch.no_grad():
-        ref = cpu(*args, radii=radii, randomized=False)
-        dev_args = [a.to(device) for a in args]
-        got = model(*dev_args, radii=radii.to(device), randomized=False)
+        ref = cpu(bundle, randomized=False)
+        on_device = bundle.to(device)
+        got = model(on_device, randomized=False)
         with torch.autocast(device.type, dtype=torch.bfloat16):
-            half = model(*dev_args, radii=radii.to(device), randomized=False)
+            half = model(on_device, randomized=False)
     res = {f"max_abs_{k}": float((got[k].float().cpu() - ref[k]).abs().max()) for k in ("rgb", "acc", "depth")}
     res.update({f"bf16_max_abs_{k}": float((half[k].float() - got[k].float()).abs().max()) for k in ("rgb", "acc")})
     return res

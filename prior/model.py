@@ -37,6 +37,7 @@ from torch.nn import functional as F
 from . import encoding, render
 from .codebook import Codebook
 from .config import ModelConfig, SamplingConfig
+from .rays import RayBundle
 
 
 def _he_uniform_(weight: torch.Tensor, fan_in: int, generator: torch.Generator) -> None:
@@ -172,34 +173,32 @@ class PriorField(nn.Module):
     def _density(self, raw: torch.Tensor) -> torch.Tensor:
         return F.softplus(raw.float() + self.model_cfg.density_bias)
 
-    def forward(self, origins: torch.Tensor, directions: torch.Tensor, near: torch.Tensor,
-                far: torch.Tensor, codes: torch.Tensor, latent_ids: torch.Tensor | None = None,
-                latents: torch.Tensor | None = None, *, radii: torch.Tensor | None = None,
-                train_frac: float | torch.Tensor = 1.0, randomized: bool = False,
+    def forward(self, rays: RayBundle, *, train_frac: float | torch.Tensor = 1.0, randomized: bool = False,
                 background: torch.Tensor | None = None, compute_normals: bool = False,
                 generator: torch.Generator | None = None) -> dict:
-        """Render N rays; ``docs/prior-model.md`` lists the keys of the returned dict.
+        """Render the N rays of ``rays`` (:class:`prior.rays.RayBundle`); ``docs/prior-model.md``
+        lists the keys of the returned dict.
 
-        ``radii`` (N,): cone radius at unit distance (pixel footprint, e.g.
-        ``2 / sqrt(12) / fx`` for unit directions); None = thin rays (plain encoding).
-        ``latents`` (N, latent_dim), if given, replaces the codebook lookup of
-        ``latent_ids``. ``train_frac`` in [0, 1] drives the proposal annealing; pass it as a
-        0-d tensor under torch.compile (a Python float is a constant: one recompile per value).
+        The bundle's ``latents``, if given, replace the codebook lookup of its ``latent_ids``;
+        its ``radii`` None means thin rays. ``train_frac`` in [0, 1] drives the proposal
+        annealing; pass it as a 0-d tensor under torch.compile (a Python float is a constant: one
+        recompile per value).
         """
-        n = origins.shape[0]
+        n = rays.origins.shape[0]
         if randomized and generator is None:
             raise ValueError("randomized sampling needs a torch.Generator (no global RNG)")
+        codes, latents = rays.codes, rays.latents
         if latents is None:
-            if latent_ids is None:
+            if rays.latent_ids is None:
                 raise ValueError("PriorField needs latent_ids or latents")
-            latents = self.codebook(latent_ids)
+            latents = self.codebook(rays.latent_ids)
         if codes.shape != (n, self.code_dim) or latents.shape != (n, self.model_cfg.latent_dim):
             raise ValueError(f"codes {tuple(codes.shape)} / latents {tuple(latents.shape)} do not "
                              f"match ({n}, {self.code_dim}) / ({n}, {self.model_cfg.latent_dim})")
         cond = torch.cat([codes.float(), latents.float()], dim=-1)[:, None, :]
-        origins, directions = origins.float(), directions.float()
-        near, far = render.ray_bounds(near, far)
-        radii = torch.zeros_like(near) if radii is None else radii.float()
+        origins, directions = rays.origins.float(), rays.directions.float()
+        near, far = render.ray_bounds(rays.near, rays.far)
+        radii = torch.zeros_like(near) if rays.radii is None else rays.radii.float()
         dir_enc = encoding.pos_enc(directions, self.model_cfg.dir_levels)[:, None, :]
         levels = self.sampling_cfg.samples_per_level
         jitter = (render.draw_jitter(n, self.sampling_cfg, generator, origins.device) if randomized

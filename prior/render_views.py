@@ -20,6 +20,7 @@ import torch
 
 from prior.data.bounds import intersect_sphere
 from prior.data.sampler import pixel_radius
+from prior.rays import RayBundle
 from synth.appearance.srgb import srgb8
 from synth.dataset.reader import camera_rays
 from synth.io import atomic_place, atomic_write_bytes, atomic_write_json
@@ -67,17 +68,15 @@ def render_image(model, K, c2w, width: int, height: int, code: np.ndarray, laten
     n = o.shape[0]
     dev = torch.device(device)
     rad = torch.full((n,), float(pixel_radius(np.asarray(K))), device=dev)
-    codes = torch.as_tensor(np.asarray(code, np.float32), device=dev)
+    codes = torch.as_tensor(np.asarray(code, np.float32), device=dev).expand(n, -1)
     ids = None if latent is not None else torch.full((n,), int(latent_id), dtype=torch.long, device=dev)
-    lat = None if latent is None else torch.as_tensor(latent, dtype=torch.float32, device=dev).reshape(1, -1)
-    T = [torch.as_tensor(np.ascontiguousarray(a, np.float32), device=dev) for a in (o, d, near, far)]
+    rays = RayBundle.from_numpy(o, d, near, far, codes, latent_ids=ids, radii=rad, device=dev)
+    if latent is not None:
+        rays = rays.with_latent(torch.as_tensor(latent, dtype=torch.float32, device=dev).reshape(1, -1))
     parts: dict[str, list] = {"rgb": [], "acc": [], "depth": [], "normals": []}
-    for a in range(0, n, chunk):
-        b = min(n, a + chunk)
+    for chunk_rays in rays.chunks(chunk):
         with torch.autocast(dev.type, dtype=torch.bfloat16, enabled=bf16):
-            out = model(T[0][a:b], T[1][a:b], T[2][a:b], T[3][a:b], codes.expand(b - a, -1),
-                        None if ids is None else ids[a:b], None if lat is None else lat.expand(b - a, -1),
-                        radii=rad[a:b], randomized=False)
+            out = model(chunk_rays, randomized=False)
         parts["rgb"].append(out["rgb"].float().clamp(0, 1))
         parts["acc"].append(out["acc"].float())
         parts["depth"].append(out["depth"].float())

@@ -81,8 +81,7 @@ def finetune(model, views: ViewSet, w0: torch.Tensor, cfg: FinetuneConfig, *, se
         gen = torch.Generator(device=dev).manual_seed(step_seed(FINETUNE_STREAM, seed, step))
         amp = torch.autocast(dev.type, dtype=torch.bfloat16) if bf16 else contextlib.nullcontext()
         with amp:
-            out = model(b.origins, b.directions, b.near, b.far, b.codes, latents=w.expand(len(pix), -1),
-                        radii=b.radii, randomized=True, generator=gen, compute_normals=normals)
+            out = model(b.rays.with_latent(w), randomized=True, generator=gen, compute_normals=normals)
         terms = fit_loss(model, out, b.target, b.valid, cfg)
         opt.zero_grad(set_to_none=True)
         terms["loss"].backward()

@@ -90,8 +90,7 @@ def invert_latent(model, views: ViewSet, w0: torch.Tensor, cfg: InversionConfig,
             vi, pix, p = draw_patches(views, step, seed, cfg.patches, cfg.patch_size)
             b = views.rays(vi, pix, dev)
             gen = torch.Generator(device=dev).manual_seed(step_seed(INVERT_STREAM, seed, step))
-            out = model(b.origins, b.directions, b.near, b.far, b.codes, latents=w.expand(len(pix), -1),
-                        radii=b.radii, randomized=True, generator=gen)
+            out = model(b.rays.with_latent(w), randomized=True, generator=gen)
             l1 = losses.l1_loss(out["rgb"], b.target, b.valid)
             loss = l1
             lp = torch.zeros(())

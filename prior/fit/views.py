@@ -17,23 +17,19 @@ import torch.nn.functional as F
 
 from prior.data.bounds import intersect_sphere
 from prior.data.sampler import pixel_radius
+from prior.rays import RayBundle
 from synth.dataset.reader import camera_rays
 
 
 @dataclass
 class RayBatch:
-    origins: torch.Tensor  # (N, 3)
-    directions: torch.Tensor  # (N, 3) unit
-    near: torch.Tensor  # (N,)
-    far: torch.Tensor  # (N,)
-    radii: torch.Tensor  # (N,)
-    codes: torch.Tensor  # (N, C)
+    rays: RayBundle  # conditioned on the codes of their images, without a latent
     target: torch.Tensor  # (N, 3) masked linear colour
 
     @property
     def valid(self) -> torch.Tensor:
         """1 for rays that cross the bounding sphere."""
-        return (self.far > self.near).float()
+        return self.rays.valid
 
 
 @dataclass
@@ -66,8 +62,9 @@ class ViewSet:
             o[sel], d[sel] = r.origins, r.directions
         near, far = intersect_sphere(o, d, self.centre, self.radius)
         rgb = self.target.reshape(len(self), H * W, 3)[views, pixels]
-        T = lambda a: torch.as_tensor(np.ascontiguousarray(a, np.float32), device=device)  # noqa: E731
-        return RayBatch(T(o), T(d), T(near), T(far), T(pixel_radius(self.K[views])), T(self.codes[views]), T(rgb))
+        rays = RayBundle.from_numpy(o, d, near, far, self.codes[views], radii=pixel_radius(self.K[views]),
+                                    device=device)
+        return RayBatch(rays, torch.as_tensor(rgb, dtype=torch.float32, device=device))
 
     def resized(self, width: int, height: int) -> "ViewSet":
         """The same views at ``width`` x ``height`` (area-averaged when shrinking, bilinear when

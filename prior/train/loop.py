@@ -31,6 +31,7 @@ import torch
 from prior import losses
 from prior.data.sampler import RaySampler
 from prior.precision import resolve_bf16
+from prior.rays import RayBundle
 from prior.data.stream import Loader
 from prior.render_views import render_image, scaled_camera
 from prior.train import checkpoint as ckpt
@@ -38,6 +39,7 @@ from prior.train.logs import RunLog
 from prior.train.optim import build_optimizer, clip_per_group, learning_rate, set_learning_rate
 from prior.train.run import RunSetup, write_run_files
 from prior.train.setup import Dist, build_model
+from prior.train.stats import LoggedStats, StepStats
 from synth.appearance.srgb import srgb8
 from synth.errors import SynthError
 
@@ -133,32 +135,30 @@ class Trainer:
         self.log.message(bf16_line)
 
     # ------------------------------------------------------------------ one step
-    def _tensors(self, b):
-        T = lambda a, dt=torch.float32: torch.as_tensor(a, dtype=dt).to(self.dev, non_blocking=True)  # noqa: E731
-        return (T(b.origins), T(b.directions), T(b.near), T(b.far), T(b.radii), T(b.codes),
-                T(b.latent_ids, torch.long), T(b.rgba))
+    def _tensors(self, b) -> tuple[RayBundle, torch.Tensor]:
+        """A sampler batch on the device: its rays and their premultiplied colour and alpha."""
+        rays = RayBundle.from_numpy(b.origins, b.directions, b.near, b.far, b.codes, latent_ids=b.latent_ids,
+                                    radii=b.radii, device=self.dev)
+        return rays, torch.as_tensor(b.rgba, dtype=torch.float32).to(self.dev, non_blocking=True)
 
-    def step(self, step: int) -> torch.Tensor:
-        """Forward and backward of every micro-batch of ``step``; returns (7,) statistics summed
-        over them: loss, L1, proposal loss (means), squared error, opacity and count of foreground
-        rays, count of valid rays (sums)."""
+    def step(self, step: int) -> StepStats:
+        """Forward and backward of every micro-batch of ``step``; returns their statistics."""
         t = self.cfg.train
         stage_bg = step < t.background_steps
         acc_n = t.grad_accum
-        stats = torch.zeros(7, device=self.dev)  # loss, l1, prop, sq err sum, fg acc sum, fg rays, valid rays
+        stats = StepStats.accumulator(self.dev)
         # a 0-d tensor under torch.compile (a float would be a constant: one recompile per step)
         frac = torch.tensor(step / t.steps, device=self.dev) if t.compile else step / t.steps
         for micro in range(acc_n):
-            o, d, near, far, radii, codes, ids, rgba = self._tensors(self.sampler.batch(step, micro))
+            rays, rgba = self._tensors(self.sampler.batch(step, micro))
             gen = torch.Generator(device=self.dev).manual_seed(jitter_seed(t.seed, step, micro, self.dist.rank))
             sync = self.ddp.no_sync() if (self.dist.enabled and micro < acc_n - 1) else contextlib.nullcontext()
             with sync:
                 with torch.autocast(self.dev.type, dtype=torch.bfloat16, enabled=self.bf16):
-                    out = self.fwd(o, d, near, far, codes, ids, radii=radii, train_frac=frac,
-                                   randomized=True, generator=gen)
+                    out = self.fwd(rays, train_frac=frac, randomized=True, generator=gen)
                 alpha = rgba[:, 3]
                 target = rgba[:, :3] + (1 - alpha)[:, None] * self.bg if stage_bg else rgba[:, :3]
-                valid = (far > near).float()
+                valid = rays.valid
                 l1 = losses.l1_loss(out["rgb"], target, valid)
                 prop = losses.proposal_loss(out["history"])
                 loss = l1 + t.proposal_weight * prop
@@ -166,9 +166,10 @@ class Trainer:
             with torch.no_grad():
                 fg = valid * (alpha > 0.5).float()
                 se = (((out["rgb"].float() - target) ** 2).mean(-1) * valid).sum()
-                stats += torch.stack([loss.detach() / acc_n, l1.detach() / acc_n, prop.detach() / acc_n, se,
-                                      (out["acc"].float() * fg).sum(), fg.sum(), valid.sum()])
-        return stats
+                stats += StepStats(loss=loss.detach() / acc_n, l1=l1.detach() / acc_n, proposal=prop.detach() / acc_n,
+                                   sq_err=se, fg_acc=(out["acc"].float() * fg).sum(), fg_rays=fg.sum(),
+                                   valid_rays=valid.sum()).to_tensor()
+        return StepStats.from_tensor(stats)
 
     # ------------------------------------------------------------------ loop
     def run(self, *, stop_at: int | None = None, deadline: float | None = None) -> int:
@@ -187,7 +188,7 @@ class Trainer:
                     stats = self.step(step)
                     self.sampler.step_done()
                     norms = clip_per_group(self.opt, t.grad_clip)
-                    flags = torch.stack([(~torch.isfinite(torch.stack([stats[0], *norms.values()]))).any().float(),
+                    flags = torch.stack([(~torch.isfinite(torch.stack([stats.loss, *norms.values()]))).any().float(),
                                          torch.tensor(float(stop.hit), device=self.dev)])
                     if self.dist.enabled:
                         torch.distributed.all_reduce(flags, op=torch.distributed.ReduceOp.MAX)
@@ -225,7 +226,7 @@ class Trainer:
         return 0
 
     def _log(self, done: int, stats, norms, window, rays_step):
-        s = torch.cat([stats, torch.tensor([float(len(self.loader.skipped))], device=stats.device)])
+        s = LoggedStats.of(stats, len(self.loader.skipped))
         spread = 0.0
         if self.dist.enabled:  # ranks must hold the same parameters (DDP): the spread of their sums
             with torch.no_grad():
@@ -234,20 +235,22 @@ class Trainer:
             torch.distributed.all_reduce(lo, op=torch.distributed.ReduceOp.MIN)
             torch.distributed.all_reduce(hi, op=torch.distributed.ReduceOp.MAX)
             spread = float(hi - lo)
-            torch.distributed.all_reduce(s)
-            s[:3] /= self.dist.world
-        loss, l1, prop, se, acc_sum, fg_n, valid_n, skipped = s.tolist()
-        mse = se / max(valid_n, 1)
-        acc_fg = acc_sum / fg_n if fg_n > 0 else float("nan")
+            summed = s.to_tensor()
+            torch.distributed.all_reduce(summed)
+            s = LoggedStats.from_tensor(summed).mean_over_ranks(self.dist.world)
+        vals = s.values()
+        mse = vals["sq_err"] / max(vals["valid_rays"], 1)
+        fg_n = vals["fg_rays"]
+        acc_fg = vals["fg_acc"] / fg_n if fg_n > 0 else float("nan")
         now = time.perf_counter()
         rate = (done - window[1]) * rays_step / max(now - window[0], 1e-9)
         t = self.cfg.train
         stage = "bg" if done - 1 < t.background_steps else "nobg"
-        self.losses = {"step": done, "loss": loss, "l1": l1, "proposal": prop,
+        self.losses = {"step": done, "loss": vals["loss"], "l1": vals["l1"], "proposal": vals["proposal"],
                        "psnr": -10 * math.log10(max(mse, 1e-12)), "acc_fg": acc_fg}
         metrics = {**self.losses, "lr": self.opt.param_groups[0]["lr"], "rays_per_s": rate,
                    "samples_per_s": rate * sum(self.cfg.sampling.samples_per_level), "stage": stage,
-                   "skipped_shards": int(skipped), "epoch": self.loader.epoch, "param_spread": spread,
+                   "skipped_shards": int(vals["skipped_shards"]), "epoch": self.loader.epoch, "param_spread": spread,
                    **{f"grad_norm_{k}": float(v) for k, v in norms.items()}}
         metrics.pop("step")
         self.log.log(done, metrics)

@@ -49,7 +49,7 @@ def full_loss(model, views, w) -> float:
     vi, pix = np.divmod(np.arange(len(views) * H * W), H * W)
     b = views.rays(vi, pix)
     with torch.no_grad():
-        out = model(b.origins, b.directions, b.near, b.far, b.codes, latents=w.expand(len(pix), -1), radii=b.radii)
+        out = model(b.rays.with_latent(w))
     return float(losses.l1_loss(out["rgb"], b.target, b.valid))
 
 
@@ -57,7 +57,8 @@ def test_views_rays_and_resize(views):
     H, W = views.size
     b = views.rays(np.array([1, 1]), np.array([0, H * W - 1]))
     np.testing.assert_allclose(b.target.numpy(), views.target[1].reshape(-1, 3)[[0, H * W - 1]])
-    assert np.allclose(np.linalg.norm(b.directions.numpy(), axis=1), 1, atol=1e-6)
+    assert np.allclose(np.linalg.norm(b.rays.directions.numpy(), axis=1), 1, atol=1e-6)
+    assert b.rays.latent_ids is None and b.rays.latents is None and len(b.rays) == 2
     low = views.resized(12, 12)
     assert low.size == (12, 12) and np.allclose(low.K[:, 0, 0], views.K[:, 0, 0] / 2)
     # area averaging keeps the mean colour
@@ -129,8 +130,7 @@ def test_loss_terms_follow_their_weights(views):
 
     model = tiny_model()
     b = views.rays(np.zeros(64, np.int64), np.arange(64) * 7)
-    out = model(b.origins, b.directions, b.near, b.far, b.codes, latents=torch.zeros(64, 4), radii=b.radii,
-                compute_normals=True)
+    out = model(b.rays.with_latent(torch.zeros(4)), compute_normals=True)
     cfg = fc.preset("small").finetune
     t = fit_loss(model, out, b.target, b.valid, cfg)
     want = (t["l1"] + cfg.proposal_weight * t["proposal"] + cfg.normal_weight * t["normal"]
@@ -173,6 +173,7 @@ def test_render_image_skips_rays_that_miss_the_bounds(views):
     field evaluated on every ray (the misses see nothing: zero colour and opacity)."""
     from prior.data.bounds import intersect_sphere
     from prior.data.sampler import pixel_radius
+    from prior.rays import RayBundle
     from prior.render_views import render_image
     from synth.dataset.reader import camera_rays
 
@@ -184,11 +185,11 @@ def test_render_image_skips_rays_that_miss_the_bounds(views):
     near, far = intersect_sphere(o, d, np.zeros(3), 0.1)
     miss = far <= near
     assert 0 < miss.sum() < miss.size  # both kinds of rays in the image
-    T = lambda a: torch.as_tensor(np.ascontiguousarray(a, np.float32))  # noqa: E731
     n = o.shape[0]
+    rays = RayBundle.from_numpy(o, d, near, far, np.repeat(code[None], n, axis=0),
+                                radii=np.full(n, pixel_radius(K), np.float32)).with_latent(lat)
     with torch.no_grad():
-        ref = model(T(o), T(d), T(near), T(far), T(code).expand(n, -1), None, lat.reshape(1, -1).expand(n, -1),
-                    radii=torch.full((n,), float(pixel_radius(K))), randomized=False)
+        ref = model(rays, randomized=False)
     np.testing.assert_allclose(img["rgb"].reshape(-1, 3), ref["rgb"].clamp(0, 1).numpy(), atol=1e-6)
     np.testing.assert_allclose(img["acc"].reshape(-1), ref["acc"].numpy(), atol=1e-6)
     assert (img["rgb"].reshape(-1, 3)[miss] == 0).all() and (img["depth"].reshape(-1)[miss] == 0).all()

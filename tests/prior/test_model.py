@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -12,6 +13,7 @@ import torch
 from prior import losses
 from prior.config import ModelConfig, SamplingConfig, preset
 from prior.model import MultiLinear, PriorField, num_parameters
+from prior.rays import RayBundle
 
 CODE_DIM = 5
 
@@ -35,14 +37,14 @@ def random_rays(n, seed=0):
     near, far = torch.full((n,), 0.75), torch.full((n,), 1.25)
     codes = torch.randn(n, CODE_DIM, generator=g)
     ids = torch.randint(0, 3, (n,), generator=g)
-    return origins, directions, near, far, codes, ids
+    return RayBundle(origins, directions, near, far, codes, latent_ids=ids)
 
 
 def test_forward_outputs_shapes_and_sorted_intervals_inside_the_bounds():
     model = tiny_model()
-    o, d, near, far, codes, ids = random_rays(20)
-    near = near + torch.linspace(0, 0.2, 20)
-    out = model(o, d, near, far, codes, ids, randomized=True, train_frac=0.5,
+    rays = random_rays(20)
+    near, far = rays.near + torch.linspace(0, 0.2, 20), rays.far
+    out = model(dataclasses.replace(rays, near=near), randomized=True, train_frac=0.5,
                 generator=torch.Generator().manual_seed(1))
     assert out["rgb"].shape == (20, 3) and out["acc"].shape == (20,) and out["depth"].shape == (20,)
     assert out["weights"].shape == (20, 12) and out["t"].shape == (20, 13)
@@ -61,11 +63,11 @@ def test_forward_outputs_shapes_and_sorted_intervals_inside_the_bounds():
 def test_randomness_comes_only_from_the_generator():
     model = tiny_model()
     rays = random_rays(16)
-    run = lambda seed: model(*rays, randomized=True, generator=torch.Generator().manual_seed(seed))["t"]
+    run = lambda seed: model(rays, randomized=True, generator=torch.Generator().manual_seed(seed))["t"]
     assert torch.equal(run(3), run(3)) and not torch.equal(run(3), run(4))
-    assert torch.equal(model(*rays)["t"], model(*rays)["t"])  # deterministic mode
+    assert torch.equal(model(rays)["t"], model(rays)["t"])  # deterministic mode
     with pytest.raises(ValueError, match="Generator"):
-        model(*rays, randomized=True)
+        model(rays, randomized=True)
 
 
 def test_initialisation_is_seeded_he_uniform():
@@ -100,16 +102,18 @@ def test_multilinear_equals_a_linear_layer_on_the_concatenation():
 
 def test_conditioning_and_explicit_latents():
     model = tiny_model()
-    o, d, near, far, codes, ids = random_rays(8)
-    base = model(o, d, near, far, codes, ids)["rgb"]
-    explicit = model(o, d, near, far, codes, latents=model.codebook(ids))["rgb"]
+    rays = random_rays(8)
+    base = model(rays)["rgb"]
+    explicit = model(dataclasses.replace(rays, latents=model.codebook(rays.latent_ids)))["rgb"]
     torch.testing.assert_close(base, explicit)
-    assert not torch.allclose(base, model(o, d, near, far, codes + 1, ids)["rgb"])
-    assert not torch.allclose(base, model(o, d, near, far, codes, latents=torch.ones(8, 64))["rgb"])
+    torch.testing.assert_close(model(rays.with_latent(model.codebook.embedding.weight[1]))["rgb"],
+                               model(dataclasses.replace(rays, latent_ids=torch.ones(8, dtype=torch.long)))["rgb"])
+    assert not torch.allclose(base, model(dataclasses.replace(rays, codes=rays.codes + 1))["rgb"])
+    assert not torch.allclose(base, model(rays.with_latent(torch.ones(64)))["rgb"])
     with pytest.raises(ValueError, match="latent_ids or latents"):
-        model(o, d, near, far, codes)
+        model(dataclasses.replace(rays, latent_ids=None))
     with pytest.raises(ValueError, match="do not match"):
-        model(o, d, near, far, codes[:, :3], ids)
+        model(dataclasses.replace(rays, codes=rays.codes[:, :3]))
 
 
 @pytest.mark.slow
@@ -119,8 +123,8 @@ def test_compiled_forward_matches_eager():
     compiled = torch.compile(model, backend="aot_eager")  # no C++ toolchain needed
     for frac in (0.2, 0.7):
         kwargs = dict(train_frac=torch.tensor(frac), randomized=True, background=torch.ones(16, 3))
-        want = model(*rays, generator=torch.Generator().manual_seed(5), **kwargs)
-        got = compiled(*rays, generator=torch.Generator().manual_seed(5), **kwargs)
+        want = model(rays, generator=torch.Generator().manual_seed(5), **kwargs)
+        got = compiled(rays, generator=torch.Generator().manual_seed(5), **kwargs)
         for key in ("rgb", "acc", "depth", "t"):
             torch.testing.assert_close(got[key], want[key])
 
@@ -137,12 +141,12 @@ def test_param_groups_partition_the_parameters_and_view_branch_is_the_direction_
 
 def test_missed_rays_and_all_background_batches_are_finite():
     model = tiny_model()
-    o, d, near, far, codes, ids = random_rays(6)
     near = torch.tensor([0.8, 1.0, 1.2, 0.0, 0.9, 0.5])
     far = torch.tensor([0.8, 0.5, 1.2, 0.0, 1.3, 0.5])  # equal, reversed, both zero, one valid
+    rays = dataclasses.replace(random_rays(6), near=near, far=far)
     bg = torch.rand(6, 3, generator=torch.Generator().manual_seed(0))
     params = list(model.parameters())
-    out = model(o, d, near, far, codes, ids, randomized=True, background=bg, compute_normals=True,
+    out = model(rays, randomized=True, background=bg, compute_normals=True,
                 generator=torch.Generator().manual_seed(0))
     missed = torch.tensor([True, True, True, True, False, True])
     for key in ("rgb", "acc", "depth", "normals_pred", "normals_analytic"):
@@ -163,11 +167,11 @@ def test_zero_and_huge_densities_give_finite_losses_and_gradients(density_bias, 
     model = tiny_model(density_bias=density_bias)
     rays = random_rays(10)
     bg = torch.ones(10, 3)
-    out = model(*rays, randomized=True, background=bg, generator=torch.Generator().manual_seed(0),
+    out = model(rays, randomized=True, background=bg, generator=torch.Generator().manual_seed(0),
                 compute_normals=True)
     torch.testing.assert_close(out["acc"], torch.full((10,), 1.0 if opaque else 0.0))
     if opaque:  # density ~1e4 / m: the ray stops right behind near (resampled intervals are mm-wide)
-        assert ((out["depth"] - rays[2]).abs() < 5e-3).all()
+        assert ((out["depth"] - rays.near).abs() < 5e-3).all()
     loss = (losses.l1_loss(out["rgb"], torch.zeros(10, 3)) + losses.proposal_loss(out["history"])
             + losses.distortion_loss(out["s"], out["weights"]))
     loss.backward()
@@ -177,9 +181,9 @@ def test_zero_and_huge_densities_give_finite_losses_and_gradients(density_bias, 
 
 def test_bf16_autocast_on_cpu_keeps_float32_outputs_and_finite_gradients():
     model = tiny_model()
-    o, d, near, far, codes, ids = random_rays(12)
+    rays = random_rays(12)
     with torch.autocast("cpu", dtype=torch.bfloat16):
-        out = model(o, d, near, far, codes, ids, randomized=True, compute_normals=True,
+        out = model(rays, randomized=True, compute_normals=True,
                     background=torch.zeros(12, 3), generator=torch.Generator().manual_seed(0))
         loss = (losses.l1_loss(out["rgb"], torch.full((12, 3), 0.5)) + losses.proposal_loss(out["history"])
                 + losses.distortion_loss(out["s"], out["weights"])
@@ -191,9 +195,9 @@ def test_bf16_autocast_on_cpu_keeps_float32_outputs_and_finite_gradients():
     loss.backward()
     grads = [p.grad for p in model.parameters() if p.grad is not None]
     assert grads and all(torch.isfinite(g).all() for g in grads)
-    fp32 = model(o, d, near, far, codes, ids)["rgb"]
+    fp32 = model(rays)["rgb"]
     with torch.autocast("cpu", dtype=torch.bfloat16):
-        bf16 = model(o, d, near, far, codes, ids)["rgb"]
+        bf16 = model(rays)["rgb"]
     assert (fp32 - bf16).abs().max() < 0.05
 
 
@@ -201,12 +205,12 @@ def test_analytic_normals_without_grad_and_their_gradient_with_grad():
     model = tiny_model()
     rays = random_rays(6)
     with torch.no_grad():
-        out = model(*rays, compute_normals=True)
+        out = model(rays, compute_normals=True)
     n = out["sample_normals_analytic"]
     assert not n.requires_grad
     torch.testing.assert_close(n.norm(dim=-1), torch.ones(n.shape[:-1]))
     torch.testing.assert_close(out["sample_normals_pred"].norm(dim=-1), torch.ones(n.shape[:-1]))
-    out = model(*rays, compute_normals=True)
+    out = model(rays, compute_normals=True)
     first = model.nerf.trunk.layers[0].blocks[0].weight
     (g,) = torch.autograd.grad(out["normals_analytic"].sum(), first)  # needs create_graph
     assert torch.isfinite(g).all() and g.abs().sum() > 0
@@ -272,7 +276,8 @@ def test_tiny_model_overfits_three_views_of_a_textured_sphere(one_thread):
     model_cfg = ModelConfig(scene_radius=0.25, pos_levels=8, proposal_depth=2, proposal_width=32, nerf_depth=3,
                             nerf_width=64, skip_layer=0, bottleneck_width=32, view_width=32)
     model = PriorField(model_cfg, SamplingConfig(proposal_samples=(16,), nerf_samples=16), 4, 1)
-    codes, ids, bg = torch.zeros(n, 4), torch.zeros(n, dtype=torch.long), torch.ones(n, 3)
+    rays = RayBundle(o, d, near, far, torch.zeros(n, 4), latent_ids=torch.zeros(n, dtype=torch.long), radii=radii)
+    bg = torch.ones(n, 3)
     opt = torch.optim.Adam(model.parameters(), lr=0.01)
     gen = torch.Generator().manual_seed(0)
     steps = 300  # reaches ~32.6 dB (seeded); 220 steps gave 28.6
@@ -280,14 +285,13 @@ def test_tiny_model_overfits_three_views_of_a_textured_sphere(one_thread):
         for group in opt.param_groups:
             group["lr"] = 0.01 * 0.05 ** (i / steps)
         idx = torch.randint(0, n, (1024,), generator=gen)
-        out = model(o[idx], d[idx], near[idx], far[idx], codes[idx], ids[idx], radii=radii[idx],
-                    train_frac=i / steps, randomized=True, background=bg[idx], generator=gen)
+        out = model(rays[idx], train_frac=i / steps, randomized=True, background=bg[idx], generator=gen)
         loss = losses.l1_loss(out["rgb"], image[idx]) + losses.proposal_loss(out["history"])
         opt.zero_grad()
         loss.backward()
         opt.step()
     with torch.no_grad():
-        out = model(o, d, near, far, codes, ids, radii=radii, background=bg)
+        out = model(rays, background=bg)
     psnr = -10 * math.log10(((out["rgb"] - image) ** 2).mean().item())
     assert psnr >= 28.0, psnr
     assert out["acc"][mask].mean() > 0.9 and out["acc"][~mask].mean() < 0.2
