@@ -39,6 +39,8 @@ EXPRESSIONS, VIEWS, SIZE = 13, 30, 32
 
 
 def write(out: Path, identities: int) -> None:
+    if "numpy" not in sys.modules:  # the scene's 4x4 inverses: OpenBLAS threads only spin on a busy machine
+        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from synth.dataset.shards import open_dataset
     from tests.prior import scene
     from tests.support import fake_frames as ff

@@ -170,8 +170,13 @@ def _path(err) -> str:
     return "/".join(str(p) for p in err.absolute_path) or "<root>"
 
 
+_JSON_SCALARS = frozenset({int, float, str, bool, type(None)})
+
+
 def jsonable(obj):
     """A copy of ``obj`` with numpy arrays/scalars and tuples turned into plain JSON types."""
+    if type(obj) is list and _JSON_SCALARS.issuperset(map(type, obj)):  # a plain array: types checked in C
+        return list(obj)
     if isinstance(obj, dict):
         return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
