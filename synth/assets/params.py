@@ -415,9 +415,8 @@ class Pack:
     @classmethod
     def from_json(cls, d: Any, where: str) -> Pack:
         d = as_object(d, where)
-        return cls(required(d, "class", str, where), required(d, "file", str, where), required(d, "asset_root", str, where),
-                   required(d, "object", str, where), required(d, "sha256", str, where), required(d, "anchor", str, where),
-                   _num(d, "reference_width_m", where))
+        s = [required(d, k, str, where) for k in ("class", "file", "asset_root", "object", "sha256", "anchor")]
+        return cls(*s, required(d, "reference_width_m", (int, float), where))
 
     def to_json(self) -> dict[str, Any]:
         return {"class": self.cls, "file": self.file, "asset_root": self.asset_root, "object": self.object,

@@ -94,3 +94,14 @@ def test_lighting_records_keep_their_key_order():
     assert orjson.dumps(rec.to_json()) == orjson.dumps(studio)
     with pytest.raises(SynthError, match="unknown environment"):
         lighting_from_json({"environment": "sun", "strength": 1.0}, "lighting")
+
+
+def test_an_external_pick_keeps_its_pack_record():
+    pick = {"id": "test_cap", "generator": "blend:caps/cap.blend", "params": {},
+            "pack": {"class": "hair", "file": "caps/cap.blend", "asset_root": "/packs", "object": "Cap",
+                     "sha256": "0" * 64, "anchor": "head", "reference_width_m": 0.15}}
+    rec = AssetPick.from_json("hair", pick, "hair")
+    assert rec.external and rec.pack.cls == "hair" and rec.pack.reference_width_m == 0.15
+    assert orjson.dumps(rec.to_json()) == orjson.dumps(pick)
+    with pytest.raises(SynthError, match="'object' is missing"):
+        AssetPick.from_json("hair", {**pick, "pack": {k: v for k, v in pick["pack"].items() if k != "object"}}, "hair")
