@@ -56,7 +56,6 @@ def required(d: Mapping, key: str, types: type | tuple[type, ...], where: str):
     return v
 
 
-
 #: The beard's cheek line (0 low, 1 high; synth.assets.fit.masks.cheek_line) where none is planned,
 #: and the line of a shaved beard's shadow on an identity without a beard.
 DEFAULT_REACH = 0.3
@@ -129,7 +128,7 @@ def _kinds(cls: type) -> dict[str, tuple[type, ...]]:
 
 
 def _checked(v, kinds: tuple[type, ...], where: str) -> Value:
-    if isinstance(v, list) and tuple in kinds:
+    if isinstance(v, (list, tuple)) and tuple in kinds:
         if all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
             return tuple(v)
     elif isinstance(v, bool):
