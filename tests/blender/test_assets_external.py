@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from synth.assets.params import AssetPick
 from synth.plan.records import RenderSettings
 
 bpy = pytest.importorskip("bpy")
@@ -82,7 +83,6 @@ def test_pack_validates(pack_manifest, tmp_path):
 def built(pack_manifest, tmp_path_factory):
     from blender_scripts import assets as basset
     from synth.assets import catalogue
-    from synth.assets.params import AssetPick
     from synth.plan import assets
     from tests.support import asset_scene
 
