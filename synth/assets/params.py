@@ -33,6 +33,7 @@ from synth.assets.classes import CLASSES, NAMES
 from synth.errors import SynthError
 
 FIX = "re-run 'synth plan' (see docs/plan-format.md)"
+UNKNOWN_PARAMETER_FIX = "remove it from the catalogue or add it to the class's record in synth/assets/params.py"
 
 
 def spec_error(what: str, where: str) -> SynthError:
@@ -94,8 +95,7 @@ class Params:
         for name, v in params.items():
             if name not in kinds or name == "given":
                 raise SynthError(f"{cls.CLASS} asset '{asset_id}' has parameter '{name}', which its rig does not "
-                                 f"read (known: {', '.join(sorted(k for k in kinds if k != 'given'))})", where,
-                                 "remove it from the catalogue or add it to synth/assets/params.py")
+                                 f"read (known: {', '.join(sorted(cls.names()))})", where, UNKNOWN_PARAMETER_FIX)
             values[name] = _checked(v, kinds[name], f"{where} params.{name}")
         return cls(given=tuple(params), **values)
 
@@ -106,6 +106,11 @@ class Params:
         if isinstance(params, cls):
             return params
         return cls.from_json(asset_id, params or {}, f"{cls.CLASS} asset '{asset_id}'")
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        """The parameters of this class (what its rig reads), in field order."""
+        return tuple(k for k in _kinds(cls) if k != "given")
 
     def to_json(self) -> dict[str, Value]:
         """The planned values, in the plan's order (tuples are written as JSON arrays)."""
