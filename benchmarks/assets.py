@@ -46,6 +46,7 @@ def main() -> None:
     from synth.model.head import HeadModel
     from synth.plan.io import load_plan
     from synth.plan.planner import run_plan
+    from synth.plan.records import RenderSettings
 
     with tempfile.TemporaryDirectory(prefix="synth-bench-") as d:
         tmp = Path(d)
@@ -55,16 +56,16 @@ def main() -> None:
         run_plan(cfg, 1, tmp / "plan", seed=args.seed, first_identity=args.identity)
         plan = load_plan(tmp / "plan")
         hm = HeadModel(plan.model_data())
-        spec = plan.shard(plan.shard_ids()[0])
-        ident = spec["identities"][0]
-        frames = ident["expressions"][0]["frames"][: args.views]
+        spec = plan.shard_spec(plan.shard_ids()[0])
+        ident = spec.identities[0]
+        frames = ident.expressions[0].frames[: args.views]
         results = []
         for res in sorted(args.densities):
             t0 = time.perf_counter()
-            sc = IdentityScene(ident, hm, plan, plan.render_settings(), int(spec["run_seed"]),
+            sc = IdentityScene(ident, hm, RenderSettings.from_json(plan.render_settings()), spec.run_seed,
                                {"name": hm.data.name, "sha256": plan.model_sha256()}, software_versions(),
                                asset_resolution=res)
-            sc.set_expression(ident["expressions"][0])
+            sc.set_expression(ident.expressions[0])
             t_build = time.perf_counter() - t0
             rss = rss_mb()
             outs, t_render = [], 0.0
@@ -75,7 +76,7 @@ def main() -> None:
             counts = {c: r.record().get("strands") for c, r in sc.rigs.items() if r.record().get("strands")}
             noise = None
             if res == max(args.densities):  # noise floor: same geometry, another Cycles seed
-                noise = [sc.render(f, tmp, seed=int(f["seed"]) + 1)[0]["rgba"] for f in frames]
+                noise = [sc.render(f, tmp, seed=f.seed + 1)[0]["rgba"] for f in frames]
             sc.close()
             bscene.reset()
             results.append((res, counts, t_build, t_render / len(frames), rss, outs, noise))
@@ -83,7 +84,7 @@ def main() -> None:
                   f"RSS {rss:.0f} MB", file=sys.stderr)
     ref = results[-1][5]
     masks = [r[..., 3] > 0.5 for r in ref]
-    assets = ", ".join(f"{c}={e['id']}" for c, e in ident["assets"].items() if e)
+    assets = ", ".join(f"{c}={e.id}" for c, e in ident.assets.items() if e)
     print(f"\n### Asset cost against strand count ({args.image}x{args.image}, {args.spp} spp denoised; {machine()})\n")
     print(f"Identity {args.identity} (seed {args.seed}): {assets}. {args.views} views; PSNR against asset "
           f"resolution {results[-1][0]} over its alpha > 0.5 pixels.\n")

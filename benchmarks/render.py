@@ -27,6 +27,7 @@ memory: RSS of one process building, rendering (1 view, ci preset) and resetting
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import platform
 import sys
@@ -84,14 +85,15 @@ def _plan_one(tmp: Path, n: int, preset: str, views: int, seed: int):
     return load_plan(tmp / "plan")
 
 
-def _scene(plan, shard_id: str, hm, render_cfg: dict | None = None):
+def _scene(plan, shard_id: str, hm, render_cfg=None):
     from blender_scripts.worker import IdentityScene, software_versions
+    from synth.plan.records import RenderSettings
 
-    spec = plan.shard(shard_id)
-    ident = spec["identities"][0]
-    sc = IdentityScene(ident, hm, plan, render_cfg or plan.render_settings(), int(spec["run_seed"]),
+    spec = plan.shard_spec(shard_id)
+    ident = spec.identities[0]
+    sc = IdentityScene(ident, hm, render_cfg or RenderSettings.from_json(plan.render_settings()), spec.run_seed,
                        {"name": hm.data.name, "sha256": plan.model_sha256()}, software_versions(), shard_id)
-    sc.set_expression(ident["expressions"][0])
+    sc.set_expression(ident.expressions[0])
     return sc, ident
 
 
@@ -123,12 +125,11 @@ def quality(args) -> None:
         plan = _plan_one(tmp, 1, "preview", args.views, args.seed)
         hm = HeadModel(plan.model_data())
         sc, ident = _scene(plan, "shard_000000", hm)
-        frames = ident["expressions"][0]["frames"][: args.views]
-        base = dict(plan.render_settings())
+        frames = ident.expressions[0].frames[: args.views]
 
         def render_all(spp: int, denoise: bool):
-            bscene.configure_render({**base, "samples": spp, "denoise": denoise, "adaptive_sampling": False},
-                                    sc.width, sc.height)
+            bscene.configure_render(dataclasses.replace(sc.render_cfg, samples=spp, denoise=denoise,
+                                                        adaptive_sampling=False), sc.width, sc.height)
             outs, secs = [], 0.0
             for f in frames:
                 t0 = time.perf_counter()
@@ -148,7 +149,7 @@ def quality(args) -> None:
                 rows.append((spp, dn, s, p, fr))
                 print(f"  spp {spp:4d} denoise {dn!s:5}: {s:6.2f} s/frame, PSNR {p:.2f} dB, fringe {fr:.4f}",
                       file=sys.stderr)
-    assets = sorted(c for c, e in ident["assets"].items() if e)
+    assets = sorted(c for c, e in ident.assets.items() if e)
     print(f"\n### Speed against error at 256x256 ({machine()})\n")
     print(f"Identity 0 of seed {args.seed} with assets: {', '.join(assets)}; {args.views} views; reference "
           f"{args.reference_spp} spp without denoising ({ref_s:.1f} s/frame). PSNR over the reference's "
@@ -174,7 +175,7 @@ def _apply_variant(variant: str, sc, defaults: dict, undo: list) -> None:
 
     while undo:  # links removed by nbcloth / nbskin, subsurface methods changed by burley
         undo.pop()()
-    bscene.configure_render(dict(sc.render_cfg), sc.width, sc.height)
+    bscene.configure_render(sc.render_cfg, sc.width, sc.height)
     c = bpy.context.scene.cycles
     for k, v in defaults.items():
         setattr(c, k, v)
@@ -219,6 +220,7 @@ def settings(args) -> None:
     from blender_scripts.worker import IdentityScene, software_versions
     from synth.model.head import HeadModel
     from synth.plan.io import load_plan
+    from synth.plan.records import RenderSettings
 
     plan = load_plan(args.plan)
     hm = HeadModel(plan.model_data())
@@ -228,16 +230,16 @@ def settings(args) -> None:
     with tempfile.TemporaryDirectory(prefix="synth-bench-") as d:
         tmp = Path(d)
         for n, sid in enumerate(plan.shard_ids()[: args.identities]):
-            spec = plan.shard(sid)
-            ident = spec["identities"][0]
-            sc = IdentityScene(ident, hm, plan, plan.render_settings(), int(spec["run_seed"]),
+            spec = plan.shard_spec(sid)
+            ident = spec.identities[0]
+            sc = IdentityScene(ident, hm, RenderSettings.from_json(plan.render_settings()), spec.run_seed,
                                {"name": hm.data.name, "sha256": plan.model_sha256()}, software_versions(), sid)
-            sc.set_expression(ident["expressions"][0])
+            sc.set_expression(ident.expressions[0])
             if defaults is None:
                 defaults = {k: getattr(bpy.context.scene.cycles, k) for k in _DEFAULTS}
-            frames = ident["expressions"][0]["frames"]
+            frames = ident.expressions[0].frames
             _apply_variant("base", sc, defaults, undo)
-            bscene.configure_render({**sc.render_cfg, "samples": args.reference_spp, "denoise": True},
+            bscene.configure_render(dataclasses.replace(sc.render_cfg, samples=args.reference_spp, denoise=True),
                                     sc.width, sc.height)
             bscene.drop_render_cache()
             ref = [sc.render(f, tmp)[0]["rgba"] for f in frames]
@@ -277,7 +279,7 @@ def memory(args) -> None:
         rss = []
         for k, sid in enumerate(plan.shard_ids()):
             sc, ident = _scene(plan, sid, hm)
-            sc.render(ident["expressions"][0]["frames"][0], tmp)
+            sc.render(ident.expressions[0].frames[0], tmp)
             sc.close()
             rss.append(rss_mb())
             print(f"  scene {k + 1:2d}: RSS {rss[-1]:.0f} MB", file=sys.stderr)

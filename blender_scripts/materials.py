@@ -9,6 +9,7 @@ from __future__ import annotations
 import bpy
 
 from synth.appearance.teeth import TOOTH_ALBEDO
+from synth.assets.params import SkinParams
 from synth.dataset.segmentation import CLASSES
 
 
@@ -42,7 +43,7 @@ def _ridge(nodes, links, fac):
     return ab.outputs[0]
 
 
-def skin_material(albedo, params: dict | None = None, pixel_m: float | None = None, lip_albedo=None):
+def skin_material(albedo, params: SkinParams | None = None, pixel_m: float | None = None, lip_albedo=None):
     """Principled skin (``synth.appearance.skin_optics`` for the physics and the rules):
     random-walk subsurface with per-channel radii (red furthest), the broad specular lobe with
     the sampled roughness (varied with a low-frequency noise) and a sharp coat lobe, albedo
@@ -56,9 +57,9 @@ def skin_material(albedo, params: dict | None = None, pixel_m: float | None = No
     from synth.appearance import lips as lp
     from synth.appearance import skin_optics as so
 
-    p = dict(params or {})
-    roughness = float(p.get("roughness", 0.45))
-    seed = float(p.get("noise_seed", 7.31 * float(p.get("detail_variant", 0))))
+    p = params if params is not None else SkinParams()
+    roughness = float(p.roughness)
+    seed = float(p.noise_seed)
     mat, bsdf = _principled("skin", "skin")
     nt = mat.node_tree
     nodes, links = nt.nodes, nt.links
@@ -73,15 +74,15 @@ def skin_material(albedo, params: dict | None = None, pixel_m: float | None = No
     mix.data_type = "RGBA"
     ramp = nodes.new("ShaderNodeMath")
     ramp.operation = "MULTIPLY"
-    ramp.inputs[1].default_value = float(p.get("redness", 0.3))
+    ramp.inputs[1].default_value = float(p.redness)
     links.new(blotch.outputs["Fac"], ramp.inputs[0])
     links.new(ramp.outputs[0], mix.inputs["Factor"])
     links.new(base.outputs[0], mix.inputs["A"])
     links.new(red.outputs[0], mix.inputs["B"])
     links.new(mix.outputs["Result"], bsdf.inputs["Base Color"])
     # fine bump layers, as far as the resolution shows them
-    layers = {"pores": (so.PORES, float(p.get("pore_scale", 1.0)), float(p.get("pore_strength", 0.15)), 0.0003),
-              "fine_lines": (so.FINE_LINES, 1.0, 0.1 + 0.25 * float(p.get("wrinkle_depth", so.DEFAULT_WRINKLE_DEPTH)), 0.0002)}
+    layers = {"pores": (so.PORES, float(p.pore_scale), float(p.pore_strength), 0.0003),
+              "fine_lines": (so.FINE_LINES, 1.0, 0.1 + 0.25 * float(p.wrinkle_depth), 0.0002)}
     unresolved, normal = [], None
     for name, ((period, var), scale, strength, dist) in layers.items():
         w = 1.0 if pixel_m is None else so.detail_weight(pixel_m, period * scale)
@@ -120,9 +121,9 @@ def skin_material(albedo, params: dict | None = None, pixel_m: float | None = No
     rough.inputs["To Max"].default_value = min(1.0, broad + 0.1)
     links.new(blotch.outputs["Fac"], rough.inputs["Value"])
     links.new(rough.outputs["Result"], bsdf.inputs["Roughness"])
-    for k, v in so.sharp_lobe(roughness, float(p.get("oiliness", 0.0))).items():
+    for k, v in so.sharp_lobe(roughness, float(p.oiliness)).items():
         bsdf.inputs[k].default_value = v
-    radius, scale = so.subsurface(float(p.get("subsurface_radius_scale", 1.0)))
+    radius, scale = so.subsurface(float(p.subsurface_radius_scale))
     bsdf.subsurface_method = "RANDOM_WALK"
     bsdf.inputs["Subsurface Weight"].default_value = 1.0
     bsdf.inputs["Subsurface Radius"].default_value = radius
@@ -196,7 +197,7 @@ def tooth_gaps(mat) -> None:
     chain_bump(mat, ramp(f, 0.0, tt.ROUNDING, 0.0, 1.0), 0.5, 0.0004)
 
 
-def head_materials(skin_params: dict, albedo, pixel_m: float | None = None,
+def head_materials(skin_params: SkinParams | None, albedo, pixel_m: float | None = None,
                    lip_albedo=None) -> dict[int, "bpy.types.Material"]:
     """Material per segmentation class for the head mesh (``pixel_m``, ``lip_albedo``: see
     :func:`skin_material`)."""

@@ -12,6 +12,8 @@ from typing import Any
 import bpy
 import numpy as np
 
+from synth.plan.records import RenderSettings, StudioLight
+
 VIEW_LAYER = "ViewLayer"
 
 
@@ -60,26 +62,26 @@ def _pick_device(scene, wanted: str) -> str:
     return "cpu"
 
 
-def configure_render(settings: dict[str, Any], width: int, height: int) -> dict[str, Any]:
+def configure_render(settings: RenderSettings, width: int, height: int) -> dict[str, Any]:
     """Apply render settings; returns the effective settings (recorded in frame JSON)."""
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
-    device = _pick_device(scene, str(settings.get("device", "auto")).lower())
+    device = _pick_device(scene, str(settings.device).lower())
     c = scene.cycles
-    c.samples = int(settings["samples"])
+    c.samples = int(settings.samples)
     c.time_limit = 0.0
-    c.use_adaptive_sampling = bool(settings.get("adaptive_sampling", settings.get("adaptive", False)))
+    c.use_adaptive_sampling = bool(settings.adaptive_sampling)
     if c.use_adaptive_sampling:
-        c.adaptive_threshold = float(settings.get("adaptive_threshold") or 0.01)
-    c.use_denoising = bool(settings.get("denoise", False))
+        c.adaptive_threshold = float(settings.adaptive_threshold)
+    c.use_denoising = bool(settings.denoise)
     if c.use_denoising:
-        c.denoiser = "OPENIMAGEDENOISE" if device == "cpu" else str(settings.get("gpu_denoiser", "OPTIX")).upper()
+        c.denoiser = "OPENIMAGEDENOISE" if device == "cpu" else str(settings.gpu_denoiser).upper()
         c.denoising_input_passes = "RGB_ALBEDO_NORMAL"
-    c.max_bounces = int(settings.get("max_bounces", 8))
+    c.max_bounces = int(settings.max_bounces)
     c.use_animated_seed = False
     c.seed = 0
-    c.sample_clamp_indirect = float(settings.get("clamp_indirect", 10.0))
-    c.pixel_filter_width = float(settings.get("filter_width", 1.5))
+    c.sample_clamp_indirect = float(settings.clamp_indirect)
+    c.pixel_filter_width = float(settings.filter_width)
     scene.render.resolution_x = int(width)
     scene.render.resolution_y = int(height)
     scene.render.resolution_percentage = 100
@@ -181,12 +183,12 @@ def uniform_environment(strength: float = 1.0, color=(1.0, 1.0, 1.0)) -> None:
     scene.world = world
 
 
-def studio_environment(env: dict, strength: float = 1.0, color=(1.0, 1.0, 1.0)) -> None:
+def studio_environment(env: StudioLight, strength: float = 1.0, color=(1.0, 1.0, 1.0)) -> None:
     """The procedural studio environment of the plan's lighting record ``env``
     (synth.appearance.lighting): an equirectangular float image made in memory (no file)."""
-    from synth.appearance.lighting import Studio, studio_map
+    from synth.appearance.lighting import studio_map
 
-    L = studio_map(Studio.from_record(env))
+    L = studio_map(env.studio())
     H, W = L.shape[:2]
     rgba = np.ones((H, W, 4), np.float32)
     rgba[..., :3] = L * np.asarray(color, np.float32)

@@ -30,11 +30,14 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 
-from renderer_jobs.events import EXIT_DISK_FULL, EXIT_INPUT, Commit, Error, Frame, Rss, Skip, Start, emit
+from renderer_jobs.events import EXIT_DISK_FULL, EXIT_INPUT, Commit, Error, Rss, Skip, Start, emit
+from renderer_jobs.events import Frame as FrameDone
 from synth.assets.classes import RECORD_ORDER
 from synth.dataset.exr import camera_attributes
 from synth.errors import SynthError
 from synth.io.process import rss_mb
+from synth.plan.records import (Expression, Frame, Identity, Lighting, RenderSettings, StudioLight,
+                                UniformLight)
 
 
 def software_versions() -> dict:
@@ -45,43 +48,32 @@ def software_versions() -> dict:
     return {"synth": synth.__version__, "blender": bpy.app.version_string, "python": platform.python_version()}
 
 
-def _dress(ident: dict, ctx, rigs_out: dict) -> dict:
+def _dress(ident: Identity, ctx, rigs_out: dict) -> dict:
     """Build the identity's chosen assets (only those). Returns class -> frame-JSON record, every
     registered class in RECORD_ORDER (null where absent)."""
     from blender_scripts import assets as basset
 
-    chosen = {c: ident.get("assets", {}).get(c) for c in RECORD_ORDER}
-    rigs = basset.dress(ctx, {c: e for c, e in chosen.items() if e})
+    chosen = {c: ident.assets.get(c) for c in RECORD_ORDER}
+    rigs = basset.dress(ctx, {c: e for c, e in chosen.items() if e is not None})
     rigs_out.update(rigs)
-    record = {}
-    for c in RECORD_ORDER:
-        e = chosen[c]
-        if not e:
-            record[c] = None
-            continue
-        record[c] = {**e, "build": rigs[c].record()}
-    return record
+    return {c: None if e is None else {**e.to_json(), "build": rigs[c].record()} for c, e in chosen.items()}
 
 
-def _set_environment(env: dict) -> dict:
+def _set_environment(env: Lighting) -> Lighting:
     """Make the plan's lighting record ``env`` the scene's world; returns it."""
     from blender_scripts import scene as bscene
 
-    env = dict(env)
-    strength = float(env.get("strength", 1.0))
-    kind = env.get("environment", "uniform")
-    if kind == "uniform":
-        bscene.uniform_environment(strength, tuple(env.get("color", (1.0, 1.0, 1.0))))
-    elif kind == "studio":
-        bscene.studio_environment(env, strength, tuple(env.get("color", (1.0, 1.0, 1.0))))
+    if isinstance(env, UniformLight):
+        bscene.uniform_environment(float(env.strength), tuple(env.color))
+    elif isinstance(env, StudioLight):
+        bscene.studio_environment(env, float(env.strength), tuple(env.color))
     else:
-        path = env.get("file")
-        if not path:
+        if not env.file:
             raise SynthError("the plan's lighting names no HDR file", "lighting", "re-plan with lighting.hdri_files")
-        if not Path(path).is_file():
-            raise SynthError("HDR environment file not found", str(path),
+        if not Path(env.file).is_file():
+            raise SynthError("HDR environment file not found", env.file,
                              "restore the file or remove it from lighting.hdri_files and re-plan")
-        bscene.hdr_environment(str(path), strength, float(env.get("rotation_deg", 0.0)))
+        bscene.hdr_environment(env.file, float(env.strength), float(env.rotation_deg))
     return env
 
 
@@ -98,7 +90,7 @@ class IdentityScene:
     only between the views of one expression, where nothing but the camera moves.
     """
 
-    def __init__(self, ident: dict, hm, plan, render_cfg: dict, run_seed: int, model_info: dict,
+    def __init__(self, ident: Identity, hm, render_cfg: RenderSettings, run_seed: int, model_info: dict,
                  versions: dict, shard_id: str = "", asset_resolution: int | None = None):
         from blender_scripts import camera as bcam
         from blender_scripts import head as bhead
@@ -106,35 +98,37 @@ class IdentityScene:
         from blender_scripts import scene as bscene
         from blender_scripts.assets import HeadContext
         from synth.appearance.lips import lip_albedo
-        from synth.appearance.skin import DEFAULT_HAEMOGLOBIN, DEFAULT_MELANIN, skin_albedo
+        from synth.appearance.skin import skin_albedo
         from synth.appearance.skin_optics import pixel_footprint_m
+        from synth.dataset.frame_json import RenderRecord
 
         self.ident, self.hm, self.render_cfg = ident, hm, render_cfg
         self.run_seed, self.model_info, self.versions, self.shard_id = run_seed, model_info, versions, shard_id
         bscene.reset()
-        f0 = ident["expressions"][0]["frames"][0]["camera"]
-        self.width, self.height = int(f0["width"]), int(f0["height"])
+        c0 = ident.expressions[0].frames[0].camera
+        self.width, self.height = int(c0.width), int(c0.height)
         self.effective = bscene.configure_render(render_cfg, self.width, self.height)
-        self.env = _set_environment(ident.get("lighting") or plan.lighting())
-        skin = dict(ident.get("skin") or {})
-        mel = float(skin.get("melanin", DEFAULT_MELANIN))
-        hb = float(skin.get("haemoglobin", DEFAULT_HAEMOGLOBIN))
+        self.env = _set_environment(ident.lighting)
+        skin = ident.skin
+        mel, hb = float(skin.melanin), float(skin.haemoglobin)
         albedo, lips = skin_albedo(mel, hb), lip_albedo(mel, hb)
-        self.skin_record = {**skin, "albedo_linear_srgb": [round(a, 6) for a in albedo],
+        self.skin_record = {**skin.to_json(), "albedo_linear_srgb": [round(a, 6) for a in albedo],
                             "lip_albedo_linear_srgb": [round(a, 6) for a in lips]}
-        pixel_m = pixel_footprint_m([f["camera"] for e in ident["expressions"] for f in e["frames"]])
+        pixel_m = pixel_footprint_m([f.camera for f in ident.frames()])
         self.materials = bmat.head_materials(skin, albedo, pixel_m, lips)
-        self.beta = np.asarray(ident["identity_code"], np.float64)
+        self.beta = np.asarray(ident.identity_code, np.float64)
         rest = self._evaluate(np.zeros(hm.data.expression_dims), np.zeros((hm.J, 3)))
         self.rest = rest[0]
         self.head_ob = bhead.build_head_object(hm.data, self.rest, self.materials)
         bhead.set_rest_positions(self.head_ob, self.rest)
         self.effective["subdivision_levels"] = bhead.add_render_subdivision(self.head_ob, max(self.width, self.height))
+        self.render_record = RenderRecord(shard_id, self.width, self.height, render_cfg.preset, self.effective,
+                                          versions)
         # asset_resolution: benchmarks keep strand counts independent of the image size
         self.ctx = HeadContext(data=hm.data, head=self.head_ob, materials=self.materials, rest_vertices=self.rest,
                                vertices=self.rest, joint_transforms=rest[2], joint_index=dict(hm.joint_index),
                                landmarks=rest[1], resolution=asset_resolution or max(self.width, self.height),
-                               identity_index=int(ident["identity_index"]), run_seed=run_seed, pixel_m=pixel_m)
+                               identity_index=int(ident.identity_index), run_seed=run_seed, pixel_m=pixel_m)
         self.rigs: dict = {}
         self.assets_record = _dress(ident, self.ctx, self.rigs)
         self.cam_ob = bcam.make_camera()
@@ -146,15 +140,15 @@ class IdentityScene:
         return (ev.vertices[0].astype(np.float64), {k: v[0].astype(np.float64) for k, v in ev.landmarks.items()},
                 ev.joint_transforms[0].astype(np.float64))
 
-    def set_expression(self, e: dict) -> None:
+    def set_expression(self, e: Expression) -> None:
         from blender_scripts import head as bhead
         from blender_scripts import scene as bscene
         from blender_scripts.assets import update as update_rigs
 
         hm = self.hm
-        psi = np.asarray(e["expression_code"], np.float64)
+        psi = np.asarray(e.expression_code, np.float64)
         rot = np.zeros((hm.J, 3))
-        for name, r in (e.get("joint_rotations") or {}).items():
+        for name, r in e.joint_rotations.items():
             rot[hm.joint_index[name]] = r
         verts, lms, joints = self._evaluate(psi, rot)
         bhead.set_vertices(self.head_ob, verts)
@@ -164,7 +158,7 @@ class IdentityScene:
         self.expr = {"e": e, "psi": psi, "rot": rot, "lm3d": lms["ibug68"],
                      "head_pose": joints[hm.joint_index["head"]]}
 
-    def use_environment(self, env: dict) -> None:
+    def use_environment(self, env: Lighting) -> None:
         """Light the scene with ``env`` (an expression's environment, plans of more than one
         per expression); the world it replaces is removed and Cycles' cache dropped, so a
         frame's pixels do not depend on the environment rendered before it."""
@@ -177,29 +171,27 @@ class IdentityScene:
         bscene.remove_world(old)
         bscene.drop_render_cache()
 
-    def render(self, f: dict, tmp: Path, seed: int | None = None) -> tuple[dict, dict]:
+    def render(self, f: Frame, tmp: Path, seed: int | None = None) -> tuple[dict, dict]:
         """Render one planned frame of the current expression: (passes, frame JSON)."""
         from blender_scripts import camera as bcam
         from blender_scripts.passes import render_view
         from synth.conventions import project
-        from synth.dataset.frame_json import build_frame_record
+        from synth.dataset.frame_json import ModelEvaluation, SceneRecord, build_frame_record
         from synth.dataset.labels import visibility
 
         x = self.expr
-        c = f["camera"]
-        K = np.asarray(c["K"], np.float64)
-        w2c = np.asarray(c["world_to_camera"], np.float64)
-        bcam.set_camera(self.cam_ob, K, w2c, self.width, self.height, c["near"], c["far"])
-        out = render_view(tmp, int(f["seed"] if seed is None else seed))
+        c = f.camera
+        K = np.asarray(c.K, np.float64)
+        w2c = np.asarray(c.world_to_camera, np.float64)
+        bcam.set_camera(self.cam_ob, K, w2c, self.width, self.height, c.near, c.far)
+        out = render_view(tmp, int(f.seed if seed is None else seed))
         uv, z = project(K, w2c, x["lm3d"])
         vis = visibility(uv, z, out["depth"], out["rgba"][..., 3])
-        fj = build_frame_record(
-            f, shard_id=self.shard_id, width=self.width, height=self.height, model_info=self.model_info,
-            identity_code=self.beta, planned_expression=x["e"], expression_code=x["psi"],
-            joint_rotations={n: x["rot"][j] for n, j in self.hm.joint_index.items()}, head_pose=x["head_pose"],
-            landmarks_3d=x["lm3d"], landmarks_2d=uv, landmarks_visible=vis, assets=self.assets_record,
-            skin=self.skin_record, lighting=self.env, render_preset=self.render_cfg.get("preset"),
-            render_settings=self.effective, software=self.versions)
+        model = ModelEvaluation(self.model_info, self.beta, x["e"], x["psi"],
+                                {n: x["rot"][j] for n, j in self.hm.joint_index.items()}, x["head_pose"], x["lm3d"],
+                                uv, vis)
+        scene = SceneRecord(self.assets_record, self.skin_record, self.env.to_json())
+        fj = build_frame_record(f, model, scene, self.render_record)
         return out, fj
 
     def close(self) -> None:
@@ -209,39 +201,36 @@ class IdentityScene:
 
 def render_shard(ds, plan, shard_id: str, hm, model_info: dict, tmp: Path, lease_ttl: float) -> int:
     """Render the missing frames of one shard and commit it. Returns frames rendered."""
-    spec = plan.shard(shard_id)
-    render_cfg = plan.render_settings()
+    spec = plan.shard_spec(shard_id)
+    render_cfg = RenderSettings.from_json(plan.render_settings())
     versions = software_versions()
     rendered = 0
-    seeds = {f["frame_id"]: f["seed"] for ident in spec["identities"] for e in ident["expressions"]
-             for f in e["frames"]}
+    seeds = {f.frame_id: f.seed for f in spec.frames()}
     st = ds.try_staging(shard_id, lease_ttl)
     if st is None:  # committed meanwhile, or another process holds it
         emit(Skip(shard=shard_id))
         return 0
     with st:
         done = st.frames_done()
-        for ident in spec["identities"]:
-            keys = [f["frame_id"] for e in ident["expressions"] for f in e["frames"]]
-            if all(k in done for k in keys):
+        for ident in spec.identities:
+            if all(f.frame_id in done for f in ident.frames()):
                 continue
-            sc = IdentityScene(ident, hm, plan, render_cfg, int(spec["run_seed"]), model_info, versions, shard_id)
-            for e in ident["expressions"]:
-                if all(f["frame_id"] in done for f in e["frames"]):
+            sc = IdentityScene(ident, hm, render_cfg, spec.run_seed, model_info, versions, shard_id)
+            for e in ident.expressions:
+                if all(f.frame_id in done for f in e.frames):
                     continue
                 sc.set_expression(e)
-                envs = e.get("environments")  # plans of more than one environment per expression
-                for f in e["frames"]:
-                    if f["frame_id"] in done:
+                for f in e.frames:
+                    if f.frame_id in done:
                         continue
-                    if envs:
-                        sc.use_environment(envs[int(f["environment_index"])])
+                    if e.environments:  # plans of more than one environment per expression
+                        sc.use_environment(e.environments[int(f.environment_index)])
                     out, fj = sc.render(f, tmp)
                     cam = fj["camera"]  # also in the EXR header, as OpenEXR's standard attributes
-                    st.write_frame(f["frame_id"], out["rgba"], out["depth"], out["normals"], out["segmentation"], fj,
+                    st.write_frame(f.frame_id, out["rgba"], out["depth"], out["normals"], out["segmentation"], fj,
                                    exr_header=camera_attributes(cam["K"], cam["world_to_camera"], sc.width, sc.height))
                     rendered += 1
-                    emit(Frame(shard=shard_id, key=f["frame_id"], render_seconds=out["render_seconds"]))
+                    emit(FrameDone(shard=shard_id, key=f.frame_id, render_seconds=out["render_seconds"]))
             sc.close()
             emit(Rss(rss_mb=rss_mb()))
         st.commit(manifest_extra={"seeds": seeds, "versions": versions})

@@ -66,6 +66,7 @@ def dump(out: Path, identities: int, seed: int, preset: str = "ci") -> None:
     from synth.model.head import HeadModel
     from synth.plan.io import load_plan
     from synth.plan.planner import run_plan
+    from synth.plan.records import RenderSettings
 
     out.mkdir(parents=True, exist_ok=True)
     arrays: dict[str, np.ndarray] = {}
@@ -78,12 +79,12 @@ def dump(out: Path, identities: int, seed: int, preset: str = "ci") -> None:
         hm = HeadModel(plan.model_data())
         versions = {"synth": "-", "blender": "-", "python": "-"}
         for shard_id in plan.shard_ids():
-            spec = plan.shard(shard_id)
-            for ident in spec["identities"]:
-                i = int(ident["identity_index"])
-                sc = IdentityScene(ident, hm, plan, plan.render_settings(), int(spec["run_seed"]),
+            spec = plan.shard_spec(shard_id)
+            for ident in spec.identities:
+                i = ident.identity_index
+                sc = IdentityScene(ident, hm, RenderSettings.from_json(plan.render_settings()), spec.run_seed,
                                    {"name": hm.data.name, "sha256": "-"}, versions)
-                for e_i, e in enumerate(ident["expressions"]):
+                for e_i, e in enumerate(ident.expressions):
                     sc.set_expression(e)
                     tag = f"id{i:03d}_ex{e_i}"
                     for cls, rig in sorted(sc.rigs.items()):

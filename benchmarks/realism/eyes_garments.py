@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from synth.plan.records import RenderSettings
+
 
 def _save(path: Path, rgba: np.ndarray) -> None:
     import imageio.v3 as iio
@@ -51,7 +53,7 @@ def crops(args) -> None:
                                                                         "freckles": 0.2, "oiliness": 0.3}},
                            "garment": {"id": "tshirt_crew", "params": {"colour_hsv": "navy"}}})
         _, info = eye_coordinates(ctx.data, ctx.rest_vertices)
-        scene.configure_render({"samples": args.spp, "denoise": False, "device": "cpu", "max_bounces": 8}, res, res)
+        scene.configure_render(RenderSettings(samples=args.spp, denoise=False, device="cpu", max_bounces=8), res, res)
         scene.uniform_environment(1.0)
         cam = camera.make_camera()
         shots = {"eye": (intrinsics(res, res, 12.0), orbit_camera_to_world(0.0, 0.0, 0.25, np.array(info["l"]["centre"]))),

@@ -4,10 +4,11 @@ The classes, their rig modules, segmentation ids and build order are the registr
 (:mod:`synth.assets.classes`); nothing here lists them. A rig module
 ``blender_scripts.assets.<CLASSES[cls].rig>`` exposes::
 
-    def build(ctx: HeadContext, entry: dict) -> Rig
+    def build(ctx: HeadContext, entry: AssetPick) -> Rig
 
-``entry`` is the plan's choice for the class: ``{"id", "generator", "params", ...}`` (see the
-shard spec, docs/plan-format.md). ``build`` creates only what that asset needs, links its
+``entry`` is the plan's choice for the class, a :class:`synth.plan.records.AssetPick`: its
+``id``, ``generator``, typed ``params`` (:mod:`synth.assets.params`, where every default
+lives) and, for an external pack, ``pack`` (see the shard spec, docs/plan-format.md). ``build`` creates only what that asset needs, links its
 objects into the scene, gives every material ``pass_index = CLASSES[cls].segmentation_id``,
 and returns a :class:`Rig`. After an expression change the worker updates the head mesh in
 place and calls ``rig.update(ctx)``; rigs attached to the surface (hair curves with
@@ -23,11 +24,12 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
 from synth.assets.classes import BUILD_ORDER, CLASSES, rig_rng
+from synth.assets.params import AssetPick
 
 
 @dataclass
@@ -45,11 +47,16 @@ class HeadContext:
     resolution: int  # max(width, height) of the render, pixels (strand counts scale with it)
     identity_index: int
     run_seed: int
-    assets: dict[str, Any] = field(default_factory=dict)  # the identity's full asset choice (class -> entry)
+    assets: dict[str, AssetPick] = field(default_factory=dict)  # the identity's chosen assets (class -> pick)
     pixel_m: float | None = None  # metres per pixel on the face in the finest view (None: no resolution rule)
 
     def rng(self, cls: str) -> np.random.Generator:
         return rig_rng(self.run_seed, self.identity_index, cls)
+
+    def pick(self, cls: str) -> AssetPick | None:
+        """The identity's pick of class ``cls`` (None where absent)."""
+        e = (self.assets or {}).get(cls)
+        return None if not e else AssetPick.coerce(cls, e)
 
 
 class Rig:
@@ -70,20 +77,20 @@ class Rig:
         return dict(self.info)
 
 
-def rig_module(cls: str, entry: dict):
-    gen = str(entry.get("generator", ""))
-    if gen.endswith(".blend") or gen.startswith("blend:"):
+def rig_module(cls: str, entry: AssetPick):
+    if entry.external:
         return importlib.import_module(f"{__name__}.external")
     return importlib.import_module(f"{__name__}.{CLASSES[cls].rig}")
 
 
-def dress(ctx: HeadContext, assets: dict[str, Any]) -> dict[str, Rig]:
-    """Build the chosen assets (only those; absent classes are None) in BUILD_ORDER."""
-    ctx.assets = dict(assets)
+def dress(ctx: HeadContext, assets: Mapping[str, AssetPick | Mapping | None]) -> dict[str, Rig]:
+    """Build the chosen assets (only those; absent classes are None) in BUILD_ORDER. Picks
+    given as plan-style objects (tests, benchmarks) are checked into records first."""
+    ctx.assets = {c: AssetPick.coerce(c, e) for c, e in assets.items() if e}
     rigs: dict[str, Rig] = {}
     for cls in BUILD_ORDER:
-        entry = assets.get(cls)
-        if not entry:
+        entry = ctx.assets.get(cls)
+        if entry is None:
             continue
         mod = rig_module(cls, entry)
         rigs[cls] = mod.build(ctx, entry)

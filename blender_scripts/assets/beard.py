@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from blender_scripts.assets.strands import StrandRig
 from synth.assets.fit.beard import groom
+from synth.assets.params import AssetPick
 
 
-def build(ctx, entry) -> StrandRig:
+def build(ctx, entry: AssetPick) -> StrandRig:
     return StrandRig.build(ctx, groom(ctx, entry))

@@ -40,8 +40,9 @@ import numpy as np
 from mathutils import Matrix
 
 from blender_scripts.assets import HeadContext, Rig
-from synth.assets.classes import CLASSES, PACK_ANCHORS
+from synth.assets.classes import CLASSES
 from synth.assets.packs import REFERENCE_SKULL_WIDTH_M, verify_pack
+from synth.assets.params import AssetPick
 from synth.errors import SynthError
 
 #: object types that render and carry material slots (lights, cameras, empties... are skipped)
@@ -49,14 +50,6 @@ RENDERABLE = {"MESH", "CURVE", "SURFACE", "META", "FONT", "CURVES", "POINTCLOUD"
 NOSE_BRIDGE_IBUG = 27
 
 
-def _class_of(ctx: HeadContext, entry: dict, pack: dict) -> str:
-    cls = pack.get("class") or entry.get("class")
-    if not cls:
-        cls = next((c for c, e in (ctx.assets or {}).items() if e is entry), None)
-    if cls not in CLASSES:
-        raise SynthError(f"external asset '{entry.get('id')}' has no known class ({cls!r})",
-                         str(entry.get("generator")), "re-plan with the current synth")
-    return cls
 
 
 def anchor_matrix(ctx: HeadContext, anchor: str) -> np.ndarray:
@@ -147,15 +140,18 @@ class PackRig(Rig):
         self.place(ctx)
 
 
-def build(ctx: HeadContext, entry: dict) -> Rig:
-    pack = entry.get("pack")
-    where = f"asset {entry.get('id')} ({entry.get('generator')})"
-    if not isinstance(pack, dict):
+def build(ctx: HeadContext, entry: AssetPick) -> Rig:
+    pack = entry.pack
+    where = f"asset {entry.id} ({entry.generator})"
+    if pack is None:
         raise SynthError("external asset entry carries no pack record", where,
                          "re-plan with the current synth (synth plan writes the pack record)")
-    cls = _class_of(ctx, entry, pack)
-    path = verify_pack(pack.get("file", ""), pack.get("asset_root", ""), pack.get("sha256"), where)
-    linked = _link(path, str(pack.get("object")), where)
+    if pack.cls != entry.cls:
+        raise SynthError(f"external asset '{entry.id}' is planned as {entry.cls} but its pack is {pack.cls}", where,
+                         "re-plan with the current synth")
+    cls = entry.cls
+    path = verify_pack(pack.file, pack.asset_root, pack.sha256, where)
+    linked = _link(path, pack.object, where)
 
     seg = CLASSES[cls].segmentation_id
     coll = bpy.data.collections.new(f"asset_{cls}")
@@ -165,7 +161,7 @@ def build(ctx: HeadContext, entry: dict) -> Rig:
     for src in linked:
         m0 = pack_matrix(src)
         ob = src.copy()  # local Object sharing the linked data
-        ob.name = f"{cls}_{entry.get('id')}_{src.name}"
+        ob.name = f"{cls}_{entry.id}_{src.name}"
         ob.parent = None
         coll.objects.link(ob)
         if not len(ob.material_slots):
@@ -176,7 +172,7 @@ def build(ctx: HeadContext, entry: dict) -> Rig:
             key = m.name_full if m is not None else None
             if key not in local_mats:
                 lm = m.copy() if m is not None else bpy.data.materials.new(f"{cls}_pack_default")
-                lm.name = f"{cls}_{entry.get('id')}_{m.name if m is not None else 'default'}"
+                lm.name = f"{cls}_{entry.id}_{m.name if m is not None else 'default'}"
                 lm.pass_index = seg
                 local_mats[key] = lm
             slot.link = "OBJECT"
@@ -185,12 +181,11 @@ def build(ctx: HeadContext, entry: dict) -> Rig:
         objects.append(ob)
         rest.append(m0)
 
-    anchor = str(pack.get("anchor") or PACK_ANCHORS.get(cls, "head"))
-    ref = float(pack.get("reference_width_m") or REFERENCE_SKULL_WIDTH_M)
+    anchor, ref = pack.anchor, float(pack.reference_width_m)  # the catalogue's (synth.assets.packs.pack_record)
     width = skull_width(ctx)
     scale = width / ref
-    info = {"fit": "rigid", "pack": str(pack.get("file")), "library": str(path), "sha256": pack.get("sha256"),
-            "object": pack.get("object"), "anchor": anchor, "skull_width_m": round(width, 6),
+    info = {"fit": "rigid", "pack": pack.file, "library": str(path), "sha256": pack.sha256,
+            "object": pack.object, "anchor": anchor, "skull_width_m": round(width, 6),
             "reference_width_m": ref, "scale": round(scale, 6), "segmentation_id": seg,
             "objects": [o.name for o in objects]}
     rig = PackRig(cls, objects, rest, anchor, scale, info)

@@ -18,6 +18,7 @@ from synth.assets.fit.body import Body, Cloth, FittedShell, fit_shell
 from synth.assets.fit.garment import BARE_ARMS, CLEARANCE, FABRICS, colour_rgb, garment_shell
 from synth.assets.fit.hem import hidden_polygons
 from synth.assets.fit import torso as torso_fit
+from synth.assets.params import AssetPick
 from synth.dataset.segmentation import CLASSES as SEGMENTATION
 
 
@@ -207,7 +208,7 @@ def hide_bust_under_hem(head, body: Body) -> int:
     return int(hidden.sum())
 
 
-def build(ctx: HeadContext, entry: dict) -> Rig:
+def build(ctx: HeadContext, entry: AssetPick) -> Rig:
     body = Body.of(ctx)
     skin = (ctx.materials or {}).get(SEGMENTATION["skin"])
     rig = shell_rig(fit_shell(body, garment_shell(body, entry, ctx.rng("garment")), CLEARANCE), torso=True,

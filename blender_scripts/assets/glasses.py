@@ -18,6 +18,7 @@ import bpy
 import numpy as np
 
 from blender_scripts.assets import Rig
+from synth.assets.params import AssetPick
 from synth.assets.classes import CLASSES
 from synth.assets.fit.glasses.front import build_front
 from synth.assets.fit.glasses.solve import FRAME_PARTS, GlassesFit, fit_glasses
@@ -159,10 +160,10 @@ class GlassesRig(Rig):
         self._apply(self._fit(ctx))
 
 
-def build(ctx, entry: dict) -> GlassesRig:
-    style = str(entry["id"])
+def build(ctx, entry: AssetPick) -> GlassesRig:
+    style = entry.id
     rng = ctx.rng("glasses")
-    spec = frame_spec(style, dict(entry.get("params") or {}), rng)
+    spec = frame_spec(style, entry.params, rng)
     seed = float(rng.uniform(0, 100))
     metal_col = spec.temple_colour if spec.temple_colour in METALLIC_COLOURS else (
         spec.colour if spec.colour in METALLIC_COLOURS else "silver")

@@ -11,8 +11,9 @@ from blender_scripts.assets import HeadContext, Rig
 from blender_scripts.assets.garment import shell_rig
 from synth.assets.fit.body import Body, fit_shell
 from synth.assets.fit.headwear import CLEARANCE, headwear_shell
+from synth.assets.params import AssetPick
 
 
-def build(ctx: HeadContext, entry: dict) -> Rig:
+def build(ctx: HeadContext, entry: AssetPick) -> Rig:
     body = Body.of(ctx)
     return shell_rig(fit_shell(body, headwear_shell(body, entry, ctx.rng("headwear")), CLEARANCE))

@@ -35,6 +35,7 @@ from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
 from synth.appearance.iris import iris_palette, pupil_ratio
 from synth.assets.fit.eyes import FRAME_ATTRIBUTES, eye_coordinates, eye_frames, medial_canthi
+from synth.assets.params import AssetPick
 from synth.dataset.segmentation import CLASSES
 
 #: refractive index of the cornea / aqueous humour (Gullstrand: 1.376 / 1.336)
@@ -182,12 +183,12 @@ def caruncle_layer(mat, seed: float) -> None:
     bmat.chain_bump(mat, core, 0.6, 0.0004)
 
 
-def build(ctx, entry: dict) -> Rig:
-    p = dict(entry.get("params") or {})
+def build(ctx, entry: AssetPick) -> Rig:
+    p = entry.params
     rng = ctx.rng("iris")
     seed = float(rng.uniform(0, 100))
     pal = iris_palette(p)
-    pupil = pupil_ratio(float(p.get("pupil_dilation", 0.45)))
+    pupil = pupil_ratio(float(p.pupil_dilation))
     coords, info = eye_coordinates(ctx.data, ctx.rest_vertices)
     bmat.write_point_vector(ctx.head.data, "iris_coord", coords)
     _write_frames(ctx)
@@ -221,7 +222,7 @@ def build(ctx, entry: dict) -> Rig:
     fib.inputs["Scale"].default_value = 1.0
     fib.inputs["Detail"].default_value = 6.0
     nt.links.new(polar.outputs[0], fib.inputs["Vector"])
-    contrast = float(p.get("fibre_contrast", 0.35))
+    contrast = float(p.fibre_contrast)
     fmap = _map_range(nt, fib.outputs["Fac"], 0.35, 0.65)
     col = nt.nodes.new("ShaderNodeMix")
     col.data_type = "RGBA"
@@ -256,16 +257,16 @@ def build(ctx, entry: dict) -> Rig:
     mid = bmat.math_node(mat, "MULTIPLY", band(pupil + 0.1, pupil + 0.25), band(0.7, 0.95, rising=False))
     over(pal["dark"], bmat.math_node(mat, "MULTIPLY", crypt, mid))
     # inner (collarette) zone and limbal ring
-    het = float(p.get("central_heterochromia", 0.25))
+    het = p.collarette
     inner_edge = pupil + (1 - pupil) * 0.35
     over(pal["inner"], bmat.math_node(mat, "MULTIPLY", band(inner_edge - 0.05, inner_edge + 0.05, rising=False),
                                       0.3 + 0.7 * het))
-    ring = float(p.get("limbal_ring", 0.5))
+    ring = float(p.limbal_ring)
     over(pal["limbal"], bmat.math_node(mat, "MULTIPLY", band(0.82, 0.98), ring))
     over((0.004, 0.004, 0.004), band(pupil - 0.03, pupil + 0.01, rising=False))
     # over the sclera, inside the limbus
     bmat.layer_over(mat, "Base Color", last, band(1.0, 1.05, rising=False))
     caruncle_layer(mat, seed)
-    rec = {"id": entry.get("id"), "palette": {k: [round(c, 5) for c in v] for k, v in pal.items()},
+    rec = {"id": entry.id, "palette": {k: [round(c, 5) for c in v] for k, v in pal.items()},
            "pupil_ratio": round(pupil, 4), "eyes": info, "cornea_ior": CORNEA_IOR}
     return IrisRig("iris", [], rec)

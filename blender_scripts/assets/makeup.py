@@ -16,6 +16,7 @@ import numpy as np
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
 from synth.assets.fit.masks import WING_EDGE_M, WING_TIP_M, makeup_masks, wing_coordinates, wing_width
+from synth.assets.params import AssetPick, planned_or
 from synth.dataset.segmentation import CLASSES
 
 LIP_COLOURS = {"red": (0.42, 0.02, 0.03), "nude": (0.42, 0.2, 0.15), "pink": (0.6, 0.16, 0.25),
@@ -55,9 +56,9 @@ def _wing_line(ctx, mat, envelope, liner: float):
     return m(mat, "MULTIPLY", m(mat, "MAXIMUM", lines[0], lines[1]), envelope)
 
 
-def build(ctx, entry: dict) -> Rig:
-    look = str(entry["id"])
-    p = dict(entry.get("params") or {})
+def build(ctx, entry: AssetPick) -> Rig:
+    look = entry.id
+    p = entry.params
     rng = ctx.rng("makeup")
     draws = {"gloss": float(rng.uniform(0, 0.8)), "opacity": float(rng.uniform(0.5, 1.0)),
              "extent": float(rng.uniform(0.3, 1.0)), "thick": float(rng.uniform(0.3, 1.0)),
@@ -65,27 +66,26 @@ def build(ctx, entry: dict) -> Rig:
              "coverage": float(rng.uniform(0.2, 0.6)), "wing": bool(rng.random() < 0.4)}
     layers = {"foundation": 0.0, "lips": 0.0, "shadow": 0.0, "liner": 0.0, "blush": 0.0}
     rec: dict = {"id": look}
-    lip_col = _choose(p.get("lip_colour"), LIP_COLOURS, rng)
-    sh_col = _choose(p.get("colour", p.get("eyeshadow_colour")), SHADOW_COLOURS, rng)
-    gloss = float(p.get("gloss", draws["gloss"]))
-    shimmer = float(p.get("shimmer", draws["shimmer"]))
-    extent = float(p.get("extent", draws["extent"]))
-    thick = float(p.get("thickness", draws["thick"]))
-    wing = bool(p.get("wing", draws["wing"]))
+    lip_col = _choose(p.lip_colour, LIP_COLOURS, rng)
+    sh_col = _choose(p.shadow_colour, SHADOW_COLOURS, rng)
+    gloss = float(planned_or(p.gloss, draws["gloss"]))
+    shimmer = float(planned_or(p.shimmer, draws["shimmer"]))
+    extent = float(planned_or(p.extent, draws["extent"]))
+    thick = float(planned_or(p.thickness, draws["thick"]))
+    wing = bool(planned_or(p.wing, draws["wing"]))
     if look == "light_foundation":
-        layers["foundation"] = float(p.get("coverage", draws["coverage"]))
+        layers["foundation"] = float(planned_or(p.coverage, draws["coverage"]))
     elif look == "lipstick":
-        layers["lips"] = float(p.get("opacity", draws["opacity"]))
+        layers["lips"] = float(planned_or(p.opacity, draws["opacity"]))
     elif look == "eyeliner":
         layers["liner"] = 1.0
     elif look == "eyeshadow":
         layers["shadow"] = 0.85
     elif look == "blush":
-        layers["blush"] = float(p.get("intensity", draws["blush"]))
-    elif look == "full_look":
-        layers.update(foundation=0.3, lips=0.9, shadow=0.75, blush=float(p.get("blush", draws["blush"])),
-                      liner=1.0 if bool(p.get("eyeliner", True)) else 0.0)
-        gloss = float(p.get("gloss", 0.4))
+        layers["blush"] = float(planned_or(p.intensity, draws["blush"]))
+    elif look == "full_look":  # its gloss: the planned one, else 0.4 (MakeupParams), never drawn
+        layers.update(foundation=0.3, lips=0.9, shadow=0.75, blush=float(planned_or(p.blush, draws["blush"])),
+                      liner=1.0 if bool(p.eyeliner) else 0.0)
     else:
         raise ValueError(f"unknown makeup look {look!r}")
     m1, m2 = makeup_masks(ctx.data, np.asarray(ctx.vertices), np.asarray(ctx.landmarks["ibug68"]),

@@ -32,12 +32,12 @@ import numpy as np
 from blender_scripts import materials as bmat
 from blender_scripts.assets import Rig
 from synth.appearance import skin_optics as so
-from synth.appearance.skin import DEFAULT_HAEMOGLOBIN
-from synth.appearance.skin_optics import DEFAULT_WRINKLE_DEPTH, WRINKLES, detail_weight, sharp_lobe
+from synth.appearance.skin_optics import WRINKLES, detail_weight, sharp_lobe
 from synth.appearance.pigment import pigment, shaft_darkness
 from synth.assets.fit.eyes import lid_margin
 from synth.assets.fit.groom import colour_of, head_frame
 from synth.assets.fit.masks import scalp_hair_area, skin_detail_mask
+from synth.assets.params import AssetPick, BeardParams
 from synth.dataset.segmentation import CLASSES
 
 
@@ -103,40 +103,42 @@ def stubble_factor(mat, seed: float, strength: float, mask, w: float):
     return _blend_mean(mat, tex, w, so.NOISE_FAC_MEAN, bmat.math_node(mat, "MULTIPLY", mask, strength))
 
 
-def build(ctx, entry: dict) -> Rig:
-    p = dict(entry.get("params") or {})
+def build(ctx, entry: AssetPick) -> Rig:
+    p = entry.params
     rng = ctx.rng("skin")
-    seed = float(p.get("detail_variant", rng.integers(64))) * 7.31
+    rng.integers(64)  # drawn, not used (the plan gives detail_variant): the draws after it stay aligned
+    seed = float(p.detail_variant) * 7.31
     stub_draw, stub_level = float(rng.random()), float(rng.uniform(0.1, 0.3))
     mat = ctx.materials[CLASSES["skin"]]
     nt = mat.node_tree
     V, lm = np.asarray(ctx.vertices), np.asarray(ctx.landmarks["ibug68"])
-    reach = ((((ctx.assets or {}).get("beard") or {}).get("params")) or {}).get("reach")  # the beard's cheek line
+    beard_entry, hair_entry = ctx.pick("beard"), ctx.pick("hair")
+    reach = (beard_entry.params if beard_entry is not None else BeardParams()).reach  # the beard's cheek line
     bmat.write_point_colour(ctx.head.data, "skin_mask", skin_detail_mask(ctx.data, V, lm, reach))
     attr = bmat.attribute(mat, "skin_mask")
     sep = nt.nodes.new("ShaderNodeSeparateColor")
     nt.links.new(attr.outputs["Color"], sep.inputs["Color"])
     cheeks, tzone, wzone, beard = sep.outputs[0], sep.outputs[1], sep.outputs[2], attr.outputs["Alpha"]
-    rec = {"id": entry.get("id")}
-    pore = float(p.get("pore_scale", 1.0))  # the base material builds the pores (materials.skin_material)
+    rec = {"id": entry.id}
+    pore = float(p.pore_scale)  # the base material builds the pores (materials.skin_material)
     # redness from blood volume
-    red = float(np.clip(float(p.get("haemoglobin", DEFAULT_HAEMOGLOBIN)) / 0.07, 0, 1))
+    red = float(np.clip(float(p.haemoglobin) / 0.07, 0, 1))
     bmat.layer_over(mat, "Base Color", (0.75, 0.3, 0.3), bmat.math_node(mat, "MULTIPLY", cheeks, 0.35 * red),
                     blend="MULTIPLY")
     # freckles: small cells, random per cell, thresholded by the amount
-    fr = float(p.get("freckles", 0.0))
+    fr = float(p.freckles)
     w_fr = so.spot_weight(ctx.pixel_m, so.FRECKLES)
     if fr > 0.01:
         f = spot_factor(mat, so.FRECKLES, seed, 0.6 * fr, bmat.math_node(mat, "MULTIPLY", cheeks, 0.8), w_fr)
         bmat.layer_over(mat, "Base Color", (0.55, 0.35, 0.22), f, blend="MULTIPLY")
-    ag = float(p.get("age_spots", 0.0))
+    ag = float(p.age_spots)
     w_ag = so.spot_weight(ctx.pixel_m, so.AGE_SPOTS)
     if ag > 0.01:
         f = spot_factor(mat, so.AGE_SPOTS, seed + 3, 0.25 * ag, bmat.math_node(mat, "MAXIMUM", cheeks, wzone), w_ag)
         bmat.layer_over(mat, "Base Color", (0.45, 0.3, 0.2), f, blend="MULTIPLY")
-    oil = float(p.get("oiliness", 0.0))
+    oil = float(p.oiliness)
     if oil > 0.0:  # an oilier T-zone: both lobes sharper, the sharp one stronger
-        base_r = float(p.get("roughness", 0.45))
+        base_r = float(p.roughness)
         tz = bmat.math_node(mat, "MULTIPLY", tzone, 0.9)
         bmat.layer_over(mat, "Roughness", base_r * (1 - 0.6 * oil), tz)
         bmat.layer_over(mat, "Coat Weight", sharp_lobe(base_r, min(1.0, 2.0 * oil))["Coat Weight"], tz)
@@ -146,7 +148,7 @@ def build(ctx, entry: dict) -> Rig:
     nt.links.new(bmat.attribute(mat, "tear_line").outputs["Vector"], tear.inputs[0])
     for name, value in (("Coat Weight", 1.0), ("Coat Roughness", 0.03), ("Roughness", 0.15)):
         bmat.layer_over(mat, name, value, tear.outputs["X"])
-    wd = float(p.get("wrinkle_depth", DEFAULT_WRINKLE_DEPTH))
+    wd = float(p.wrinkle_depth)
     w_wr = 1.0 if ctx.pixel_m is None else detail_weight(ctx.pixel_m, WRINKLES[0])
     if wd > 0.01 and w_wr > 0.0:
         wave = _tex_node(mat, "ShaderNodeTexWave", 90.0, seed)
@@ -155,14 +157,13 @@ def build(ctx, entry: dict) -> Rig:
         wave.inputs["Distortion"].default_value = 3.0
         h = bmat.math_node(mat, "MULTIPLY", wave.outputs["Fac"], wzone)
         bmat.chain_bump(mat, h, 0.35 * wd * w_wr, 0.0006)
-    beard_entry = (ctx.assets or {}).get("beard")
-    beard_id = (beard_entry or {}).get("id")
+    beard_id = beard_entry.id if beard_entry is not None else None
     # the shadow of shaved or short beard hair shows as far as the hair is darker than the skin
-    dark = shaft_darkness(pigment(colour_of(beard_entry or {}, ctx)))
+    dark = shaft_darkness(pigment(colour_of(beard_entry, ctx)))
     stubble = 0.0
     if beard_id == "stubble":
         stubble = STUBBLE_SHADOW * dark
-    elif not beard_entry and stub_draw < 0.5:
+    elif beard_entry is None and stub_draw < 0.5:
         stubble = stub_level * dark
     w_st = 1.0 if ctx.pixel_m is None else detail_weight(ctx.pixel_m, so.STUBBLE_PERIOD_M)
     if stubble > 0:
@@ -172,11 +173,10 @@ def build(ctx, entry: dict) -> Rig:
     # the scalp shadow: under scalp hair the skin between the strands reads as the hair's colour
     # (a render carries far fewer strands than a head has hairs, and bare pink scalp showed
     # through them from above); as dark as the hair is, where it grows (receding hairline kept)
-    hair_entry = (ctx.assets or {}).get("hair")
     scalp = 0.0
-    if hair_entry:
+    if hair_entry is not None:
         scalp = SCALP_SHADOW * shaft_darkness(pigment(colour_of(hair_entry, ctx)))
-        rec_h = float((hair_entry.get("params") or {}).get("hairline_recession", 0.0))
+        rec_h = float(hair_entry.params.hairline_recession)
         area = scalp_hair_area(ctx.data, V, head_frame(ctx), rec_h)
         bmat.write_point_vector(ctx.head.data, "scalp_mask", np.repeat(area[:, None], 3, 1))
         sm = nt.nodes.new("ShaderNodeSeparateXYZ")

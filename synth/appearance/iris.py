@@ -30,7 +30,11 @@ a perfect reflector maps to (1, 1, 1) (the renderer's uniform white environment)
 
 from __future__ import annotations
 
+from typing import Mapping
+
 import numpy as np
+
+from synth.assets.params import IrisParams
 
 WAVELENGTHS = np.arange(380.0, 781.0, 10.0)
 
@@ -82,12 +86,12 @@ def iris_colour(melanin: float, stroma_scatter: float = 0.7) -> tuple[float, flo
     return float(rgb[0]), float(rgb[1]), float(rgb[2])
 
 
-def iris_palette(params: dict) -> dict[str, tuple[float, float, float]]:
+def iris_palette(params: IrisParams | Mapping) -> dict[str, tuple[float, float, float]]:
     """Colours the iris shader mixes: base, light fibres, dark crypts, inner (collarette)
-    zone, limbal ring. All from the same model at shifted melanin / scattering."""
-    m = float(params.get("melanin", 0.5))
-    s = float(params.get("stroma_scatter", 0.75 if m < 0.3 else 0.6))
-    het = float(params.get("central_heterochromia", 0.0))
+    zone, limbal ring. All from the same model at shifted melanin / scattering (``params``:
+    an iris pick's, :class:`synth.assets.params.IrisParams`, where the defaults live)."""
+    p = IrisParams.of("iris", params)
+    m, s, het = float(p.melanin), float(p.stroma_scatter), p.heterochromia
     base = iris_colour(m, s)
     light = iris_colour(max(0.0, m - 0.12), min(1.0, s + 0.15))
     dark = tuple(0.45 * c for c in iris_colour(min(1.0, m + 0.2), s))

@@ -124,15 +124,16 @@ def subpixel_roughness(roughness: float, unresolved: list[tuple[float, float]]) 
 
 
 def pixel_footprint_m(cameras, default_resolution: int | None = None) -> float:
-    """Metres one pixel covers on the face in the finest of ``cameras`` (frame-JSON camera
-    dicts: ``K``, ``world_to_camera``, ``target``): ``|camera centre - target| / f_x``. Without
-    cameras, a face of ``FACE_WIDTH_M`` filling ``FACE_FILL`` of ``default_resolution`` pixels."""
+    """Metres one pixel covers on the face in the finest of ``cameras`` (the plan's cameras,
+    :class:`synth.plan.records.Camera`: ``K``, ``world_to_camera``, ``target``):
+    ``|camera centre - target| / f_x``. Without cameras, a face of ``FACE_WIDTH_M`` filling
+    ``FACE_FILL`` of ``default_resolution`` pixels."""
     best = np.inf
     for c in cameras or ():
-        K = np.asarray(c["K"], np.float64)
-        w2c = np.asarray(c["world_to_camera"], np.float64)
+        K = np.asarray(c.K, np.float64)
+        w2c = np.asarray(c.world_to_camera, np.float64)
         centre = -w2c[:3, :3].T @ w2c[:3, 3]
-        best = min(best, float(np.linalg.norm(centre - np.asarray(c["target"], np.float64)) / K[0, 0]))
+        best = min(best, float(np.linalg.norm(centre - np.asarray(c.target, np.float64)) / K[0, 0]))
     if np.isfinite(best):
         return best
     if not default_resolution:

@@ -26,6 +26,7 @@ from typing import Any
 
 from synth.assets import packs
 from synth.assets.classes import NAMES, PROCEDURAL_GENERATORS
+from synth.assets.params import PARAMS, UNKNOWN_PARAMETER_FIX
 from synth.errors import SynthError
 from synth.io import sha256_bytes
 
@@ -149,10 +150,13 @@ def parameter_defects(asset: dict, max_parameters: int = MAX_PARAMETERS) -> list
         module, func = check.split(":")
         out.extend(getattr(importlib.import_module(module), func)(asset))
     params = asset.get("parameters", {}) or {}
+    known = PARAMS[asset["class"]].names() if asset.get("class") in PARAMS else None
     if len(params) > max_parameters:
         out.append((f"asset '{asset.get('id')}' has more than {max_parameters} parameters", "",
                     "split it into several assets"))
     for name, spec in params.items():
+        if known is not None and name not in known:
+            out.append((f"parameter '{name}' is not one the {asset['class']} rig reads", name, UNKNOWN_PARAMETER_FIX))
         if not isinstance(spec, dict):
             continue  # the schema reports it
         if "range" in spec and len(spec["range"]) == 2 and spec["range"][0] > spec["range"][1]:

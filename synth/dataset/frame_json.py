@@ -13,7 +13,9 @@ import functools
 import itertools
 import json
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Protocol
 
 import numpy as np
 import orjson
@@ -194,47 +196,95 @@ def _floats(a) -> list:
     return np.asarray(a, dtype=np.float64).tolist()
 
 
-def build_frame_record(planned_frame: Mapping, *, shard_id: str, width: int, height: int, model_info: Mapping,
-                       identity_code, planned_expression: Mapping, expression_code, joint_rotations: Mapping,
-                       head_pose, landmarks_3d, landmarks_2d, landmarks_visible, assets: Mapping,
-                       skin: Mapping, lighting: Mapping, render_preset: str | None,
-                       render_settings: Mapping, software: Mapping) -> dict:
-    """The frame JSON of one rendered view, in the documented key order (docs/frame-format.md).
+class PlannedFrame(Protocol):
+    """The plan's frame (:class:`synth.plan.records.Frame`; the dataset layer names only what
+    it reads)."""
 
-    - ``planned_frame``: the plan's frame (``frame_id``, the three indices, ``seed``, ``camera``),
-      copied first and unchanged;
-    - ``model_info``: the model's ``name`` and ``sha256``; ``identity_code`` and
-      ``expression_code``: the codes the head was evaluated with; ``planned_expression``: the
-      plan's expression (its ``preset``, ``kind`` and ``pose`` are recorded);
-      ``joint_rotations``: joint name -> axis-angle (3,), in the model's joint order;
-      ``head_pose``: the head joint's 4x4 world transform;
-    - ``landmarks_3d`` (68, 3) world metres, ``landmarks_2d`` (68, 2) pixels,
-      ``landmarks_visible`` (68,) booleans;
-    - ``assets``, ``skin``, ``lighting``: the records of the identity's scene;
-    - ``render_preset`` and ``render_settings`` (the effective engine settings) with the image
-      size and the planned seed make ``render``; ``software`` the versions.
+    frame_id: str
+    seed: int
+
+    def to_json(self) -> dict[str, Any]: ...
+
+
+class PlannedExpression(Protocol):
+    """The plan's expression (:class:`synth.plan.records.Expression`): what the frame records of it."""
+
+    kind: str
+    preset: str | None
+    pose: Mapping[str, float]
+
+
+@dataclass(frozen=True)
+class ModelEvaluation:
+    """The head model as evaluated for one frame: ``info`` (the model's ``name`` and
+    ``sha256``), the identity and expression codes it was evaluated with, the plan's
+    ``expression`` (its ``preset``, ``kind`` and ``pose`` are recorded), ``joint_rotations``
+    (joint name -> axis-angle (3,), in the model's joint order), ``head_pose`` (the head
+    joint's 4x4 world transform) and the landmarks: (68, 3) world metres, (68, 2) pixels,
+    (68,) booleans. Arrays of any float dtype; they are recorded as float64 values."""
+
+    info: Mapping[str, str]
+    identity_code: np.ndarray
+    expression: PlannedExpression
+    expression_code: np.ndarray
+    joint_rotations: Mapping[str, np.ndarray]
+    head_pose: np.ndarray
+    landmarks_3d: np.ndarray
+    landmarks_2d: np.ndarray
+    landmarks_visible: np.ndarray
+
+
+@dataclass(frozen=True)
+class SceneRecord:
+    """The identity's scene as the frame JSON records it: ``assets`` (class -> the plan's pick
+    with its ``build``, every class), ``skin`` (the plan's parameters and the albedos) and
+    ``lighting`` (the plan's lighting record of the frame's environment)."""
+
+    assets: Mapping[str, Any]
+    skin: Mapping[str, Any]
+    lighting: Mapping[str, Any]
+
+
+@dataclass(frozen=True)
+class RenderRecord:
+    """How a frame was rendered: its shard, the image size, the render preset and the
+    effective engine settings (``blender_scripts.scene.configure_render``), the software versions."""
+
+    shard_id: str
+    width: int
+    height: int
+    preset: str | None
+    settings: Mapping[str, Any]
+    software: Mapping[str, str]
+
+
+def build_frame_record(frame: PlannedFrame, model: ModelEvaluation, scene: SceneRecord, render: RenderRecord) -> dict:
+    """The frame JSON of one rendered view, in the documented key order (docs/frame-format.md):
+    the plan's ``frame`` first and unchanged, then the shard, the image, the model block, the
+    landmarks, the scene, ``render`` (the preset, the image size, the planned seed and the
+    engine settings) and the software versions.
 
     Arrays become plain lists (float64 values, bit for bit); nothing is validated here
     (:func:`write_frame_json` and ``StagingShard.write_frame`` do that).
     """
-    record = dict(planned_frame)
-    record["shard_id"] = shard_id
-    record["image"] = {"width": width, "height": height, "file": frame_files(planned_frame["frame_id"])[0],
+    record = jsonable(frame.to_json())
+    e = model.expression
+    record["shard_id"] = render.shard_id
+    record["image"] = {"width": render.width, "height": render.height, "file": frame_files(frame.frame_id)[0],
                        "layers": list(CHANNELS)}
-    record["model"] = {**model_info, "identity": _floats(identity_code), "expression": _floats(expression_code),
-                       "expression_preset": planned_expression.get("preset"),
-                       "expression_kind": planned_expression.get("kind"),
-                       "joint_rotations": {name: _floats(r) for name, r in joint_rotations.items()},
-                       "pose": planned_expression.get("pose"), "head_pose": _floats(head_pose)}
-    record["landmarks_3d"] = _floats(landmarks_3d)
-    record["landmarks_2d"] = _floats(landmarks_2d)
-    record["landmarks_visible"] = np.asarray(landmarks_visible, dtype=bool).tolist()
-    record["assets"] = assets
-    record["skin"] = skin
-    record["lighting"] = lighting
-    record["render"] = {"preset": render_preset, "resolution": [width, height], "seed": int(planned_frame["seed"]),
-                        **render_settings}
-    record["software"] = software
+    record["model"] = {**model.info, "identity": _floats(model.identity_code),
+                       "expression": _floats(model.expression_code), "expression_preset": e.preset, "expression_kind": e.kind,
+                       "joint_rotations": {name: _floats(r) for name, r in model.joint_rotations.items()},
+                       "pose": dict(e.pose), "head_pose": _floats(model.head_pose)}
+    record["landmarks_3d"] = _floats(model.landmarks_3d)
+    record["landmarks_2d"] = _floats(model.landmarks_2d)
+    record["landmarks_visible"] = np.asarray(model.landmarks_visible, dtype=bool).tolist()
+    record["assets"] = jsonable(scene.assets)
+    record["skin"] = jsonable(scene.skin)
+    record["lighting"] = jsonable(scene.lighting)
+    record["render"] = {"preset": render.preset, "resolution": [render.width, render.height], "seed": int(frame.seed),
+                        **render.settings}
+    record["software"] = render.software
     return record
 
 

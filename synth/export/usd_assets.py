@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from synth.assets.classes import CLASSES, RECORD_ORDER, rig_rng
+from synth.assets.params import AssetPick
 from synth.dataset.segmentation import CLASSES as SEGMENTATION
 
 
@@ -42,8 +43,9 @@ class HeadPose:
     landmarks: dict[str, np.ndarray]
 
 
-def _entry(record: dict) -> dict:
-    return {k: v for k, v in record.items() if k != "build"}
+def _entry(cls: str, record: dict) -> AssetPick:
+    """The plan's pick of a frame JSON's asset record (without what the rig built)."""
+    return AssetPick.from_json(cls, {k: v for k, v in record.items() if k != "build"}, f"frame JSON assets.{cls}")
 
 
 def _shell(module: str, cls: str, data, rest: HeadPose, poses: list[HeadPose], record: dict, run_seed: int,
@@ -57,7 +59,7 @@ def _shell(module: str, cls: str, data, rest: HeadPose, poses: list[HeadPose], r
     fit = importlib.import_module(f"synth.assets.fit.{module}")
     make, CLEARANCE = getattr(fit, f"{module}_shell"), fit.CLEARANCE
     body = Body(rest.vertices, data.triangles, data.regions, rest.landmarks["ibug68"])
-    fitted = fit_shell(body, make(body, _entry(record), rig_rng(run_seed, identity, cls)), CLEARANCE)
+    fitted = fit_shell(body, make(body, _entry(cls, record), rig_rng(run_seed, identity, cls)), CLEARANCE)
     built = record.get("build") or {}
     for k in ("vertices", "faces"):
         if k in built and built[k] != fitted.info.get(k):
@@ -108,8 +110,8 @@ def _glasses(cls: str, data, rest: HeadPose, poses: list[HeadPose], record: dict
     from synth.assets.fit.glasses.solve import FRAME_PARTS, fit_glasses
     from synth.assets.fit.glasses.spec import frame_spec
 
-    entry = _entry(record)
-    spec = frame_spec(str(entry["id"]), dict(entry.get("params") or {}), rig_rng(run_seed, identity, "glasses"))
+    entry = _entry(cls, record)
+    spec = frame_spec(entry.id, entry.params, rig_rng(run_seed, identity, "glasses"))
     front = build_front(spec)
     recorded = (record.get("build") or {}).get("pose")
     rebuilt = fit_glasses(rest.vertices, data.triangles, data.regions, rest.landmarks, spec, front=front).info["pose"]

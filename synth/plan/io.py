@@ -249,6 +249,12 @@ class Plan:
             validate(spec, "shard", str(p))
         return spec
 
+    def shard_spec(self, shard_id: str):
+        """One shard spec as typed records (:class:`synth.plan.records.ShardSpec`), checked."""
+        from synth.plan.records import ShardSpec
+
+        return ShardSpec.from_json(self.shard(shard_id), str(self.root / self._shards[shard_id]["file"]))
+
     def verify(self) -> None:
         """Check the whole plan before any worker starts: every shard spec has the sha256
         plan.json lists, the model file is the one planned with, the HDR maps exist."""

@@ -18,6 +18,7 @@ import numpy as np
 from synth import seeds
 from synth.assets.catalogue import Catalogue, load_catalogue
 from synth.assets.classes import NAMES, check_model
+from synth.assets.params import assets_from_json
 from synth.config import Config
 from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
 from synth.dataset.layout import frame_keys, shard_name
@@ -260,10 +261,12 @@ class ShardSpecs:
                         rec["environments"] = [arr.lighting[n], *arr.environments[p]]
                     rec["frames"] = orjson.Fragment(next(frames))
                     exprs.append(rec)
-                asset = arr.assets[n]
+                picks = assets_from_json(arr.assets[n], f"identity {int(arr.identity[n])} assets")
+                skin = picks.get("skin")
                 idents.append({"identity_index": int(arr.identity[n]), "identity_code": self.id_codes[n],
-                               "target": self.targets[n], "assets": asset,
-                               "skin": dict(asset["skin"]["params"]) if asset.get("skin") else None,
+                               "target": self.targets[n],
+                               "assets": {c: None if e is None else e.to_json() for c, e in picks.items()},
+                               "skin": None if skin is None else skin.params.to_json(),
                                "lighting": arr.lighting[n], "expressions": exprs})
             sid = shard_name(int(arr.identity[s0]) // S)
             yield sid, {"format": "synth-plan-shard", "format_version": 1, "shard_id": sid, "run_seed": self.seed,

@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 
 from synth import seeds
-from synth.appearance.skin import DEFAULT_HAEMOGLOBIN, ITA_CATEGORIES, melanin_for_ita
+from synth.appearance.skin import ITA_CATEGORIES, melanin_for_ita
+from synth.assets.params import SkinParams
 
 
 def category_intervals(limits_deg) -> np.ndarray:
@@ -50,7 +51,7 @@ def apply_skin_tones(seed: int, identities, assets: list[dict[str, Any]], skin_c
         return
     u = seeds.uniforms(seed, seeds.Stream.SKIN, ids[rows], None, None, n=1)[..., 0]
     ita = ita_from_uniform(u, skin_cfg.ita_weights, skin_cfg.ita_limits_deg)
-    hb = np.array([float(assets[n]["skin"]["params"].get("haemoglobin", DEFAULT_HAEMOGLOBIN)) for n in rows])
+    hb = np.array([float(assets[n]["skin"]["params"].get("haemoglobin", SkinParams.haemoglobin)) for n in rows])
     mel = melanin_for_ita(ita, hb)
     for j, n in enumerate(rows):
         p = assets[n]["skin"]["params"]

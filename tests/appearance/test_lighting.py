@@ -9,6 +9,7 @@ import pytest
 
 from synth.appearance.lighting import FRONT, Studio, front_normals, irradiance, map_directions, studio_map
 from synth.conventions import spherical_offset
+from synth.plan.records import RenderSettings
 from tests.support import asset_scene
 
 
@@ -108,7 +109,7 @@ def test_a_diffuse_sphere_shows_the_predicted_irradiance(tmp_path):
     me = new_triangle_mesh("sphere", V, F)
     me.shade_smooth()
     link_object("sphere", me, [mat])
-    scene.configure_render({"samples": 64, "denoise": False, "device": "cpu", "max_bounces": 4}, 48, 48)
+    scene.configure_render(RenderSettings(samples=64, denoise=False, device="cpu", max_bounces=4), 48, 48)
     env = sample_lighting(0, 0, load_config(overrides=["lighting.studio_rotation_deg=[40,40]"]).lighting)
     scene.studio_environment(env)
     L = studio_map(Studio.from_record(env))

@@ -39,14 +39,15 @@ def test_subpixel_roughness():
 
 def test_pixel_footprint_from_cameras():
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
+    from synth.plan.records import Camera
 
     target = np.array([0.0, -0.1, 0.7])
     cams = []
     for radius, res in ((1.0, 256), (0.5, 256), (1.0, 512)):
         K = intrinsics(res, res, 24.0)
-        w2c = invert_rigid(orbit_camera_to_world(30.0, 10.0, radius, target))
-        cams.append({"K": K.tolist(), "world_to_camera": w2c.tolist(), "target": target.tolist()})
-    fx = [np.asarray(c["K"])[0, 0] for c in cams]
+        c2w = orbit_camera_to_world(30.0, 10.0, radius, target)
+        cams.append(Camera(K, invert_rigid(c2w), c2w, res, res, 0.05, 10.0, 30.0, 10.0, radius, tuple(target)))
+    fx = [np.asarray(c.K)[0, 0] for c in cams]
     got = so.pixel_footprint_m(cams)
     assert got == pytest.approx(min(1.0 / fx[0], 0.5 / fx[1], 1.0 / fx[2]))
     assert so.pixel_footprint_m([], 256) == pytest.approx(0.2 / (0.6 * 256))

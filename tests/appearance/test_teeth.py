@@ -36,7 +36,7 @@ def test_teeth_material_uses_the_measured_colour():
     from blender_scripts import scene as bscene
 
     bscene.reset()
-    mats = bmat.head_materials({}, (0.5, 0.3, 0.2))
+    mats = bmat.head_materials(None, (0.5, 0.3, 0.2))
     from synth.dataset.segmentation import CLASSES
 
     bsdf = bmat.principled(mats[CLASSES["teeth"]])

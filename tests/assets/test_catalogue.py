@@ -151,6 +151,17 @@ def test_glasses_values_the_rig_would_refuse(manifest, fake_rigs):
         load_catalogue(manifest)
 
 
+def test_a_parameter_no_rig_reads_is_a_defect(manifest, fake_rigs):
+    """Each class's parameters are its record's fields (synth/assets/params.py): a name the rig
+    does not read is reported, and refused when the catalogue loads (plan time)."""
+    with (manifest / "skin.toml").open("a") as f:
+        f.write(_asset("glowing_skin", "skin", "skin_shader", "glow = { range = [0.0, 1.0] }"))
+    _expect(_defects(manifest, fake_rigs), [("parameter 'glow' is not one the skin rig reads",
+                                              "asset glowing_skin parameter glow", "synth/assets/params.py")])
+    with pytest.raises(SynthError, match="parameter 'glow'"):
+        load_catalogue(manifest)
+
+
 def test_missing_class_unknown_file_rule_tags_and_schema(manifest, fake_rigs):
     (manifest / "iris.toml").unlink()
     (manifest / "wigs.toml").write_text('class = "hair"\n')

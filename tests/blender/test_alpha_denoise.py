@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from synth.plan.records import RenderSettings
 from tests.support import asset_scene
 
 N = 48
@@ -18,7 +19,7 @@ def _render(tmp_path, samples: int, denoise: bool) -> dict:
     from blender_scripts import passes, scene
 
     scene.reset()
-    eff = scene.configure_render({"samples": samples, "denoise": denoise, "device": "cpu", "max_bounces": 2}, N, N)
+    eff = scene.configure_render(RenderSettings(samples=samples, denoise=denoise, device="cpu", max_bounces=2), N, N)
     scene.uniform_environment(1.0)
     bpy.ops.mesh.primitive_plane_add(size=1.0)
     plane = bpy.context.active_object

@@ -32,6 +32,7 @@ import numpy as np
 import pytest
 
 from synth.assets.classes import CLASSES, NAMES
+from synth.plan.records import RenderSettings
 
 bpy = pytest.importorskip("bpy")
 
@@ -77,7 +78,7 @@ def _render(ctx, tmp, target, radius, near=0.01):
     from blender_scripts import camera, passes, scene
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
 
-    scene.configure_render({"samples": SAMPLES, "denoise": False, "device": "cpu"}, SIZE, SIZE)
+    scene.configure_render(RenderSettings(samples=SAMPLES, denoise=False, device="cpu"), SIZE, SIZE)
     scene.uniform_environment(1.0)
     cam = bpy.data.objects.get("contract_cam") or camera.make_camera("contract_cam")
     w2c = invert_rigid(orbit_camera_to_world(0.0, 10.0, radius, np.asarray(target, np.float64)))

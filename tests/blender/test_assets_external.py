@@ -11,6 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from synth.assets.params import AssetPick
+from synth.plan.records import RenderSettings
+
 bpy = pytest.importorskip("bpy")
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
@@ -88,7 +91,7 @@ def built(pack_manifest, tmp_path_factory):
     pick = assets.sample_assets(5, 0, cat)["hair"]
     assert pick["id"] == "test_cap" and pick["pack"]["sha256"] == sha
     ctx, hm = asset_scene.head_context()
-    assert basset.rig_module("hair", pick).__name__ == "blender_scripts.assets.external"
+    assert basset.rig_module("hair", AssetPick.coerce("hair", pick)).__name__ == "blender_scripts.assets.external"
     rigs = basset.dress(ctx, {"hair": pick})
     return ctx, hm, rigs["hair"], pack, pick
 
@@ -138,7 +141,7 @@ def test_render_shows_the_segmentation_id(built, tmp_path):
 
     ctx, _, _, _, _ = built
     W = H = 64
-    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu"}, W, H)
+    scene.configure_render(RenderSettings(samples=4, denoise=False, device="cpu"), W, H)
     scene.uniform_environment(1.0)
     cam = camera.make_camera()
     target = ctx.joint_transforms[ctx.joint_index["head"]][:3, 3]
@@ -190,7 +193,7 @@ def test_tampered_pack_is_refused(pack_manifest, tmp_path):
     ctx, _ = asset_scene.head_context()
     n_libs = len(bpy.data.libraries)
     with pytest.raises(SynthError) as e:
-        external.build(ctx, pick)
+        external.build(ctx, AssetPick.coerce("hair", pick))
     msg = str(e.value)
     assert str(f2.resolve()) in msg and "checksum" in msg and "\n" not in msg
     assert len(bpy.data.libraries) == n_libs  # nothing was linked
@@ -198,4 +201,4 @@ def test_tampered_pack_is_refused(pack_manifest, tmp_path):
         catalogue.load_catalogue(d2)
     # a pick without its pack record (hand-made) is refused with a clear message
     with pytest.raises(SynthError, match="no pack record"):
-        external.build(ctx, {"id": "x", "generator": "blend:caps/cap.blend", "params": {}})
+        external.build(ctx, AssetPick.coerce("hair", {"id": "x", "generator": "blend:caps/cap.blend", "params": {}}))

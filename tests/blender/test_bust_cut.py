@@ -8,6 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from synth.assets.params import AssetPick
+from synth.plan.records import RenderSettings
+
 bpy = pytest.importorskip("bpy")
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
@@ -42,7 +45,7 @@ def test_no_skin_at_the_bust_cut(tmp_path, case, garment):
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
 
     ctx, _ = asset_scene.head_context(case)
-    rig = grig.build(ctx, {"id": garment, "params": {"colour_hsv": "navy"}})
+    rig = grig.build(ctx, AssetPick.of("garment", garment, {"colour_hsv": "navy"}))
     assert rig.record()["hidden_bust_polygons"] > 0
     if rig.record().get("torso_arms_skin"):  # a tank top's bare arms cover the arm stumps' cut: their
         mats = rig.objects[1].data.materials  # skin is not the bust's, so it gets a class of its own here
@@ -50,7 +53,7 @@ def test_no_skin_at_the_bust_cut(tmp_path, case, garment):
         mats[1].pass_index = ARMS_HERE
     V = ctx.vertices
     loop = cut_loop(ctx.data.triangles, V)
-    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu", "max_bounces": 4}, W, H)
+    scene.configure_render(RenderSettings(samples=4, denoise=False, device="cpu", max_bounces=4), W, H)
     scene.uniform_environment(1.0)
     cam = camera.make_camera()
     target = V[loop].mean(0) + np.array([0.0, 0.0, 0.05])
@@ -88,12 +91,12 @@ def test_body_leaves_the_frame_at_the_bottom(tmp_path, case, garment):
     from synth.dataset.segmentation import CLASSES
 
     ctx, _ = asset_scene.head_context(case)
-    rig = grig.build(ctx, {"id": garment, "params": {"colour_hsv": "navy", "drawstrings": True}})
+    rig = grig.build(ctx, AssetPick.of("garment", garment, {"colour_hsv": "navy", "drawstrings": True}))
     assert len(rig.objects) == 2 and rig.record()["torso_vertices"] > 0
     head = ctx.vertices[ctx.vertices[:, 2] > ctx.landmarks["ibug68"][8, 2] - 0.02]
     lo, hi = head.min(0), head.max(0)
     target, radius = 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo)) + 0.03
-    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu", "max_bounces": 4}, W, H)
+    scene.configure_render(RenderSettings(samples=4, denoise=False, device="cpu", max_bounces=4), W, H)
     scene.uniform_environment(1.0)
     cam = camera.make_camera()
     half = np.arctan(18.0 / 85.0)

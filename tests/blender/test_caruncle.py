@@ -8,6 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from synth.assets.params import AssetPick
+from synth.plan.records import RenderSettings
+
 bpy = pytest.importorskip("bpy")
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
@@ -27,8 +30,9 @@ def test_caruncle_is_pink_at_the_medial_canthus_and_stays_when_the_eye_turns(tmp
     from tests.support import asset_scene
 
     ctx, hm = asset_scene.head_context("neutral")
-    rig = iris.build(ctx, {"id": "blue", "params": {"melanin": 0.05, "stroma_scatter": 0.9, "pupil_dilation": 0.5}})
-    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu", "max_bounces": 4}, W, H)
+    rig = iris.build(ctx, AssetPick.of("iris", "blue", {"melanin": 0.05, "stroma_scatter": 0.9,
+                                                  "pupil_dilation": 0.5}))
+    scene.configure_render(RenderSettings(samples=4, denoise=False, device="cpu", max_bounces=4), W, H)
     scene.uniform_environment(1.0)
     eye = np.asarray(ctx.data.regions["eye_l"])
     c = ctx.rest_vertices[eye].mean(0)

@@ -7,6 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from synth.assets.params import AssetPick
+from synth.plan.records import RenderSettings
+
 bpy = pytest.importorskip("bpy")
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
@@ -21,7 +24,7 @@ def test_rig_mesh_is_the_fitted_shell():
 
     ctx, hm = asset_scene.head_context("id-3_brows", resolution=256, identity_index=2, run_seed=5)
     entry = {"id": "hoodie", "params": {"hood_up": True}}
-    rig = garment.build(ctx, entry)
+    rig = garment.build(ctx, AssetPick.coerce("garment", entry))
     body = Body.of(ctx)
     want = fit_shell(body, garment_shell(body, entry, ctx.rng("garment")), CLEARANCE)
     got, faces = asset_scene.evaluated_mesh(rig.objects[0])
@@ -47,7 +50,7 @@ def test_rig_mesh_is_the_fitted_shell():
     band = torso.hem_band(want)
     moved_t = torso.follow(Vt, want.P[band], moved[band])
     assert np.allclose(asset_scene.evaluated_mesh(rig.objects[1])[0], moved_t, atol=1e-6)
-    h = headwear.build(ctx, {"id": "baseball_cap", "params": {"brim_yaw_deg": 90.0}})
+    h = headwear.build(ctx, AssetPick.coerce("headwear", {"id": "baseball_cap", "params": {"brim_yaw_deg": 90.0}}))
     assert h.cls == "headwear" and len(h.objects) == 1 and h.record()["faces"] > 100
 
 
@@ -59,11 +62,11 @@ def test_render_shows_clothing_and_headwear(tmp_path):
     from synth.dataset.segmentation import CLASSES
 
     ctx, _ = asset_scene.head_context("neutral")
-    g = garment.build(ctx, {"id": "sweater", "params": {"colour_hsv": "navy"}})
-    h = headwear.build(ctx, {"id": "beanie", "params": {"colour_hsv": "red"}})
+    g = garment.build(ctx, AssetPick.coerce("garment", {"id": "sweater", "params": {"colour_hsv": "navy"}}))
+    h = headwear.build(ctx, AssetPick.coerce("headwear", {"id": "beanie", "params": {"colour_hsv": "red"}}))
     assert all(m.pass_index == CLASSES["clothing"] for m in g.objects[0].data.materials)
     assert all(m.pass_index == CLASSES["headwear"] for m in h.objects[0].data.materials)
-    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu"}, 48, 64)
+    scene.configure_render(RenderSettings(samples=4, denoise=False, device="cpu"), 48, 64)
     scene.uniform_environment(1.0)
     cam = camera.make_camera()
     lm = ctx.landmarks["ibug68"]
@@ -127,7 +130,7 @@ def test_sleeveless_garments_have_bare_arms(tmp_path, garment_id, bare):
     from synth.dataset.segmentation import CLASSES
 
     ctx, _ = asset_scene.head_context("neutral")
-    g = garment.build(ctx, {"id": garment_id, "params": {"colour_hsv": "navy"}})
+    g = garment.build(ctx, AssetPick.coerce("garment", {"id": garment_id, "params": {"colour_hsv": "navy"}}))
     torso_ob = g.objects[1]
     mats = list(torso_ob.data.materials)
     slots = np.zeros(len(torso_ob.data.polygons), np.int64)
@@ -139,7 +142,7 @@ def test_sleeveless_garments_have_bare_arms(tmp_path, garment_id, bare):
         assert 0 < (slots == 1).sum() < len(slots)  # the arms' faces, not the prism's
     else:
         assert "torso_arms_skin" not in g.record() and len(mats) == 1 and not slots.any()
-    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu"}, 64, 64)
+    scene.configure_render(RenderSettings(samples=4, denoise=False, device="cpu"), 64, 64)
     scene.uniform_environment(1.0)
     cam = camera.make_camera()
     z = min(a.z_base for a in g.arms) - 0.08

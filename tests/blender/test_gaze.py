@@ -34,6 +34,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from synth.assets.params import AssetPick
+from synth.plan.records import RenderSettings
+
 bpy = pytest.importorskip("bpy")
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
@@ -105,8 +108,8 @@ def test_pupil_in_the_pixels_follows_the_planned_gaze(tmp_path):
     from synth.plan.expressions import Expressions
 
     ctx, hm = asset_scene.head_context("neutral")
-    rig = iris.build(ctx, {"id": "blue", "params": {"melanin": 0.05, "stroma_scatter": 0.9, "limbal_ring": 0.5,
-                                                     "pupil_dilation": 0.5}})
+    rig = iris.build(ctx, AssetPick.of("iris", "blue", {"melanin": 0.05, "stroma_scatter": 0.9, "limbal_ring": 0.5,
+                                                        "pupil_dilation": 0.5}))
     c, D = _entrance_pupil_distance(ctx)
     _hide(ctx.materials[CLASSES["skin"]])
     n = len(GAZES)
@@ -114,7 +117,7 @@ def test_pupil_in_the_pixels_follows_the_planned_gaze(tmp_path):
     z = np.zeros(n)
     ex = Expressions(np.zeros((n, hm.data.expression_dims)), z.astype(int), z.astype(int) - 1, z, z, yaw, pitch, verg)
     rot_planned = ex.joint_rotations()
-    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu", "max_bounces": 4}, W, H)
+    scene.configure_render(RenderSettings(samples=4, denoise=False, device="cpu", max_bounces=4), W, H)
     scene.uniform_environment(1.0)
     cam = camera.make_camera()
     K = intrinsics(W, H, 8.0, (0.0, 0.0))

@@ -12,6 +12,8 @@ import pytest
 from synth.assets.classes import CLASSES
 from synth.assets.fit.glasses.solve import FRAME_PARTS, fit_glasses
 from synth.assets.fit.glasses.spec import frame_spec
+from synth.assets.params import AssetPick
+from synth.plan.records import RenderSettings
 from tests.support import asset_scene
 
 pytest.importorskip("bpy")
@@ -25,7 +27,7 @@ def test_glasses_rig_meshes_are_the_fit():
     mod = importlib.import_module("blender_scripts.assets.glasses")
     ctx, hm = asset_scene.head_context("id-3_jaw", identity_index=4, run_seed=2)
     entry = {"id": "browline", "params": {"frame_colour": "tortoise"}}
-    rig = mod.build(ctx, entry)
+    rig = mod.build(ctx, AssetPick.coerce("glasses", entry))
     spec = frame_spec("browline", entry["params"], ctx.rng("glasses"))
     for stage in ("build", "update"):
         if stage == "update":
@@ -47,7 +49,7 @@ def test_glasses_rig_deterministic():
     out = []
     for _ in range(2):
         ctx, _ = asset_scene.head_context("neutral", identity_index=3, run_seed=11)
-        rig = mod.build(ctx, {"id": "cat_eye", "params": {"wing_lift": 0.6}})
+        rig = mod.build(ctx, AssetPick.coerce("glasses", {"id": "cat_eye", "params": {"wing_lift": 0.6}}))
         out.append((asset_scene.evaluated_mesh(rig.objects[0])[0], rig.record()))
     np.testing.assert_array_equal(out[0][0], out[1][0])
     assert out[0][1] == out[1][1]
@@ -75,7 +77,7 @@ def _lens_scene(style: str, res: int, params: dict | None = None):
     y = float(front.lens_V[:, 1].max()) + 0.02
     link_object("wall", new_triangle_mesh("wall", np.array([[-1, y, -1], [1, y, -1], [1, y, 1], [-1, y, 1.0]]),
                                           np.array([[0, 2, 1], [0, 3, 2]])), [wall])
-    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu", "max_bounces": 8}, res, res)
+    scene.configure_render(RenderSettings(samples=4, denoise=False, device="cpu", max_bounces=8), res, res)
     scene.uniform_environment(1.0)
     return front, camera.make_camera()
 

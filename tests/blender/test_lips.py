@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from synth.plan.records import RenderSettings
+
 bpy = pytest.importorskip("bpy")
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
@@ -36,7 +38,7 @@ def test_lips_are_redder_than_the_skin_around_them(tmp_path):
     ctx, hm = asset_scene.head_context("neutral")
     hb = 0.015
     mel = float(melanin_for_ita(np.array([45.0]), np.array([hb]))[0])  # light skin
-    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu", "max_bounces": 4}, W, H)
+    scene.configure_render(RenderSettings(samples=4, denoise=False, device="cpu", max_bounces=4), W, H)
     scene.uniform_environment(1.0)
     d, V = ctx.data, ctx.vertices
     lm = ctx.landmarks["ibug68"]
@@ -65,7 +67,7 @@ def test_lips_are_redder_than_the_skin_around_them(tmp_path):
 
     out = {}
     for name, lip in (("with", lip_albedo(mel, hb)), ("without", None)):
-        slot.material = bmat.skin_material(skin_albedo(mel, hb), {}, None, lip)
+        slot.material = bmat.skin_material(skin_albedo(mel, hb), None, None, lip)
         r = passes.render_view(tmp_path, 1)
         pl, ps = pixels(lips, r), pixels(near, r)
         assert len(pl) >= 15 and len(ps) >= 15, (len(pl), len(ps))

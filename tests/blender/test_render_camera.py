@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from synth.plan.records import RenderSettings
+
 bpy = pytest.importorskip("bpy")
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
@@ -23,9 +25,9 @@ def rendered(tmp_path_factory):
     hm = HeadModel(m)
     scene.reset()
     W, H = 64, 48
-    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu"}, W, H)
+    scene.configure_render(RenderSettings(samples=4, denoise=False, device="cpu"), W, H)
     scene.uniform_environment(1.0)
-    mats = materials.head_materials({}, skin_albedo(0.05, 0.015))
+    mats = materials.head_materials(None, skin_albedo(0.05, 0.015))
     ev = hm.evaluate(np.zeros(m.identity_dims), np.zeros(m.expression_dims))
     head.build_head_object(m, ev.vertices[0], mats)
     cam = camera.make_camera()

@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from synth.assets.params import AssetPick
+from synth.plan.records import RenderSettings
 from tests.support import asset_scene
 
 MANIFEST = Path(__file__).resolve().parents[2] / "assets_manifest"
@@ -28,7 +30,7 @@ def _render(ctx, tmp, target=None, radius: float = 0.3, fov_deg: float = 30.0):
     from blender_scripts import camera, passes, scene
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
 
-    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu", "max_bounces": 4}, W, H)
+    scene.configure_render(RenderSettings(samples=4, denoise=False, device="cpu", max_bounces=4), W, H)
     scene.uniform_environment(1.0)
     lm = ctx.landmarks["ibug68"]
     if target is None:
@@ -163,7 +165,7 @@ def test_every_shader_layer_id_builds(tmp_path):
         mod = importlib.import_module(f"blender_scripts.assets.{CLASSES[cls].rig}")
         for i in _ids(cls):
             params = {"freckles": 0.5, "age_spots": 0.2, "oiliness": 0.4, "wrinkle_depth": 0.8} if cls == "skin" else {}
-            rig = mod.build(ctx, {"id": i, "params": params})
+            rig = mod.build(ctx, AssetPick.coerce(cls, {"id": i, "params": params}))
             recs.append(rig.record())
     assert len(recs) == len(_ids("skin")) + len(_ids("iris")) + len(_ids("makeup"))
     for name in ("makeup_mask", "makeup_mask2", "iris_coord", "skin_mask"):
@@ -178,7 +180,7 @@ def test_every_shader_layer_id_builds(tmp_path):
     shadow = {}
     for colour in ("black", "blonde"):
         ctx2.assets = {"beard": {"id": "stubble", "params": {"colour": colour}}}
-        shadow[colour] = sd.build(ctx2, {"id": "procedural_skin", "params": {}}).record()["stubble_shadow"]
+        shadow[colour] = sd.build(ctx2, AssetPick.of("skin", "procedural_skin")).record()["stubble_shadow"]
         assert shadow[colour] == pytest.approx(sd.STUBBLE_SHADOW * shaft_darkness(pigment(colour)), abs=1e-4)
     assert shadow["black"] > 3 * shadow["blonde"] > 0  # fair stubble barely shows
     # the scalp shadow under scalp hair, as dark as the hair; none without hair
@@ -187,7 +189,7 @@ def test_every_shader_layer_id_builds(tmp_path):
         ctx2.assets = {"hair": {"id": "short_straight", "params": {"colour": colour}}} if colour else {}
         if "scalp_mask" in ctx2.head.data.attributes:
             ctx2.head.data.attributes.remove(ctx2.head.data.attributes["scalp_mask"])
-        scalp[colour] = sd.build(ctx2, {"id": "procedural_skin", "params": {}}).record()["scalp_shadow"]
+        scalp[colour] = sd.build(ctx2, AssetPick.of("skin", "procedural_skin")).record()["scalp_shadow"]
         assert ("scalp_mask" in ctx2.head.data.attributes) == bool(colour)
         if colour:
             assert scalp[colour] == pytest.approx(sd.SCALP_SHADOW * shaft_darkness(pigment(colour)), abs=1e-4)

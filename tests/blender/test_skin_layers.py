@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from synth.appearance import skin_optics as so
+from synth.plan.records import RenderSettings
 from tests.support import asset_scene
 
 N = 128  # pixels across; 16 samples each: 262,144 point samples of the pattern
@@ -21,8 +22,8 @@ def _plane_mean(tmp_path, size_m: float, build_factor) -> tuple[float, float]:
     from blender_scripts import passes, scene
 
     scene.reset()
-    scene.configure_render({"samples": 16, "denoise": False, "device": "cpu", "max_bounces": 0,
-                            "filter_width": 0.01}, N, N)
+    scene.configure_render(RenderSettings(samples=16, denoise=False, device="cpu", max_bounces=0,
+                            filter_width=0.01), N, N)
     bpy.ops.mesh.primitive_plane_add(size=size_m)  # object coordinates = metres, as on the head
     plane = bpy.context.active_object
     mat, em = asset_scene.single_shader_material("layer", "ShaderNodeEmission", {"Color": (1.0, 1.0, 1.0, 1.0)})

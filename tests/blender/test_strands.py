@@ -12,6 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from synth.assets.params import AssetPick
+from synth.plan.records import RenderSettings
+
 bpy = pytest.importorskip("bpy")
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
@@ -48,7 +51,7 @@ def _rig(cls):
 
 
 def _entry(cls, sid, params):
-    return {"id": sid, "generator": f"procedural:{cls}", "params": dict(params)}
+    return AssetPick.of(cls, sid, dict(params))
 
 
 def _thin_wedge(half_width: float = 0.2, scale: float = 0.002, length: float = 0.01):
@@ -178,7 +181,7 @@ def test_render_shows_strand_classes(tmp_path):
 
     ctx, _ = asset_scene.head_context("neutral", resolution=64)
     W = H = 64
-    scene.configure_render({"samples": 4, "denoise": False, "device": "cpu"}, W, H)
+    scene.configure_render(RenderSettings(samples=4, denoise=False, device="cpu"), W, H)
     scene.uniform_environment(1.0)
     rigs = dress(ctx, {"hair": _entry("hair", "short_straight", {"length_m": 0.06, "parting": "left", "colour": "red"}),
                        "beard": _entry("beard", "short_full", {"length_m": 0.015, "colour": "black"}),

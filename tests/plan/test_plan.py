@@ -292,7 +292,7 @@ def test_asset_sampling_respects_rules_weights_and_ranges():
     ('class = "hair"\n[[assets]]\nid = "x"\nclass = "hair"\ngenerator = "procedural:x"\n', "licence"),
     ('class = "hair"\n[[assets]]\nid = "x"\nclass = "hair"\ngenerator = "ftp:x"\nlicence = "MIT"\n', "generator"),
     ('class = "hair"\n[[assets]]\nid = "x"\nclass = "hair"\ngenerator = "procedural:x"\nlicence = "MIT"\n'
-     '[assets.parameters]\nlen = { range = [2, 1] }\n', "range"),
+     '[assets.parameters]\nlength_m = { range = [2, 1] }\n', "range"),
     ('class = "beard"\n[[assets]]\nid = "x"\nclass = "beard"\ngenerator = "procedural:x"\nlicence = "MIT"\n',
      "class"),
 ])

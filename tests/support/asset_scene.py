@@ -77,7 +77,7 @@ def head_context(case: str = "neutral", resolution: int = 64, identity_index: in
     hm = HeadModel(load_default_model() if model is None else model)
     bscene.reset()
     ctx = head_arrays(hm, case, resolution, identity_index, run_seed)
-    ctx.materials = bmat.head_materials({}, skin_albedo(0.1, 0.015))
+    ctx.materials = bmat.head_materials(None, skin_albedo(0.1, 0.015))
     ctx.head = bhead.build_head_object(hm.data, ctx.vertices, ctx.materials)
     return ctx, hm
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from synth.assets.fit.groom import Groom, Styling, setup
-from synth.assets.fit.masks import DEFAULT_REACH, beard_area, below_cheek_line
+from synth.assets.fit.masks import beard_area, below_cheek_line
 from synth.assets.fit.strands import DOWN, LEFT, UP, add_curl, arc_length, grow, push_out_strands, scale_count
 from synth.geometry.normals import normalize
 
@@ -48,7 +48,7 @@ def _polyline_distance(p, line):
 
 
 def groom(ctx, entry) -> Groom:
-    st = setup(ctx, entry, "beard", "short_full")
+    st = setup(ctx, entry, "beard")
     rng, sid, prm, surface, hf, colour, pg = st.rng, st.sid, st.prm, st.surface, st.hf, st.colour, st.pg
     lm = hf["lm"]
     # the styles that cover the whole region fade out over BEARD_FEATHER_M at its edge (roots kept
@@ -61,8 +61,8 @@ def groom(ctx, entry) -> Groom:
     half_w = 0.5 * abs(corner_l[0] - corner_r[0])
     lip_top, lip_bot, subnasal, chin = lm[51], lm[57], lm[33], lm[8]
     jaw = lm[0:17]
-    moustache = bool(prm.get("moustache", True))
-    mstyle = str(prm.get("style", "chevron"))
+    moustache = bool(prm.moustache)
+    mstyle = str(prm.style)
 
     def mask(p):
         x = p[:, 0] - x_c
@@ -85,19 +85,19 @@ def groom(ctx, entry) -> Groom:
                 return upper_lip | bars
             return upper_lip
         if sid == "chin_strap":
-            w = float(prm.get("width_m", 0.012))
+            w = float(prm.width_m)
             return (_polyline_distance(p, jaw[2:15]) < w) & (p[:, 2] < lip_bot[2])
         if sid == "mutton_chops":
             return (np.abs(x) > half_w + 0.012) & (p[:, 2] > chin[2] + 0.015)
         return np.ones(len(p), bool)
 
-    n = counts(ctx.resolution, float(prm.get("density", 1.0)))  # over the whole beard region
+    n = counts(ctx.resolution, float(prm.density))  # over the whole beard region
     t, b = surface.sample(tris, 6 * n + 64, rng)
     P0 = surface.points(t, b)
     ok = mask(P0)
     # the cheek line: how far up the cheek the hair grows (masks.cheek_line); the same line bounds
     # the stubble shadow of the skin-detail rig
-    cheek = below_cheek_line(P0, lm, float(prm.get("reach", DEFAULT_REACH)))
+    cheek = below_cheek_line(P0, lm, float(prm.reach))
     if whole:
         soft = beard_area(surface.data, surface.V)
         feathered = np.einsum("nk,nk->n", b, soft[surface.T[t]])
@@ -125,13 +125,12 @@ def groom(ctx, entry) -> Groom:
     x = R[:, 0] - x_c
     upper = (R[:, 2] > lip_top[2] - 0.002) & (R[:, 2] < subnasal[2]) & (np.abs(x) < half_w + 0.008)
 
-    length = float(prm.get("length_m", {"stubble": 0.0015, "chin_strap": 0.008, "mutton_chops": 0.012, "full_long": 0.08,
-                                         "goatee": 0.02, "moustache": 0.015}.get(sid, 0.012)))
+    length = float(prm.length_m)
     if sid == "moustache":
         length = {"pencil": min(length, 0.007), "walrus": max(length, 0.02)}.get(mstyle, length)
     L = length * rng.uniform(0.75, 1.0, N)
     side = np.where(x >= 0, 1.0, -1.0)
-    curl = float(prm.get("curl", 0.0))
+    curl = float(prm.curl)
     long = sid == "full_long"
     npts = 3 if sid == "stubble" else (16 if long else 6)
     lift = 0.0015 if not long else LONG_LIFT_M

@@ -33,14 +33,11 @@ def _brow_coords(p, line):
 
 
 def groom(ctx, entry) -> Groom:
-    st = setup(ctx, entry, "eyebrows", "natural")
+    st = setup(ctx, entry, "eyebrows")
     rng, sid, prm, surface, hf, colour, pg = st.rng, st.sid, st.prm, st.surface, st.hf, st.colour, st.pg
     lm = hf["lm"]
-    thick = float(prm.get("thickness", {"thin_arched": 0.45, "bushy": 1.5, "sparse": 0.6}.get(sid, 0.9)))
-    dens = float(prm.get("density", {"sparse": 0.35, "bushy": 1.2}.get(sid, 1.0)))
-    arch = float(prm.get("arch", {"thin_arched": 0.7, "straight": 0.05}.get(sid, 0.3)))
-    unruly = float(prm.get("unruliness", 0.15))
-    mono = bool(prm.get("monobrow", False))
+    thick, dens, arch = float(prm.thickness), float(prm.density), float(prm.arch)
+    unruly, mono = float(prm.unruliness), bool(prm.monobrow)
     # brows: ibug 17-21 (subject's right, -X) and 22-26 (left); inner ends are 21 and 22
     right = lm[17:22][::-1]
     left = lm[22:27]

@@ -3,11 +3,14 @@ curling away from the eye (assets_manifest/eyelashes.toml: natural, mascara)."""
 
 from __future__ import annotations
 
+from typing import Mapping
+
 import numpy as np
 
 from synth.appearance import pigment as pig
 from synth.assets.fit.groom import Groom, Styling, attach, colour_of
 from synth.assets.fit.strands import DOWN, FORWARD, LEFT, UP, Surface, arc_length, push_out_strands, scale_count
+from synth.assets.params import AssetPick
 from synth.geometry.normals import normalize
 
 
@@ -42,17 +45,14 @@ def _bary_on_edge(surface, tri, a, b, u):
     return bary
 
 
-def groom(ctx, entry) -> Groom:
+def groom(ctx, entry: AssetPick | Mapping) -> Groom:
+    entry = AssetPick.coerce("eyelashes", entry)
     rng = ctx.rng("eyelashes")
-    sid = str(entry.get("id", "natural"))
-    prm = dict(entry.get("params") or {})
+    sid, prm = entry.id, entry.params
     surface = Surface(ctx)
     mascara = sid == "mascara"
-    lscale = float(prm.get("length_scale", 1.3 if mascara else 1.0))
-    curl = float(prm.get("curl", 0.7 if mascara else 0.4))
-    dens = float(prm.get("density", 1.15 if mascara else 1.0))
-    clumping = float(prm.get("clumping", 0.4 if mascara else 0.0))
-    base = colour_of({}, ctx, "dark_brown")
+    lscale, curl, dens, clumping = float(prm.length_scale), float(prm.curl), float(prm.density), float(prm.clumping)
+    base = colour_of(None, ctx, "dark_brown")
     colour = "black" if mascara else pig.darker(base)
     pg = pig.sample(colour, rng, spread=0.05)
     eye_mask = surface.mask("eyes")

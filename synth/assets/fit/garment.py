@@ -31,6 +31,7 @@ triple; ``striped_blue``, ``check`` and ``tartan`` are patterns, :func:`colour_r
 from __future__ import annotations
 
 import colorsys
+from typing import Mapping
 
 import numpy as np
 
@@ -40,6 +41,7 @@ from synth.assets.fit.garment_parts import (crew_neckline, front_weight, hanging
                                             necktie, shirt_collar, torso_shell, vee_neckline,
                                             wrinkle_offset)
 from synth.assets.fit.meshops import icosphere, smooth_max, smooth_min
+from synth.assets.params import AssetPick
 from synth.model.meshutil import smoothstep
 
 #: minimum distance (m) kept between every garment vertex and the skin
@@ -73,12 +75,6 @@ FABRICS = {
     "pique": (0.003, 0.85, 0.25, "knit"), "scrub": (0.0025, 0.75, 0.15, "woven"),
 }
 
-_DEFAULT_FABRIC = {"tshirt_crew": "cotton_jersey", "tshirt_vneck": "cotton_jersey", "sweater": "wool_knit",
-                   "turtleneck": "wool_knit", "hoodie": "cotton_fleece", "shirt_collar": "cotton_poplin",
-                   "jacket_blazer": "wool_suiting", "coat": "wool_felt", "uniform": "scrub",
-                   "tank_top": "cotton_jersey", "scarf_over_sweater": "wool_knit"}
-
-
 def colour_rgb(value) -> tuple[float, float, float]:
     """Linear RGB from a colour name or an (h, s, v) triple (sRGB-encoded HSV)."""
     if isinstance(value, str):
@@ -93,33 +89,21 @@ def colour_rgb(value) -> tuple[float, float, float]:
     return (lin(r), lin(g), lin(b))
 
 
-def _params(entry: dict) -> dict:
-    return dict(entry.get("params") or entry.get("parameters") or {})
-
-
-def _num(p: dict, key: str, default: float) -> float:
-    v = p.get(key, default)
-    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else float(default)
-
-
 #: garments without sleeves: their upper arms (synth.assets.fit.torso.arms) are bare skin, not
 #: the garment's cloth
 BARE_ARMS = frozenset({"tank_top"})
 
 
-def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
-    """The garment of a plan entry on ``body`` (``rng``: the rig's generator, ctx.rng("garment"))."""
-    aid = str(entry.get("id", "tshirt_crew"))
-    p = _params(entry)
+def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generator) -> Shell:
+    """The garment of a plan pick on ``body`` (``rng``: the rig's generator, ctx.rng("garment"))."""
+    entry = AssetPick.coerce("garment", entry)
+    aid, p = entry.id, entry.params
     fr = body.frame
-    fabric = str(p.get("fabric", _DEFAULT_FABRIC.get(aid, "cotton_jersey")))
-    style = str(p.get("style", ""))
+    fabric, style = str(p.fabric), str(p.style)
     if aid == "uniform":
         fabric = {"scrubs": "scrub", "work_shirt": "cotton_twill", "polo": "pique"}.get(style, "scrub")
-    if aid == "tank_top" and "fabric" not in p:
-        fabric = "cotton_jersey"
-    colour = p.get("colour_hsv", "grey")
-    knit = _num(p, "knit_scale_m", 0.005)
+    colour = p.colour_hsv
+    knit = float(p.knit_scale_m)
     thick = FABRICS.get(fabric, FABRICS["cotton_jersey"])[0]
     seed = float(rng.uniform(0, 100))
     cloths = [Cloth(f"garment_{aid}", colour, fabric, knit, seed)]
@@ -131,24 +115,24 @@ def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
 
     if aid in ("tshirt_crew", "sweater", "hoodie", "scarf_over_sweater") or (aid == "uniform" and style not in (
             "scrubs", "work_shirt", "polo")):
-        depth = _num(p, "neckline_depth_m", 0.01)
+        depth = p.neckline_depth(vneck=False)
         base = thick + 0.0015
         rim = 0.0035 if aid != "tshirt_crew" else 0.002
         torso_shell(body, parts, crew_neckline(body, 0.008, depth), wr(base), rim=rim, rim_flatten=0.8)
         if aid == "hoodie":
-            if bool(p.get("hood_up", False)):
+            if bool(p.hood_up):
                 hood_up(body, parts, 0, base)
             else:
                 neck_tube(body, parts, 0, lambda t: fr.z_ring(t) + 0.02, 0.012 + base, 0.022,
                            angles=(np.pi - 2.0, np.pi + 2.0), taper=True)
-            if bool(p.get("drawstrings", False)):
+            if bool(p.drawstrings):
                 for sx in (-1, 1):
                     start = body.neck_loop(crew_neckline(body, 0.008, depth), 48, angle0=np.pi)
                     k = int(np.argmin(np.abs(fr.theta(start) - sx * 0.35)))
                     hanging_strip(body, parts, 0, start[k], 0.11, 0.0025, 0.0025, base + 0.002, n=8)
         if aid == "scarf_over_sweater":
-            st = _num(p, "scarf_thickness_m", 0.02)
-            wrap = str(p.get("wrap", "loop"))
+            st = float(p.scarf_thickness_m)
+            wrap = str(p.wrap)
             cloths.append(Cloth("garment_scarf", colour, "wool_knit", 0.006, seed + 1))
 
             def zc(t):
@@ -172,12 +156,12 @@ def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
                 hanging_strip(body, parts, 1, loop[0] + np.array([0.015, -0.01, -0.03]), 0.12, 0.03, st / 2, base + 0.004)
         info["neckline_depth_m"] = depth
     elif aid in ("tshirt_vneck",) or (aid == "uniform" and style == "scrubs"):
-        depth = _num(p, "neckline_depth_m", 0.07)
+        depth = p.neckline_depth(vneck=True)
         base = thick + 0.0015
         torso_shell(body, parts, vee_neckline(body, 0.008, depth, 0.75), wr(base), rim=0.002, rim_flatten=0.8)
         info["neckline_depth_m"] = depth
     elif aid == "turtleneck":
-        h = _num(p, "collar_height_m", 0.06)
+        h = float(p.collar_height_m)
         base = thick + 0.0015
         wrf = wr(base, 0.002)
 
@@ -192,8 +176,8 @@ def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
         neck_tube(body, parts, 0, lambda t: z(t) - 0.018, base + 0.009, 0.012)
         info["collar_height_m"] = h
     elif aid in ("shirt_collar",) or (aid == "uniform" and style in ("work_shirt", "polo")):
-        tie = bool(p.get("tie", False)) and aid == "shirt_collar"
-        open_top = bool(p.get("top_button_open", style == "polo")) and not tie
+        tie = bool(p.tie) and aid == "shirt_collar"
+        open_top = bool(p.top_button_open) and not tie
         base = thick + 0.001
         depth = 0.045 if open_top else 0.0
         torso_shell(body, parts, vee_neckline(body, 0.006, depth, 0.35), wr(base, 0.001), rim=0.0)
@@ -203,7 +187,7 @@ def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
             necktie(body, parts, 1, base + 0.004)
         info.update(tie=tie, top_button_open=open_top)
     elif aid in ("jacket_blazer", "coat"):
-        under = str(p.get("undershirt", "shirt")) if aid == "jacket_blazer" else "shirt"
+        under = str(p.undershirt) if aid == "jacket_blazer" else "shirt"
         if under != "none":
             ufab = "cotton_poplin" if under == "shirt" else "cotton_jersey"
             cloths.append(Cloth("garment_under", "white" if under == "shirt" else "grey", ufab, 0.005, seed + 3))
@@ -215,7 +199,7 @@ def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
                 torso_shell(body, parts, crew_neckline(body, 0.006, 0.01), wr(ub, 0.0008), slot=1, rim=0.002)
         coat = aid == "coat"
         base = (0.014 if coat else 0.009) + thick
-        lw = _num(p, "lapel_width_m", 0.08 if coat else 0.07)
+        lw = float(p.lapel_width_m)
         depth, half = (0.10, 0.9) if coat else (0.14, 0.85)
         zfn = vee_neckline(body, 0.02, depth, half)
         wrf = wr(base, 0.002)
@@ -231,15 +215,15 @@ def garment_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
             band = band * (np.cos(th) > 0.2) * (frac < 0.999)
             return wrf(P, N) + 0.005 * band
         torso_shell(body, parts, zfn, off, rim=0.003, rim_flatten=0.7)
-        if coat and bool(p.get("collar_up", False)):
+        if coat and bool(p.collar_up):
             neck_tube(body, parts, 0, lambda t: np.minimum(fr.z_ring(t) + 0.04, fr.z_cap(t) - 0.02), base, 0.03,
                        angles=(0.6, 2 * np.pi - 0.6))
         else:
             neck_tube(body, parts, 0, lambda t: fr.z_ring(t) + 0.03, base * 0.6, 0.015,
                        angles=(np.pi - 1.9, np.pi + 1.9))
-        info.update(undershirt=under, lapel_width_m=lw, collar_up=bool(p.get("collar_up", False)))
+        info.update(undershirt=under, lapel_width_m=lw, collar_up=bool(p.collar_up))
     elif aid == "tank_top":
-        w = _num(p, "strap_width_m", 0.03)
+        w = float(p.strap_width_m)
         base = thick + 0.0015
         xs = 0.5 * fr.radius + 0.045
 

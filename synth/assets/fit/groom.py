@@ -18,12 +18,14 @@ random numbers) and pushes points that ended up inside the head back out.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Mapping
 
 import numpy as np
 
 from synth.appearance import pigment as pig
 from synth.assets.fit.keepout_solid import KeepOut
 from synth.assets.fit.strands import Surface
+from synth.assets.params import AssetPick, BeardParams, EyebrowParams, HairParams, Params
 
 
 @dataclass
@@ -60,15 +62,17 @@ def head_frame(ctx) -> dict:
     return f
 
 
-def colour_of(entry: dict, ctx, default: str = "dark_brown") -> str:
-    col = (entry.get("params") or {}).get("colour")
-    if isinstance(col, str) and col in pig.COLOURS:
-        return col
-    hair = (ctx.assets or {}).get("hair") or {}
-    col = (hair.get("params") or {}).get("colour")
-    if isinstance(col, str) and col in pig.COLOURS:
-        return col
-    return default
+def _planned_colour(entry: AssetPick | None) -> str | None:
+    """The pigment a hair, beard or eyebrow pick names (None: none, or not a known pigment)."""
+    if entry is None or not isinstance(entry.params, (HairParams, BeardParams, EyebrowParams)):
+        return None
+    col = entry.params.colour
+    return col if col in pig.COLOURS else None
+
+
+def colour_of(entry: AssetPick | None, ctx, default: str = "dark_brown") -> str:
+    """The pigment of a strand pick: its own colour, else the hair's, else ``default``."""
+    return _planned_colour(entry) or _planned_colour(ctx.pick("hair")) or default
 
 
 @dataclass
@@ -77,17 +81,20 @@ class StrandSetup:
 
     rng: np.random.Generator
     sid: str
-    prm: dict
+    prm: Params
     surface: Surface
     hf: dict
     colour: str
     pg: object
 
 
-def setup(ctx, entry: dict, cls: str, default_id: str, default_colour: str = "dark_brown") -> StrandSetup:
+def setup(ctx, entry: AssetPick | Mapping, cls: str, default_colour: str = "dark_brown") -> StrandSetup:
+    """What a strand rig of class ``cls`` starts from (``entry``: the plan's pick; a plan-style
+    object is checked into one)."""
+    entry = AssetPick.coerce(cls, entry)
     rng = ctx.rng(cls)
     colour = colour_of(entry, ctx, default_colour)
-    return StrandSetup(rng, str(entry.get("id", default_id)), dict(entry.get("params") or {}), Surface(ctx),
+    return StrandSetup(rng, entry.id, entry.params, Surface(ctx),
                        head_frame(ctx), colour, pig.sample(colour, rng))
 
 

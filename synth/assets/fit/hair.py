@@ -59,16 +59,16 @@ def _sphere_path(c, roots, target, n_points, lift=0.004):
 
 
 def groom(ctx, entry) -> Groom:
-    st = setup(ctx, entry, "hair", "short_straight")
+    st = setup(ctx, entry, "hair")
     rng, sid, prm, surface, hf, colour, pg = st.rng, st.sid, st.prm, st.surface, st.hf, st.colour, st.pg
     c = hf["centre"]
-    density = float(prm.get("density", 1.0)) * (AFRO_DENSITY if sid == "afro" else 1.0)
+    density = float(prm.density) * (AFRO_DENSITY if sid == "afro" else 1.0)
     n, g = counts(ctx.resolution, density)
     P = POINTS.get(sid, 20)
     tris = surface.region_triangles("scalp", "all")
 
     # ---- roots (rejection for receding hairlines), by area, from ctx.rng only
-    rec = float(prm.get("hairline_recession", 0.0))
+    rec = float(prm.hairline_recession)
 
     def keep(p):
         return hair_grows(p, hf, rec)
@@ -89,7 +89,7 @@ def groom(ctx, entry) -> Groom:
     # crown); the rest is cut HAT_MARGIN_M short of its cut plane, under the rim
     hat = None
     if "lm" in hf:
-        hat = headwear_cut(ctx.vertices, ctx.data.regions, hf["lm"], (ctx.assets or {}).get("headwear"))
+        hat = headwear_cut(ctx.vertices, ctx.data.regions, hf["lm"], ctx.pick("headwear"))
     if hat is not None:
         hat = (hat[0] - HAT_MARGIN_M * hat[1], hat[1])
         under = (surface.points(c_tri, c_bary) - hat[0]) @ hat[1] > 0.0
@@ -177,10 +177,10 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
     gr = surface.points(g_tri, g_bary)
     gn = surface.normals(g_tri, g_bary)
     G = len(gr)
-    parting = prm.get("parting", "centre" if sid in ("bob", "long_straight", "medium_wavy") else "none")
+    parting = prm.parting
     xp = {"left": c[0] + 0.028, "right": c[0] - 0.028, "centre": c[0]}.get(str(parting))
-    fringe = bool(prm.get("fringe", False))
-    curl = float(prm.get("curl", 0.0))
+    fringe = bool(prm.fringe)
+    curl = float(prm.curl)
     extra = {"parting": str(parting)}
 
     rel = gr - c
@@ -191,23 +191,23 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
     group = np.zeros(G, np.int64)  # interpolation groups (children never mix groups)
     side_floor, volume = -0.03, 0.15  # buzz cut, undercut, afro; the loose styles set their own below
     if sid == "buzz_cut":
-        L = rng.uniform(*sorted((float(prm.get("length_m", 0.006)) * 0.85, float(prm.get("length_m", 0.006)))), G)
+        L = rng.uniform(*sorted((float(prm.length_m) * 0.85, float(prm.length_m))), G)
         sweep = normalize(BACK[None] * 0.6 + DOWN[None] * 0.6 + 0.0 * gr)
         grav, lift, layer, bend = 0.3, 0.002, np.full(G, 0.0008), 1.0
         sweep_w = 1.0
     elif sid == "undercut":
         is_top = (np.abs(rel[:, 0]) < 0.045) & (gr[:, 2] > c[2] + 0.015) & (rel[:, 1] < 0.06)
         group = is_top.astype(np.int64)
-        Lt, Ls = float(prm.get("top_length_m", 0.08)), float(prm.get("side_length_m", 0.006))
+        Lt, Ls = float(prm.top_length_m), float(prm.side_length_m)
         L = np.where(is_top, Lt * rng.uniform(0.85, 1.0, G), Ls * rng.uniform(0.8, 1.0, G))
-        sw = {"back": BACK, "left": LEFT, "right": -LEFT}[str(prm.get("swept", "back"))]
+        sw = {"back": BACK, "left": LEFT, "right": -LEFT}[str(prm.swept)]
         sweep = np.where(is_top[:, None], normalize(sw[None] + 0.15 * UP[None] + 0 * gr), normalize(DOWN + BACK * 0.4 + 0 * gr))
         grav, lift, bend = 0.25, np.where(is_top, 0.015, 0.002), 1.0
         layer = np.where(is_top, rng.uniform(0.004, 0.014, G), 0.001)
         sweep_w = 1.0
-        extra["swept"] = str(prm.get("swept", "back"))
+        extra["swept"] = str(prm.swept)
     elif sid == "afro":
-        R = float(prm.get("volume_radius_m", 0.07))
+        R = float(prm.volume_radius_m)
         ce = c + np.array([0.0, 0.01, 0.025])
         env = 0.095 + R
         # out to the envelope, then AFRO_WRAP_M more along it: the tips lie in the outer shell
@@ -220,8 +220,7 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
         afro = _AfroField(ce, env, rng, G)
         extra["volume_radius_m"] = R
     else:
-        Lm = float(prm.get("length_m", {"short_straight": 0.05, "short_curly": 0.04, "medium_wavy": 0.15, "bob": 0.16,
-                                        "long_straight": 0.35, "long_curly": 0.3}.get(sid, 0.1)))
+        Lm = float(prm.length_m)
         L = Lm * rng.uniform(0.85, 1.0, G)
         short = sid in ("short_straight", "short_curly")
         # sweep away from the parting on top, back over the head at the front
@@ -271,8 +270,8 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
 
     # curls / waves on guides (children inherit them: coherent locks)
     if sid in ("short_curly", "long_curly", "afro"):
-        r = float(prm.get("curl_radius_m", 0.005 if sid == "short_curly" else 0.008))
-        cu = float(prm.get("curl", 0.9))
+        r = float(prm.curl_radius_m)
+        cu = float(prm.curl)
         r_g = r * rng.uniform(0.8, 1.2, G)
         per = r_g * (10.0 - 5.0 * cu) if sid != "afro" else r_g * 5.0
         guides = add_curl(guides, gn, r_g, per, rng.uniform(0, 2 * np.pi, G), start=min(0.01, 0.3 * L.min()))
@@ -375,10 +374,10 @@ def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
     layer = rng.uniform(0.0015, 0.004, N)
     if sid in ("bun", "ponytail"):
         if sid == "bun":
-            h = str(prm.get("bun_height", "mid"))
+            h = str(prm.bun_height)
             d = {"low": (0.0, 1.0, -0.15), "mid": (0.0, 1.0, 0.7), "top": (0.0, 0.3, 1.0)}.get(h, (0.0, 1.0, 0.7))
         else:
-            h = str(prm.get("tie_height", "mid"))
+            h = str(prm.tie_height)
             d = {"low": (0.0, 1.0, -0.4), "mid": (0.0, 1.0, 0.2), "top": (0.0, 0.6, 1.0), "high": (0.0, 0.6, 1.0)}.get(
                 h, (0.0, 1.0, 0.2))
         Bs, Bn = _tie_point(surface, hf, d)
@@ -386,7 +385,7 @@ def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
         part1 = _sphere_path(c, R, B, n1 + 1, lift=0.003)
         part1 = push_out_strands(surface, part1, layer)
         if sid == "bun":
-            rb = float(prm.get("bun_radius_m", 0.04))
+            rb = float(prm.bun_radius_m)
             Bc = Bs + Bn * rb * 0.85
             e1 = normalize(B - Bc)[None].repeat(N, 0)
             rnd = normalize(rng.normal(size=(N, 3)))
@@ -397,7 +396,7 @@ def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
             coil = Bc + rr[:, None, None] * (np.cos(th)[..., None] * e1[:, None] + np.sin(th)[..., None] * e2[:, None])
             pts = np.concatenate([part1, coil], 1)
             # loose strands: some low roots fall freely instead
-            loose = float(prm.get("loose_strands", 0.0))
+            loose = float(prm.loose_strands)
             sel = (rng.random(N) < loose * 0.3) & (R[:, 2] < c[2] - 0.01)
             if sel.any():
                 nrm = surface.normals(c_tri[sel], c_bary[sel])
@@ -406,7 +405,7 @@ def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
                 pts[sel] = free
             g_used = 1
         else:
-            Lt = float(prm.get("tail_length_m", 0.25))
+            Lt = float(prm.tail_length_m)
             start_dir = normalize(BACK * 0.8 + (UP * 0.6 if h in ("top", "high") else DOWN * 0.3))
             centre = grow(surface, B[None], start_dir[None], np.array([Lt]), n2 + 1,
                             lambda p, s, k: DOWN[None] * 1.0 + 0.25 * BACK[None], 0.05, 0.02)[0]
@@ -421,14 +420,14 @@ def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
             lt = rng.uniform(0.8, 1.0, N)
             s = arc_length(pts)
             pts = resample_fast(pts, s[:, n1] + lt * (s[:, -1] - s[:, n1]))
-            curl = float(prm.get("curl", 0.0))
+            curl = float(prm.curl)
             if curl > 0.02:
                 pts = add_curl(pts, np.tile(BACK, (N, 1)), curl * 0.01 * rng.uniform(0.7, 1.2, N), 0.045,
                                  rng.uniform(0, 2 * np.pi, N), start=0.1, planar=False)
             g_used = 1
     else:  # braids
-        K = int(np.clip(int(prm.get("braid_count", 8)), 2, 40))
-        Lb = float(prm.get("length_m", 0.3))
+        K = int(np.clip(int(prm.braid_count), 2, 40))
+        Lb = float(prm.length_m)
         # braid bases: farthest-point sampling over the roots (deterministic)
         # (exact squared distances; argmax/argmin take the lowest index on a tie)
         base_idx = [int(np.argmax(R[:, 2]))]

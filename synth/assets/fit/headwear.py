@@ -20,15 +20,18 @@ object and the cloth materials. Both are built from the head surface of the iden
 
 from __future__ import annotations
 
+from typing import Mapping
+
 import numpy as np
 
 from synth.assets.fit.attach import push_out
 from synth.assets.fit.body import Body, Cloth, Parts, Shell, WaveNoise
 from synth.assets.fit.meshops import grid_faces, icosphere, laplacian_smooth, oriented_boundary_loops, sweep_tube
-
-CLEARANCE = 0.0015
+from synth.assets.params import AssetPick
 from synth.geometry.normals import normalize
 from synth.model.meshutil import smoothstep
+
+CLEARANCE = 0.0015
 
 
 #: cut plane of each headwear (metres): the brow centre raised by the first, the top of each
@@ -57,12 +60,12 @@ def cut_plane(V: np.ndarray, regions: dict, ibug68: np.ndarray, front_up: float,
     return Fp, n
 
 
-def headwear_cut(V: np.ndarray, regions: dict, ibug68: np.ndarray, entry: dict | None):
-    """The cut plane (origin, normal) of a plan's headwear entry on this head, or None without
+def headwear_cut(V: np.ndarray, regions: dict, ibug68: np.ndarray, entry: AssetPick | Mapping | None):
+    """The cut plane (origin, normal) of a plan's headwear pick on this head, or None without
     headwear: what the headwear covers lies on the normal's side (the hair rig leaves it out)."""
     if not entry:
         return None
-    raise_m = CUT_RAISE_M.get(str(entry.get("id", "beanie")))
+    raise_m = CUT_RAISE_M.get(AssetPick.coerce("headwear", entry).id)
     return None if raise_m is None else cut_plane(V, regions, ibug68, *raise_m)
 
 
@@ -75,17 +78,16 @@ def _crown(body: Body, front_up, ear_up, off_fn, smooth=3):
     return P, F, cut, o, n
 
 
-def headwear_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
-    """The headwear of a plan entry on ``body`` (``rng``: the rig's generator, ctx.rng("headwear"))."""
-    aid = str(entry.get("id", "beanie"))
-    p = dict(entry.get("params") or entry.get("parameters") or {})
-    colour = p.get("colour_hsv", "black")
+def headwear_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generator) -> Shell:
+    """The headwear of a plan pick on ``body`` (``rng``: the rig's generator, ctx.rng("headwear"))."""
+    entry = AssetPick.coerce("headwear", entry)
+    aid, p = entry.id, entry.params
+    colour = p.colour_hsv
     seed = float(rng.uniform(0, 100))
     parts = Parts()
     info = {"id": aid, "colour": colour if isinstance(colour, str) else list(colour)}
     if aid == "beanie":
-        fold = float(p.get("fold_height_m", 0.03))
-        knit = float(p.get("knit_scale_m", 0.005))
+        fold, knit = float(p.fold_height_m), float(p.knit_scale_m)
         cloths = [Cloth("headwear_beanie", colour, "wool_knit", knit, seed)]
         noise = WaveNoise(rng, 0.04, 10)
 
@@ -99,7 +101,7 @@ def headwear_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
         for lp in loops:
             Vt, Ft = sweep_tube(P[lp], 0.005 if fold > 0.002 else 0.003, 8, closed=True)
             parts.add(push_out(Vt, body.query, CLEARANCE + 0.001), Ft, 0)
-        pom = bool(p.get("pompom", False))
+        pom = bool(p.pompom)
         if pom:
             top = P[np.argmax((P - o) @ n)]
             Vs, Fs = icosphere(3)
@@ -108,8 +110,7 @@ def headwear_shell(body: Body, entry: dict, rng: np.random.Generator) -> Shell:
             parts.add(top + n * 0.028 + Vs * r[:, None], Fs, 0)
         info.update(fold_height_m=fold, knit_scale_m=knit, pompom=pom)
     elif aid == "baseball_cap":
-        yaw = float(p.get("brim_yaw_deg", 0.0))
-        curve = float(p.get("brim_curve", 0.5))
+        yaw, curve = float(p.brim_yaw_deg), float(p.brim_curve)
         cloths = [Cloth("headwear_cap", colour, "cotton_twill", 0.005, seed)]
 
         def off(P, N, h):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from synth.assets.params import DEFAULT_REACH
 from synth.model.meshutil import smoothstep
 
 
@@ -149,10 +150,11 @@ def wing_line(u, v, liner: float):
     return np.clip((hw + WING_EDGE_M - d) / WING_EDGE_M, 0.0, 1.0)
 
 
-def skin_detail_mask(data, V, lm, reach: float | None = None) -> np.ndarray:
+def skin_detail_mask(data, V, lm, reach: float = DEFAULT_REACH) -> np.ndarray:
     """The skin-detail rig's point-colour attribute (V, 4): R cheeks and nose, G T-zone,
     B wrinkle zones (forehead, crow's feet), A beard area (the beard region under the cheek
-    line of ``reach``, :func:`cheek_line`; default :data:`DEFAULT_REACH`); zero off the skin."""
+    line of ``reach``, :func:`cheek_line`: the beard pick's, or
+    :data:`synth.assets.params.DEFAULT_REACH` without a beard); zero off the skin."""
     n = len(V)
     skin = skin_only(data, n).astype(float)
     nose_tip, c_l, c_r = lm[30], lm[42:48].mean(0), lm[36:42].mean(0)
@@ -166,7 +168,7 @@ def skin_detail_mask(data, V, lm, reach: float | None = None) -> np.ndarray:
     crows = np.maximum(feather(np.linalg.norm(V - (lm[45] + [0.01, 0.004, 0]), axis=1), 0.002, 0.012),
                        feather(np.linalg.norm(V - (lm[36] + [-0.01, 0.004, 0]), axis=1), 0.002, 0.012))
     wr = np.maximum(forehead, crows)
-    beard = beard_area(data, V) * below_cheek_line(V, lm, DEFAULT_REACH if reach is None else reach)
+    beard = beard_area(data, V) * below_cheek_line(V, lm, reach)
     m = np.stack([cheeks, tz, wr, beard], 1) * skin[:, None]
     return np.clip(m, 0, 1)
 
@@ -241,8 +243,6 @@ def soft_region(V: np.ndarray, inside: np.ndarray, sigma: float) -> np.ndarray:
     return np.clip((out - 0.05) / 0.75, 0.0, 1.0)
 
 
-#: the cheek line of a shaved beard's shadow when the identity has no beard (no ``reach`` drawn)
-DEFAULT_REACH = 0.3
 #: how far above a beard's cheek line its roots fade out (metres)
 CHEEK_FADE_M = 0.005
 #: the sideburn's width: the cheek line meets the sideburn this far inside jaw point 0 (metres)

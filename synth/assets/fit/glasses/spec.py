@@ -8,9 +8,11 @@ draws are always made, in a fixed order, so they stay aligned whatever the plan 
 from __future__ import annotations
 
 import dataclasses
+from typing import Mapping
 
 import numpy as np
 
+from synth.assets.params import GlassesParams, planned_or
 
 STYLES = ("rectangular", "round", "oval", "aviator", "cat_eye", "browline", "rimless", "half_rim")
 
@@ -102,22 +104,22 @@ class FrameSpec:
                 for k, v in d.items()}
 
 
-def frame_spec(style: str, params: dict, rng: np.random.Generator) -> FrameSpec:
-    """Complete the plan's parameters with rig-drawn ones (bridge, missing sizes, ...)."""
+def frame_spec(style: str, params: GlassesParams | Mapping | None, rng: np.random.Generator) -> FrameSpec:
+    """Complete the plan's parameters with rig-drawn ones (bridge, what is not planned, ...)."""
     if style not in STYLES:
         raise ValueError(f"unknown glasses style {style!r}; expected one of {STYLES}")
-    p = dict(params or {})
+    p = GlassesParams.of(style, params)
     u = lambda lo, hi: float(rng.uniform(lo, hi))  # noqa: E731 - always drawn, so draws stay aligned
     draws = {"w": u(0.046, 0.054), "h": u(0.03, 0.038), "rim": u(0.002, 0.005), "bridge": u(0.016, 0.021),
              "pct": u(6.0, 10.0), "wrap": u(2.0, 6.0), "mat": u(0.0, 1.0), "col": int(rng.integers(1 << 30)),
              "coat": u(0.0, 1.0), "refl": u(0.0, 1.0)}
-    w = float(p.get("lens_width_m", p.get("lens_diameter_m", draws["w"])))
-    h = float(p.get("lens_height_m", p.get("lens_diameter_m", 0.0))) or None
-    colour = str(p.get("frame_colour", ["black", "tortoise", "brown", "silver", "gold"][draws["col"] % 5]))
-    material = str(p.get("frame_material", "metal" if colour in METALLIC_COLOURS else "acetate"))
+    w = float(planned_or(p.lens_width_m, p.lens_diameter_m, draws["w"]))
+    h = float(planned_or(p.lens_height_m, p.lens_diameter_m, 0.0)) or None
+    colour = str(planned_or(p.frame_colour, ["black", "tortoise", "brown", "silver", "gold"][draws["col"] % 5]))
+    material = str(planned_or(p.frame_material, "metal" if colour in METALLIC_COLOURS else "acetate"))
     if style in ("aviator", "rimless"):
         material = "metal"
-    rim_w = float(p.get("rim_thickness_m", draws["rim"]))
+    rim_w = float(planned_or(p.rim_thickness_m, draws["rim"]))
     n_exp, rim_mode, wing, dbl = 2.0, "full", 0.0, False
     if style == "rectangular":
         n_exp, h = 4.5, h or 0.68 * w
@@ -126,10 +128,10 @@ def frame_spec(style: str, params: dict, rng: np.random.Generator) -> FrameSpec:
     elif style == "oval":
         n_exp, h = 2.3, h or 0.68 * w
     elif style == "aviator":
-        n_exp, h, dbl = 2.4, h or 0.86 * w, bool(p.get("double_bridge", True))
+        n_exp, h, dbl = 2.4, h or 0.86 * w, bool(p.double_bridge)
         rim_w = min(rim_w, 0.0025)
     elif style == "cat_eye":
-        n_exp, h, wing = 2.8, h or 0.66 * w, float(p.get("wing_lift", 0.5))
+        n_exp, h, wing = 2.8, h or 0.66 * w, float(p.wing_lift)
     elif style == "browline":
         n_exp, h, rim_mode = 3.2, h or 0.7 * w, "browline"
     elif style == "rimless":
@@ -140,18 +142,18 @@ def frame_spec(style: str, params: dict, rng: np.random.Generator) -> FrameSpec:
     if metal and style != "browline":
         rim_w = float(np.clip(0.45 * rim_w, 0.0012, 0.0022))
     rim_d = rim_w if metal else float(np.clip(1.3 * rim_w, 0.003, 0.006))
-    temple_colour = str(p.get("temple_colour", colour))
-    coating = str(p.get("lens_coating", COATINGS[0] if draws["coat"] < AR_SHARE else COATINGS[1]))
+    temple_colour = str(planned_or(p.temple_colour, colour))
+    coating = str(planned_or(p.lens_coating, COATINGS[0] if draws["coat"] < AR_SHARE else COATINGS[1]))
     if coating not in COATINGS:
         raise ValueError(f"unknown lens_coating {coating!r}; expected one of {COATINGS}")
     lo, hi = AR_REFLECTANCE
     refl = lo * (hi / lo) ** draws["refl"] if coating == "anti_reflective" else UNCOATED_REFLECTANCE
-    refl = float(p.get("lens_reflectance", refl))
+    refl = float(planned_or(p.lens_reflectance, refl))
     if not reflectance_ok(refl):
         raise ValueError(f"lens_reflectance {refl!r} is outside [0, {MAX_LENS_REFLECTANCE:g})")
     return FrameSpec(style=style, lens_w=w, lens_h=float(h), rim_w=rim_w, rim_d=rim_d, bridge=draws["bridge"],
                      rim_mode=rim_mode, material=material, colour=colour, temple_colour=temple_colour,
-                     tint=float(p.get("lens_tint", 0.0)), superellipse=n_exp, wing_lift=wing, double_bridge=dbl,
+                     tint=float(p.lens_tint), superellipse=n_exp, wing_lift=wing, double_bridge=dbl,
                      pantoscopic_deg=draws["pct"], wrap_deg=draws["wrap"],
                      lens_thickness=0.0022 if style == "rimless" else 0.0018,
                      temple_r=(0.0007, 0.0007) if metal else (0.0011, 0.0021),
