@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from synth.errors import CodeError
+from synth.errors import CodeError, SynthError
 from synth.geometry import exact
 from synth.geometry.rotations import axis_angle_to_matrix
 from synth.model.eyelids import EXACT_OPS, EyelidRig, apply_eyelids
@@ -223,3 +223,19 @@ class HeadModel:
                     acc[:, sel] += w * (exact.points_times_matrix(vb[:, sel], RwT[:, j]) + At[:, j, None, :])
             out[:, self._blend_idx] = acc
         return out
+
+
+def landmark_basis(model: HeadModelData, landmark_set: str = "ibug68") -> tuple[np.ndarray, np.ndarray]:
+    """Neutral landmarks as template (L, 3) + code @ basis (Ki, L, 3) (identity_scale applied)."""
+    if landmark_set not in model.landmarks:
+        raise SynthError(f"the model has no '{landmark_set}' landmarks", model.name,
+                         "use camera.target = 'origin' or a model with ibug68 landmarks")
+    tri, bary = model.landmarks[landmark_set]
+    corners = model.triangles[tri]  # (L, 3)
+    b = bary.astype(np.float64)
+    T = model.template[corners].astype(np.float64)  # (L, 3 corners, 3), summed corner by corner in order
+    t = (T[:, 0] * b[:, 0, None] + T[:, 1] * b[:, 1, None]) + T[:, 2] * b[:, 2, None]
+    basis = model.identity_basis.astype(np.float64) * model.identity_scale.astype(np.float64)[:, None, None]
+    C = basis[:, corners]
+    B = (C[:, :, 0] * b[None, :, 0, None] + C[:, :, 1] * b[None, :, 1, None]) + C[:, :, 2] * b[None, :, 2, None]
+    return t, B

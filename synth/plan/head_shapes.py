@@ -37,6 +37,7 @@ import numpy as np
 from synth.errors import SynthError
 from synth.geometry import exact
 from synth.model.format import HeadModelData
+from synth.model.head import landmark_basis
 
 #: the measured quantities, in the order of the tables (mm, mm, mm, mm, %, %)
 NAMES = ("head_breadth_mm", "head_length_mm", "face_height_mm", "face_width_mm", "cephalic_index", "facial_index")
@@ -67,8 +68,6 @@ def measure_sets(model: HeadModelData) -> MeasureSets:
         raise SynthError(f"the model has no {' or '.join(need) or 'ibug68'} "
                          f"{'region' if need else 'landmarks'}: head shapes cannot be measured", model.name,
                          "set identity.head_shape = 'auto' or 'none' for this model")
-    from synth.plan.identities import landmark_basis
-
     t = model.template.astype(np.float64)
     lm, _ = landmark_basis(model)
     drop = np.concatenate([np.asarray(model.regions[r], np.int64) for r in _NOT_HEAD if r in model.regions]

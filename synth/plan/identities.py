@@ -17,6 +17,7 @@ from synth import seeds
 from synth.errors import SynthError
 from synth.geometry import exact
 from synth.model.format import HeadModelData
+from synth.model.head import landmark_basis
 from synth.model.identity_gmm import GaussianMixture
 
 #: ibug68 indices (0-based) of the outer and inner corners of both eyes.
@@ -105,22 +106,6 @@ def redraw_outside_ranges(seed: int, identity: np.ndarray, codes: np.ndarray, pr
         best_x[todo[better]] = x[better]
         todo = todo[~hs.inside(m, bounds)]
     return best
-
-
-def landmark_basis(model: HeadModelData, landmark_set: str = "ibug68") -> tuple[np.ndarray, np.ndarray]:
-    """Neutral landmarks as template (L, 3) + code @ basis (Ki, L, 3) (identity_scale applied)."""
-    if landmark_set not in model.landmarks:
-        raise SynthError(f"the model has no '{landmark_set}' landmarks", model.name,
-                         "use camera.target = 'origin' or a model with ibug68 landmarks")
-    tri, bary = model.landmarks[landmark_set]
-    corners = model.triangles[tri]  # (L, 3)
-    b = bary.astype(np.float64)
-    T = model.template[corners].astype(np.float64)  # (L, 3 corners, 3), summed corner by corner in order
-    t = (T[:, 0] * b[:, 0, None] + T[:, 1] * b[:, 1, None]) + T[:, 2] * b[:, 2, None]
-    basis = model.identity_basis.astype(np.float64) * model.identity_scale.astype(np.float64)[:, None, None]
-    C = basis[:, corners]
-    B = (C[:, :, 0] * b[None, :, 0, None] + C[:, :, 1] * b[None, :, 1, None]) + C[:, :, 2] * b[None, :, 2, None]
-    return t, B
 
 
 def look_at_targets(model: HeadModelData, codes: np.ndarray, mode: str, offset) -> np.ndarray:
