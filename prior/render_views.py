@@ -111,6 +111,16 @@ def _write_depth_exr(path: Path, depth: np.ndarray) -> None:
     atomic_place(path, lambda tmp: OpenEXR.File(hdr, {"Z": np.ascontiguousarray(depth, np.float32)}).write(str(tmp)))
 
 
+def output_dir(path) -> Path:
+    """The directory rendered views go to (``-o``), created when missing; a path that exists and
+    is not a directory gives one clear line."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise SynthError("output path exists and is not a directory", str(path), "pass a directory to -o")
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
 def write_view(out_dir: Path, key: str, img: dict[str, np.ndarray]) -> list[Path]:
     """The four files of one rendered view (see the module docstring), each written atomically."""
     files = {f"{key}_colour.png": png_bytes(srgb8(img["rgb"])),
@@ -147,10 +157,7 @@ def render_run(run_dir, identity: int, expression: int, out_dir, *, orbit_views:
     K = info.front_K[m]
     if size is not None:
         K, W, H = scaled_camera(K, W, H, size), size, size
-    out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise SynthError("output path exists and is not a directory", str(out_dir), "pass a directory to -o")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = output_dir(out_dir)
     written, cams = [], []
     for k, c2w in enumerate(orbit(info.front_c2w[m], info.centre[m], orbit_views)):
         img = render_image(model, K, c2w, W, H, code, m, info.centre[m], float(info.radius[m]),

@@ -22,7 +22,7 @@ import numpy as np
 
 from prior.fit.fitdir import FittedFace, load_fit
 from prior.fit.interpolate import interpolation_weights
-from prior.render_views import orbit, render_image, scaled_camera, write_view
+from prior.render_views import orbit, output_dir, render_image, scaled_camera, write_view
 from synth.conventions import invert_rigid
 from synth.errors import SynthError
 from synth.io import atomic_write_json
@@ -91,10 +91,7 @@ def render_fit(fit_dir, out_dir, *, orbit_views: int = 8, size: int | None = Non
         raise SynthError("--orbit and --size must be at least 1", "synth prior render", "pass positive numbers")
     fit = load_fit(fit_dir, device)
     views = read_cameras(cameras) if cameras is not None else orbit_cameras(fit, orbit_views, size)
-    out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise SynthError("output path exists and is not a directory", str(out_dir), "pass a directory to -o")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = output_dir(out_dir)
     written, cams = [], []
     chunk = fit.render_chunk
     for v in views:

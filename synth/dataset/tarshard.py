@@ -42,7 +42,7 @@ from typing import IO, NamedTuple
 
 from synth.dataset.layout import FRAME_KEY_RE, MANIFEST_FILE, SHARD_ID_RE, SHARDS_DIR, check_shard_id, entry_kind
 from synth.errors import SynthError
-from synth.io import FileRefused, atomic_place, file_digest, fsync_dir, is_temp_name, open_regular, temp_name
+from synth.io import FileRefused, atomic_write_bytes, file_digest, fsync_dir, is_temp_name, open_regular, temp_name
 
 SHARD_FORMATS = ("dir", "tar")
 TAR_SUFFIX = ".tar"
@@ -222,21 +222,7 @@ def place_tar_shard(tmp: Path, root: Path, shard_id: str, data: bytes, *, durabl
     os.replace(tmp, tp)
     if durable:  # the tar's rename is durable before the manifest can be
         fsync_dir(tp.parent)
-
-    def fill(t: Path) -> None:
-        fd = os.open(t, os.O_WRONLY | os.O_CREAT | os.O_EXCL, MEMBER_MODE)
-        try:
-            view = memoryview(data)
-            while view:
-                view = view[os.write(fd, view):]
-            if durable:
-                os.fsync(fd)
-        finally:
-            os.close(fd)
-
-    atomic_place(mp, fill, durable=False, sync_file=False)  # the commit point
-    if durable:
-        fsync_dir(mp.parent)
+    atomic_write_bytes(mp, data, durable=durable, mode=MEMBER_MODE)  # the commit point
 
 
 # --------------------------------------------------------------------------- reading

@@ -151,13 +151,13 @@ def atomic_place(path: Path, fill: Callable[[Path], object], *, durable: bool = 
         fsync_dir(path.parent)
 
 
-def atomic_write_bytes(path: Path, data: bytes, *, durable: bool = True) -> None:
-    """Write ``data`` to ``path`` atomically: temp file (mode 0644 less the umask), fsync,
+def atomic_write_bytes(path: Path, data: bytes, *, durable: bool = True, mode: int = 0o644) -> None:
+    """Write ``data`` to ``path`` atomically: temp file (``mode`` less the umask), fsync,
     rename over, fsync the directory. On any error the temporary file is removed and ``path``
     is left as it was."""
 
     def fill(tmp: Path) -> None:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, mode)
         try:
             view = memoryview(data)
             while view:
