@@ -90,6 +90,7 @@ def test_a_diffuse_sphere_shows_the_predicted_irradiance(tmp_path):
     from blender_scripts.mesh import link_object, new_triangle_mesh
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
     from synth.plan.assets import sample_lighting
+    from synth.plan.records import lighting_from_json
     from synth.config import load_config
 
     scene.reset()
@@ -111,7 +112,7 @@ def test_a_diffuse_sphere_shows_the_predicted_irradiance(tmp_path):
     link_object("sphere", me, [mat])
     scene.configure_render(RenderSettings(samples=64, denoise=False, device="cpu", max_bounces=4), 48, 48)
     env = sample_lighting(0, 0, load_config(overrides=["lighting.studio_rotation_deg=[40,40]"]).lighting)
-    scene.studio_environment(env)
+    scene.studio_environment(lighting_from_json(env, "test"))
     L = studio_map(Studio.from_record(env))
     cam = camera.make_camera()
     for az, el in ((0.0, 0.0), (120.0, 30.0)):
