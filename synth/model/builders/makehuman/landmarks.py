@@ -15,7 +15,8 @@ from synth.geometry.normals import face_normals, vertex_normals
 from synth.geometry.raycast import first_hits
 from synth.model import meshutil as mu
 from synth.model.builders.makehuman.mesh import Mesh
-from synth.model.builders.makehuman.regions import Features, feature_regions, landmark_regions, ring_midpoints
+from synth.model.builders.makehuman.regions import (Features, feature_regions, landmark_regions, midline,
+                                                    ring_midpoints)
 from synth.model.builders.makehuman.surface import arc_at_x, level_points, polyline_at, split_loop, surface_hits
 from synth.model.builders.makehuman.targets import TargetSpace
 
@@ -71,11 +72,6 @@ def ibug68_points(f: Features, X: np.ndarray, tris: np.ndarray, joint_rest: np.n
     return pts, tip
 
 
-def _midline(f: Features, X: np.ndarray, joint_rest: np.ndarray) -> np.ndarray:
-    """Visible vertices on x = 0 in front of the eyes."""
-    return np.nonzero(f.visible & (X[:, 0] == 0.0) & (X[:, 1] < joint_rest[3, 1]))[0]
-
-
 def _eyes(f: Features, X: np.ndarray, pts: dict) -> None:
     for t, ids in (("r", (36, 37, 38, 39, 40, 41)), ("l", (42, 43, 44, 45, 46, 47))):
         up, lo = f.lids[t]["upper"], f.lids[t]["lower"]
@@ -110,8 +106,8 @@ def _mouth(f: Features, X: np.ndarray, pts: dict) -> None:
 def _nose(f: Features, X: np.ndarray, joint_rest: np.ndarray, pts: dict) -> int:
     """Bridge (27-30) from the midline profile; returns the tip vertex."""
     lid_top = X[f.lids["l"]["upper"], 2].max()
-    midline = _midline(f, X, joint_rest)
-    front = midline[(X[midline, 2] > pts[51][2]) & (X[midline, 2] < lid_top)]
+    profile = midline(f, X, joint_rest)
+    front = profile[(X[profile, 2] > pts[51][2]) & (X[profile, 2] < lid_top)]
     tip = front[np.argmin(X[front, 1])]
     pts[30] = X[tip]
     above = front[X[front, 2] > X[tip, 2]]
@@ -197,8 +193,8 @@ def _jaw(f: Features, X: np.ndarray, tris: np.ndarray, joint_rest: np.ndarray, p
     """Chin (gnathion) on the midline profile, cheek silhouette from ear level down to the jaw
     angle, then the mandible body as a straight side-view line projected onto the skin."""
     vn = vertex_normals(X, tris[f.vis_tris])
-    midline = _midline(f, X, joint_rest)
-    chin_line = midline[(X[midline, 2] < pts[57][2]) & (X[midline, 1] < joint_rest[2, 1])]
+    profile = midline(f, X, joint_rest)
+    chin_line = profile[(X[profile, 2] < pts[57][2]) & (X[profile, 1] < joint_rest[2, 1])]
     chin_line = chin_line[np.argsort(-X[chin_line, 2])]
     dy = np.diff(X[chin_line, 1])
     fold = int(np.nonzero(dy < 0)[0][0])  # profile turns forward again below the labiomental fold
