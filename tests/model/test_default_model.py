@@ -136,6 +136,46 @@ def test_ibug68_landmarks_are_plausible(default_model, rest):
     np.testing.assert_allclose(L[IBUG_MIRROR] * [-1.0, 1.0, 1.0], L, atol=1e-4)
 
 
+def _frontal_lean(default_model, V, x: float, z: float) -> float:
+    """How much the skin that a frontal ray at (x, z) meets faces down rather than forward
+    (n_y - n_z of its unit normal: > 0 faces down more than forward, -Y is forward)."""
+    from synth.geometry.normals import face_normals
+    from synth.geometry.raycast import first_hits
+
+    tris = default_model.triangles[np.isin(default_model.triangles, default_model.regions["skin"]).all(1)]
+    tri, _, _ = first_hits(np.array([[x, V[:, 1].min() - 0.1, z]]), np.array([[0.0, 1.0, 0.0]]), V, tris)
+    n = face_normals(V, tris[tri])[0]
+    return float(n[1] - n[2])
+
+
+def test_nose_base_points_lie_on_the_lower_outline_of_the_nose(default_model, rest):
+    """iBUG 31-35 mark the nose base seen from the front: 33 (subnasale) where the columella meets
+    the upper lip, 31/35 where the alar lobules meet it. So a frontal view sees, 1 mm above each, the
+    underside of the nose (facing down) and, 1 mm below, the lip (facing forward). Up to builder 9
+    the row lay 4-9 mm lower, on the upper lip, where both face forward."""
+    V, L = rest
+    for i in (31, 33, 35):
+        x, z = L[i, 0], L[i, 2]
+        assert _frontal_lean(default_model, V, x, z + 0.001) > 0.0, i
+        assert _frontal_lean(default_model, V, x, z - 0.001) < 0.0, i
+    assert L[33, 2] < L[32, 2] < L[31, 2] < L[30, 2]  # the columella hangs below the alae
+    assert 0.008 < L[35, 0] - L[33, 0] < 0.02  # alar base, inside the nose's width
+
+
+def test_brow_tails_end_on_the_line_from_the_alar_base_through_the_lateral_canthus(rest):
+    """The eyebrow's tail (17, 26) ends on the line from the alar base (31, 35) through the lateral
+    canthus (36, 45) (frontal view): about a third of the eye's width past the canthus. Up to
+    builder 9 it ended 0.12 eye widths past it, 6 mm short of that line."""
+    _, L = rest
+    for tail, ala, canthus, inner in ((17, 31, 36, 39), (26, 35, 45, 42)):
+        a, c = L[ala][[0, 2]], L[canthus][[0, 2]]
+        d = (c - a) / np.linalg.norm(c - a)
+        off = L[tail][[0, 2]] - a
+        assert abs(off[0] * d[1] - off[1] * d[0]) < 0.001, tail  # on the line, within 1 mm
+        fissure = abs(L[canthus, 0] - L[inner, 0])
+        assert abs(L[tail, 0] - L[canthus, 0]) > 0.25 * fissure, tail
+
+
 def test_eye_openings_have_measured_adult_proportions(rest):
     """The template's lid openings (EYE_OPENING) against published adult means (docs/default-model.md,
     "Eye proportions"): fissure ex-en 26-30 mm, intercanthal 31-41 mm, canthal index 36-44, lid

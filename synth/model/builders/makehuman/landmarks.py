@@ -9,11 +9,14 @@ from pathlib import Path
 
 import numpy as np
 
+from synth.errors import SynthError
 from synth.geometry.closest import ClosestPoints
-from synth.geometry.normals import vertex_normals
+from synth.geometry.normals import face_normals, vertex_normals
+from synth.geometry.raycast import first_hits
 from synth.model import meshutil as mu
 from synth.model.builders.makehuman.mesh import Mesh
-from synth.model.builders.makehuman.regions import Features, feature_regions, landmark_regions, ring_midpoints
+from synth.model.builders.makehuman.regions import (Features, feature_regions, landmark_regions, midline,
+                                                    ring_midpoints)
 from synth.model.builders.makehuman.surface import arc_at_x, level_points, polyline_at, split_loop, surface_hits
 from synth.model.builders.makehuman.targets import TargetSpace
 
@@ -22,7 +25,11 @@ IBUG_GROUPS = (("jaw", 17), ("brow_r", 5), ("brow_l", 5), ("nose_bridge", 4), ("
 DENSE_LANDMARKS = 600
 CHIN_NORMAL_DOWN = 0.8  # chin landmark: first midline point below the lip whose normal points down by >= asin(0.8)
 BROW_HEIGHT = (0.40, 0.53, 0.58, 0.55, 0.42)  # brow above the upper lid, in eye widths, medial -> lateral
-BROW_SPAN = (-0.10, 1.12)  # brow extent along the eye, in eye widths from the medial corner
+BROW_HEAD = -0.10  # medial end of the brow (21/22), in eye widths from the medial canthus (negative: medial)
+#: frontal rays that trace the nose base: spacing in height (m) along a column, and between columns
+NOSE_BASE_STEP_M = 0.0001
+NOSE_BASE_COLUMN_M = 0.00025
+NOSE_BASE_TIE_M = 1e-4  # outline heights this close count as equal when the subalare (31/35) is chosen
 #: distances (m) this close count as equal where landmarks are chosen: a landmark as near to two skin
 #: triangles (on their shared edge) names the lower index
 LANDMARK_TIE_M = 1e-8
@@ -59,15 +66,10 @@ def ibug68_points(f: Features, X: np.ndarray, tris: np.ndarray, joint_rest: np.n
     _eyes(f, X, pts)
     _mouth(f, X, pts)
     tip = _nose(f, X, joint_rest, pts)
-    _brows(f, X, tris, pts)
     _nose_base(f, X, tris, pts)
+    _brows(f, X, tris, pts)
     _jaw(f, X, tris, joint_rest, pts)
     return pts, tip
-
-
-def _midline(f: Features, X: np.ndarray, joint_rest: np.ndarray) -> np.ndarray:
-    """Visible vertices on x = 0 in front of the eyes."""
-    return np.nonzero(f.visible & (X[:, 0] == 0.0) & (X[:, 1] < joint_rest[3, 1]))[0]
 
 
 def _eyes(f: Features, X: np.ndarray, pts: dict) -> None:
@@ -102,10 +104,10 @@ def _mouth(f: Features, X: np.ndarray, pts: dict) -> None:
 
 
 def _nose(f: Features, X: np.ndarray, joint_rest: np.ndarray, pts: dict) -> int:
-    """Bridge (27-30), subnasale (33) and alar bases (31, 35) from the midline profile; returns the tip vertex."""
+    """Bridge (27-30) from the midline profile; returns the tip vertex."""
     lid_top = X[f.lids["l"]["upper"], 2].max()
-    midline = _midline(f, X, joint_rest)
-    front = midline[(X[midline, 2] > pts[51][2]) & (X[midline, 2] < lid_top)]
+    profile = midline(f, X, joint_rest)
+    front = profile[(X[profile, 2] > pts[51][2]) & (X[profile, 2] < lid_top)]
     tip = front[np.argmin(X[front, 1])]
     pts[30] = X[tip]
     above = front[X[front, 2] > X[tip, 2]]
@@ -115,27 +117,23 @@ def _nose(f: Features, X: np.ndarray, joint_rest: np.ndarray, pts: dict) -> int:
     ridge = ridge[np.argsort(-X[ridge, 2])]
     ridge_pts = np.concatenate([X[ridge], X[[tip]]])
     pts[28], pts[29] = polyline_at(ridge_pts, (1 / 3, 2 / 3))
-    below = front[(X[front, 2] < X[tip, 2])]
-    sub = below[np.argmax(X[below, 1])]
-    pts[33] = X[sub]
-    z33, z30 = X[sub, 2], X[tip, 2]
-    wing = np.nonzero(f.nose & (X[:, 0] < 0) & (X[:, 2] < z33 + 0.35 * (z30 - z33)))[0]
-    ala = wing[np.argmin(X[wing, 0])]  # lateral end of the nostril base (alar base)
-    pts[31] = X[ala]
-    pts[35] = X[ala] * [-1, 1, 1]
     return int(tip)
 
 
 def _brows(f: Features, X: np.ndarray, tris: np.ndarray, pts: dict) -> None:
-    """Rays from the front at heights above the upper lid, in eye widths."""
+    """Rays from the front at heights above the upper lid, in eye widths, from the brow head
+    (``BROW_HEAD`` eye widths from the medial canthus) to the brow tail, which ends on the line
+    from the alar base (31/35) through the lateral canthus (36/45)."""
     for t, ids in (("l", (22, 23, 24, 25, 26)), ("r", (21, 20, 19, 18, 17))):
         s = 1.0 if t == "l" else -1.0
         upper = f.lids[t]["upper"]
         med, lat = X[upper[0 if t == "l" else -1]], X[upper[-1 if t == "l" else 0]]
         w = abs(lat[0] - med[0])
         top = X[upper, 2].max()
-        xs = med[0] + s * w * np.linspace(BROW_SPAN[0], BROW_SPAN[1], 5)
         zs = top + w * np.array(BROW_HEIGHT)
+        ala = pts[35 if t == "l" else 31]
+        x_tail = ala[0] + (zs[-1] - ala[2]) / (lat[2] - ala[2]) * (lat[0] - ala[0])
+        xs = np.linspace(med[0] + s * w * BROW_HEAD, x_tail, 5)
         o = np.stack([xs, np.full(5, X[:, 1].min() - 0.1), zs], 1)
         hits = surface_hits(X, tris[f.vis_tris], o, np.tile(_FORWARD, (5, 1)))
         for k in range(5):
@@ -143,18 +141,60 @@ def _brows(f: Features, X: np.ndarray, tris: np.ndarray, pts: dict) -> None:
 
 
 def _nose_base(f: Features, X: np.ndarray, tris: np.ndarray, pts: dict) -> None:
-    """Points 32 and 34 between subnasale and alar base (rays from the front)."""
+    """The lower outline of the nose seen from the front (31-35): where the skin under the
+    nose, facing down, turns into the upper lip and cheek, facing forward (``_base_outline``,
+    one column of rays every ``NOSE_BASE_COLUMN_M`` from the midline out to where the ala ends).
+    33 (subnasale): on the midline, where the columella meets the lip. 31/35 (subalare): the
+    lowest point of the outline's lateral half, where the alar lobule meets the lip. 32/34: the
+    front-ray hit halfway between them (the nostril sill)."""
+    vis = tris[f.vis_tris]
+    normals = face_normals(X, vis)
+    z_top, z_low = pts[30][2], pts[51][2]
+    outline = [_base_outline(X, vis, normals, 0.0, z_top, z_low)]
+    while (p := _base_outline(X, vis, normals, -NOSE_BASE_COLUMN_M * len(outline), z_top, z_low)) is not None:
+        outline.append(p)
+    line = np.array(outline)  # from the midline out to the lateral end of the ala
+    pts[33] = line[0]
+    lobule = line[len(line) // 2:]  # the lateral half: the alar lobules, lateral of the nostrils
+    low = np.nonzero(lobule[:, 2] <= lobule[:, 2].min() + NOSE_BASE_TIE_M)[0]
+    pts[31] = lobule[low[-1]]  # subalare: the lowest point of the lobule; near ties: the most lateral
+    pts[35] = pts[31] * [-1, 1, 1]
     o = np.array([[pts[31][0] / 2, X[:, 1].min() - 0.1, (pts[31][2] + pts[33][2]) / 2]])
-    pts[32] = surface_hits(X, tris[f.vis_tris], o, _FORWARD[None])[0]
+    pts[32] = surface_hits(X, vis, o, _FORWARD[None])[0]
     pts[34] = pts[32] * [-1, 1, 1]
+
+
+def _base_outline(X: np.ndarray, vis: np.ndarray, normals: np.ndarray, x: float, z_top: float,
+                  z_low: float) -> np.ndarray | None:
+    """The point where a column of frontal rays at ``x``, going down from
+    ``z_top`` to ``z_low``, first meets skin that faces down more than forward and then skin
+    that faces forward again: the point where the normal leans 45 degrees between down and
+    forward, interpolated between the two rays around the turn (continuous in the surface, so no
+    ray decides it alone). None when no ray in the column meets skin facing down."""
+    zs = z_top - NOSE_BASE_STEP_M * np.arange(int((z_top - z_low) / NOSE_BASE_STEP_M) + 1)
+    o = np.stack([np.full(len(zs), x), np.full(len(zs), X[:, 1].min() - 0.1), zs], 1)
+    tri, bary, _ = first_hits(o, np.tile(_FORWARD, (len(zs), 1)), X, vis)
+    if np.any(tri < 0):
+        raise SynthError("a landmark ray missed the template surface", "makehuman builder", "report this as a bug")
+    hit = np.einsum("nk,nkc->nc", bary, X[vis[tri]])
+    lean = normals[tri, 1] - normals[tri, 2]  # > 0: faces down (-Z) more than forward (-Y)
+    down = np.nonzero(lean > 0.0)[0]
+    if len(down) == 0:
+        return None
+    after = np.nonzero(lean[down[0]:] <= 0.0)[0]
+    if len(after) == 0:
+        raise SynthError("the nose base does not meet the upper lip", "makehuman builder", "report this as a bug")
+    k = int(down[0] + after[0])
+    a = lean[k - 1] / (lean[k - 1] - lean[k])
+    return hit[k - 1] * (1 - a) + hit[k] * a
 
 
 def _jaw(f: Features, X: np.ndarray, tris: np.ndarray, joint_rest: np.ndarray, pts: dict) -> None:
     """Chin (gnathion) on the midline profile, cheek silhouette from ear level down to the jaw
     angle, then the mandible body as a straight side-view line projected onto the skin."""
     vn = vertex_normals(X, tris[f.vis_tris])
-    midline = _midline(f, X, joint_rest)
-    chin_line = midline[(X[midline, 2] < pts[57][2]) & (X[midline, 1] < joint_rest[2, 1])]
+    profile = midline(f, X, joint_rest)
+    chin_line = profile[(X[profile, 2] < pts[57][2]) & (X[profile, 1] < joint_rest[2, 1])]
     chin_line = chin_line[np.argsort(-X[chin_line, 2])]
     dy = np.diff(X[chin_line, 1])
     fold = int(np.nonzero(dy < 0)[0][0])  # profile turns forward again below the labiomental fold

@@ -23,6 +23,7 @@ HM08_LID_SEED = 7748
 # with the largest backward step of the profile (loop 5, through 455 and 492).
 HM08_STOMION_UPPER = 474
 BROW_BAND_M = 0.007  # brow region: skin within this distance of the brow polyline
+HAIRLINE_FACTOR = 1.1  # face region: the hairline above the nasion, in nasion-to-upper-lip-hollow heights
 
 
 @dataclass
@@ -50,6 +51,11 @@ def ring_midpoints(X: np.ndarray, ring: list[int]) -> tuple[int, int]:
     """Highest and lowest midline (x = 0) vertices of a loop."""
     m = [v for v in ring if X[v, 0] == 0.0]
     return max(m, key=lambda v: X[v, 2]), min(m, key=lambda v: X[v, 2])
+
+
+def midline(f: Features, X: np.ndarray, joint_rest: np.ndarray) -> np.ndarray:
+    """Visible vertices on x = 0 in front of the eyes."""
+    return np.nonzero(f.visible & (X[:, 0] == 0.0) & (X[:, 1] < joint_rest[3, 1]))[0]
 
 
 def feature_regions(mesh: Mesh, X: np.ndarray, tris: np.ndarray, space: TargetSpace, data: Path) -> Features:
@@ -146,7 +152,11 @@ def landmark_regions(f: Features, X: np.ndarray, family: np.ndarray, joint_rest:
     V = len(X)
     reg, skin, visible = f.reg, f.skin, f.visible
     P68 = np.array([pts[i] for i in range(68)])
-    z_trichion = pts[27][2] + 1.1 * (pts[27][2] - pts[33][2])
+    # hairline estimate: forehead height ~ the height from the nasion down to the hollow of the upper
+    # lip's profile (the deepest midline point between the nose tip and the upper lip)
+    lip = midline(f, X, joint_rest)
+    lip = lip[(X[lip, 2] < pts[30][2]) & (X[lip, 2] > pts[51][2])]
+    z_trichion = pts[27][2] + HAIRLINE_FACTOR * (pts[27][2] - X[lip[np.argmax(X[lip, 1])], 2])
     jx = np.abs(P68[:9, 0])[::-1]
     jz = P68[:9, 2][::-1]
     below_jaw = X[:, 2] < np.interp(np.abs(X[:, 0]), jx, jz)
