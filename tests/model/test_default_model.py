@@ -151,8 +151,8 @@ def _frontal_lean(default_model, V, x: float, z: float) -> float:
 def test_nose_base_points_lie_on_the_lower_outline_of_the_nose(default_model, rest):
     """iBUG 31-35 mark the nose base seen from the front: 33 (subnasale) where the columella meets
     the upper lip, 31/35 where the alar lobules meet it. So a frontal view sees, 1 mm above each, the
-    underside of the nose (facing down) and, 1 mm below, the lip (facing forward). Up to builder 9
-    the row lay 4-9 mm lower, on the upper lip, where both face forward."""
+    underside of the nose (facing down) and, 1 mm below, the lip (facing forward). A row placed on
+    the upper lip fails: there both face forward."""
     V, L = rest
     for i in (31, 33, 35):
         x, z = L[i, 0], L[i, 2]
@@ -164,8 +164,7 @@ def test_nose_base_points_lie_on_the_lower_outline_of_the_nose(default_model, re
 
 def test_brow_tails_end_on_the_line_from_the_alar_base_through_the_lateral_canthus(rest):
     """The eyebrow's tail (17, 26) ends on the line from the alar base (31, 35) through the lateral
-    canthus (36, 45) (frontal view): about a third of the eye's width past the canthus. Up to
-    builder 9 it ended 0.12 eye widths past it, 6 mm short of that line."""
+    canthus (36, 45) (frontal view): about a third of the eye's width past the canthus."""
     _, L = rest
     for tail, ala, canthus, inner in ((17, 31, 36, 39), (26, 35, 45, 42)):
         a, c = L[ala][[0, 2]], L[canthus][[0, 2]]
