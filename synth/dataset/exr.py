@@ -336,8 +336,27 @@ def decode_channels(data: bytes, names: tuple[str, ...], where: str = "<bytes>")
     return w, h, out
 
 
+#: The largest segmentation ID when the known IDs are 0..N without gaps (else None).
+_DENSE_MAX_ID = max(NAMES) if sorted(NAMES) == list(range(len(NAMES))) else None
+
+
+def _pixels_clean(px: dict) -> bool:
+    """Whether :func:`pixel_defects` finds nothing, decided with a few whole-array reductions
+    (``synth validate`` runs it on every frame; the messages are only built when it is False)."""
+    rgba, normals, depth, seg = px["rgba"], px["normals"], px["depth"], px["segmentation"]
+    if _DENSE_MAX_ID is None or seg.dtype.kind != "u" or (seg.size and int(seg.max()) > _DENSE_MAX_ID):
+        return False
+    if not (np.isfinite(rgba).all() and np.isfinite(normals).all()):
+        return False
+    alpha = rgba[..., 3]
+    with np.errstate(invalid="ignore"):  # NaN depth: the comparison is False, so not clean
+        return bool((depth >= 0).all() and (depth < np.inf).all() and (alpha >= 0).all() and (alpha <= 1).all())
+
+
 def pixel_defects(px: dict) -> list[str]:
     """Problems in the pixels of a frame read by :func:`synth.dataset.exr.read_frame_exr`."""
+    if _pixels_clean(px):
+        return []
     out = []
     rgba = px["rgba"].astype(np.float32)
     normals = px["normals"].astype(np.float32)

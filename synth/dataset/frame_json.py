@@ -327,17 +327,21 @@ def _semantic_errors(f: dict) -> list[str]:
     if not cam["near"] < cam["far"]:
         out.append(f"camera: near {cam['near']} is not below far {cam['far']}")
     K = np.asarray(cam["K"], dtype=np.float64)
-    w2c = np.asarray(cam["world_to_camera"], dtype=np.float64)
-    c2w = np.asarray(cam["camera_to_world"], dtype=np.float64)
+    # the three rigid transforms checked together (one array op per test instead of three)
+    M = np.asarray([cam["world_to_camera"], cam["camera_to_world"], f["model"]["head_pose"]], dtype=np.float64)
+    w2c, c2w = M[0], M[1]
     if not (K[0, 0] > 0 and K[1, 1] > 0 and _close(K[2], _K_ROW, 1e-8) and K[1, 0] == 0):
         out.append("camera/K: not an intrinsics matrix (fx, fy > 0, last row [0, 0, 1], K[1][0] = 0)")
-    for name, M in (("world_to_camera", w2c), ("camera_to_world", c2w), ("model/head_pose",
-                                                                        np.asarray(f["model"]["head_pose"], float))):
-        R = M[:3, :3]
-        if not (_close(M[3], _LAST_ROW, MATRIX_TOL) and _close(R @ R.T, _EYE3, MATRIX_TOL)
-                and np.linalg.det(R) > 0):
-            out.append(f"{name if '/' in name else 'camera/' + name}: not a rigid transform "
-                       "(rotation not orthonormal with det +1, or last row not [0, 0, 0, 1])")
+    R = M[:, :3, :3]
+    tol = MATRIX_TOL + 1e-5 * np.abs(_EYE3)  # _close's bound, per element
+    rigid = ((np.abs(M[:, 3] - _LAST_ROW) <= MATRIX_TOL + 1e-5 * _LAST_ROW).all(axis=1)
+             & (np.abs(R @ R.transpose(0, 2, 1) - _EYE3) <= tol).all(axis=(1, 2)))
+    if not rigid.all() or not (np.linalg.det(R) > 0).all():
+        det = np.linalg.det(R)
+        for i, name in enumerate(("camera/world_to_camera", "camera/camera_to_world", "model/head_pose")):
+            if not (rigid[i] and det[i] > 0):
+                out.append(f"{name}: not a rigid transform "
+                           "(rotation not orthonormal with det +1, or last row not [0, 0, 0, 1])")
     if not _close(w2c @ c2w, _EYE4, MATRIX_TOL * max(1.0, float(np.abs(c2w[:3, 3]).max()))):
         out.append("camera: world_to_camera @ camera_to_world is not the identity")
     X = np.asarray(f["landmarks_3d"], dtype=np.float64)

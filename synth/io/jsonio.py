@@ -50,14 +50,29 @@ def _refuse_constant(name: str):
 def json_depth(data: bytes) -> int:
     """The deepest nesting of ``[``/``{`` in JSON bytes, strings skipped (linear time, no
     recursion). Meaningful for well-formed JSON; for other bytes it is an upper bound."""
-    brackets = _STRING.sub(b"", data).translate(None, _NOT_BRACKETS)
+    return _bracket_depth(_STRING.sub(b"", data).translate(None, _NOT_BRACKETS))
+
+
+def _bracket_depth(brackets: bytes) -> int:
+    """The deepest nesting of a string of ``[]{}`` (no recursion)."""
     if brackets.count(b"[") + brackets.count(b"{") <= 1:
         return 1 if brackets else 0
     import numpy as np
 
     a = np.frombuffer(brackets, np.uint8)
-    steps = np.where((a == ord("[")) | (a == ord("{")), 1, -1).astype(np.int64)
-    return int(np.cumsum(steps).max())
+    return int(np.cumsum(np.where((a == ord("[")) | (a == ord("{")), 1, -1).astype(np.int64)).max())
+
+
+_NOT_BRACKETS_OR_QUOTES = bytes(b for b in range(256) if b not in b'[]{}"')
+
+
+def _depth_without_escapes(raw: bytes) -> int | None:
+    """The nesting depth of JSON bytes known to be well-formed that hold no backslash (then every ``"``
+    opens or closes a string, so the brackets outside strings are those between an even and an
+    odd quote), in a few whole-buffer operations; None when ``raw`` has a backslash."""
+    if b"\\" in raw:
+        return None
+    return _bracket_depth(b"".join(raw.translate(None, _NOT_BRACKETS_OR_QUOTES).split(b'"')[::2]))
 
 
 def _deeper_than(obj, limit: int) -> bool:
@@ -98,7 +113,8 @@ def loads_json(data: bytes | str, *, max_depth: int = MAX_DEPTH):
         except orjson.JSONDecodeError:
             pass  # the path below says why, as it always has
         else:
-            if not _deeper_than(obj, max_depth):
+            depth = _depth_without_escapes(raw)
+            if (depth <= max_depth) if depth is not None else not _deeper_than(obj, max_depth):
                 return obj
     depth = json_depth(raw)
     if depth > max_depth:

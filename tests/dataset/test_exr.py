@@ -273,3 +273,32 @@ def test_reads_in_threads_leave_stderr_alone(tmp_path, capfd):
         t.join()
     assert failures == []
     assert capfd.readouterr().err.splitlines() == [f"line {i}" for i in range(200)]
+
+
+@pytest.mark.parametrize("damage, says", [
+    (None, None),
+    (lambda p: p["rgba"].__setitem__((1, 2, 0), np.nan), "RGBA has 1 NaN and 0 Inf"),
+    (lambda p: p["rgba"].__setitem__((1, 2, 1), np.inf), "RGBA has 0 NaN and 1 Inf"),
+    (lambda p: p["normals"].__setitem__((0, 0, 2), -np.inf), "normals has 0 NaN and 1 Inf"),
+    (lambda p: p["depth"].__setitem__((3, 3), np.nan), "depth has 1 NaN and 0 Inf value(s), 1 where alpha > 0"),
+    (lambda p: p["depth"].__setitem__((3, 3), np.inf), "depth has 0 NaN and 1 Inf"),
+    (lambda p: p["depth"].__setitem__((3, 3), -0.5), "depth has 1 negative value(s)"),
+    (lambda p: p["rgba"].__setitem__((0, 1, 3), 1.5), "alpha outside [0, 1]"),
+    (lambda p: p["rgba"].__setitem__((0, 1, 3), -0.25), "alpha outside [0, 1]"),
+    (lambda p: p["segmentation"].__setitem__((2, 2), 12), "unknown class ID(s) [12]"),
+    (lambda p: p["segmentation"].__setitem__((2, 2), 2**32 - 1), "unknown class ID(s) [4294967295]"),
+])
+def test_pixel_defects_finds_each_defect_and_nothing_on_a_clean_frame(damage, says):
+    """The whole-array fast path and the messages agree: a clean frame gives no defect, each
+    damage exactly its one line (``synth validate`` runs this on every frame)."""
+    from synth.dataset.exr import pixel_defects
+
+    rgba, depth, n, seg = frame()
+    rgba[..., 3] = np.clip(rgba[..., 3], 0.01, 1.0)
+    px = decode_frame_exr(encode_frame_exr(rgba, depth, n, seg))
+    px = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in px.items()}
+    if damage is not None:
+        damage(px)
+    found = pixel_defects(px)
+    assert found == ([] if says is None else found[:1]) and len(found) == (0 if says is None else 1)
+    assert says is None or says in found[0]

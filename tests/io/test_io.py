@@ -184,6 +184,20 @@ def test_loads_json_gives_what_json_gives(text):
     assert repr(sio.loads_json(text)) == repr(json.loads(text))  # repr: int stays int, -0.0 stays -0.0
 
 
+@pytest.mark.parametrize("depth", [64, 65])
+@pytest.mark.parametrize("inner", [b'"]]]}}"', b'"[[[{{"', b'"a\\"]]"', b'{"k]": "[", "v": ["]"]}', b'""'])
+def test_the_depth_limit_ignores_brackets_in_strings(depth, inner):
+    """Brackets inside strings (with and without escapes) neither hide nor add nesting: 64 is
+    accepted, 65 refused, whichever path measures the depth."""
+    outer = depth - (2 if inner.startswith(b"{") else 0)
+    text = b"[" * outer + inner + b"]" * outer
+    if depth <= 64:  # synth.io.jsonio.MAX_DEPTH
+        assert sio.loads_json(text) is not None
+    else:
+        with pytest.raises(sio.JSONError, match=f"nested {depth} levels deep"):
+            sio.loads_json(text)
+
+
 @pytest.mark.parametrize("text, says", [(b"[" * 65 + b"]" * 65, "nested 65 levels deep"),
                                         (b"[" * 2000 + b"]" * 2000, "nested 2000 levels deep"),
                                         (b"[1, 2", "Expecting ','"), (b'"\xff"', "not UTF-8")])
