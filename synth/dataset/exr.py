@@ -34,7 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from synth.dataset.exr_check import check_exr_bytes
+from synth.dataset.exr_check import ExrDamaged, check_exr_bytes
+from synth.dataset.exr_zip import TYPE_NAMES, decode_planes
 from synth.dataset.segmentation import NAMES
 from synth.errors import SynthError
 from synth.dataset.layout import MAX_EXR_BYTES
@@ -246,12 +247,16 @@ def _open(data: bytes, where: str, header_only: bool, verify: bool):
         hdr = f.header()
         chans = {} if header_only else f.channels()
     except Exception as e:  # ExrDamaged, or what the binding raises (RuntimeError/ValueError)
-        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-        if "has 0 parts" in msg:
-            msg = "pixel data does not decode"
-        raise SynthError(f"cannot read EXR: {msg}", where,
-                         "the file is corrupt or truncated; re-render the frame") from None
+        raise _unreadable(e, where) from None
     return hdr, chans
+
+
+def _unreadable(e: Exception, where: str) -> SynthError:
+    """The one-line error of bytes that do not read as an EXR."""
+    msg = str(e).splitlines()[0] if str(e) else type(e).__name__
+    if "has 0 parts" in msg:
+        msg = "pixel data does not decode"
+    return SynthError(f"cannot read EXR: {msg}", where, "the file is corrupt or truncated; re-render the frame")
 
 
 def read_frame_exr_header(source, *, where: str | None = None) -> dict:
@@ -296,27 +301,52 @@ def decode_frame_exr(data: bytes, where: str = "<bytes>", *, verify: bool = Fals
     """:func:`read_frame_exr` of bytes already in memory (a shard file, a tar member)."""
     hdr, chans = _open(data, where, header_only=False, verify=verify)
     desc = _describe(hdr, where, chans)
-    missing = [c for c in CHANNELS if c not in chans]
+    desc.update(_frame_arrays({name: c.pixels for name, c in chans.items()}, desc["width"], desc["height"], where))
+    return desc
+
+
+def _frame_arrays(planes: dict, w: int, h: int, where: str) -> dict:
+    """``rgba``, ``depth``, ``normals`` and ``segmentation`` of a frame from its channels' (h, w)
+    pixels; one clear error for a missing channel, a wrong size or a wrong pixel type."""
+    missing = [c for c in CHANNELS if c not in planes]
     if missing:
         raise SynthError(f"EXR lacks channel(s) {', '.join(missing)}", where,
                          "it was not written by synth.dataset.exr.write_frame_exr; re-render the frame")
-    h, w = desc["height"], desc["width"]
-    px = {}
     for name in CHANNELS:
-        p = chans[name].pixels
+        p = planes[name]
         if p is None or p.shape != (h, w):
             raise SynthError(f"EXR channel {name} has no pixel data of size {w}x{h}", where,
                              "the file is corrupt; re-render the frame")
-        px[name] = p
-    desc["rgba"] = np.stack([px[c] for c in RGBA_CHANNELS], axis=-1)
-    desc["depth"] = px[DEPTH_CHANNEL]
-    desc["normals"] = np.stack([px[c] for c in NORMAL_CHANNELS], axis=-1)
-    desc["segmentation"] = px[SEG_CHANNEL]
-    types = {"rgba": desc["rgba"].dtype, "depth": desc["depth"].dtype, "segmentation": desc["segmentation"].dtype}
+    out = {"rgba": np.stack([planes[c] for c in RGBA_CHANNELS], axis=-1), "depth": planes[DEPTH_CHANNEL],
+           "normals": np.stack([planes[c] for c in NORMAL_CHANNELS], axis=-1), "segmentation": planes[SEG_CHANNEL]}
+    types = {"rgba": out["rgba"].dtype, "depth": out["depth"].dtype, "segmentation": out["segmentation"].dtype}
     if types["segmentation"] != np.uint32 or types["depth"] != np.float32:
         raise SynthError(f"EXR channel types are wrong ({types})", where,
                          "depth.Z must be FLOAT and segmentation.id UINT; re-render the frame")
-    return desc
+    return out
+
+
+def verify_frame_exr(data: bytes, where: str = "<bytes>") -> dict:
+    """What ``synth validate`` reads of a frame EXR in memory, every chunk checked to decode:
+    ``{"width", "height", "channels": {name: pixel type}, "rgba", "depth", "normals",
+    "segmentation", "frame_key"}`` (``frame_key``: the ``synthFrameKey`` attribute, else None),
+    the arrays bit for bit those of :func:`decode_frame_exr` with ``verify``. Frames stored ZIP,
+    ZIPS or uncompressed are decoded by :mod:`synth.dataset.exr_zip` from the bytes the check
+    inflates (OpenEXR would inflate them again); others by OpenEXR."""
+    try:
+        layout = check_exr_bytes(data)
+        planes = decode_planes(data, layout)
+    except ExrDamaged as e:
+        raise _unreadable(e, where) from None
+    if planes is None:
+        px = decode_frame_exr(data, where, verify=True)
+        return {**{k: px[k] for k in ("width", "height", "channels", "rgba", "depth", "normals", "segmentation")},
+                "frame_key": px["header"].get("synthFrameKey")}
+    out = {"width": layout.width, "height": layout.height,
+           "channels": {name: TYPE_NAMES[t] for name, t in layout.channels.items()}}
+    out.update(_frame_arrays(planes, layout.width, layout.height, where))
+    out["frame_key"] = dict(layout.strings).get("synthFrameKey")
+    return out
 
 
 def decode_channels(data: bytes, names: tuple[str, ...], where: str = "<bytes>") -> tuple[int, int, list]:
@@ -385,5 +415,5 @@ def pixel_defects(px: dict) -> list[str]:
 
 __all__ = ["CHANNELS", "REC709_CHROMATICITIES", "HALF_MAX", "STORED_BACKGROUND_DEPTH", "BACKGROUND_DEPTH_THRESHOLD",
            "camera_attributes",
-           "encode_frame_exr", "read_camera_attributes", "write_frame_exr", "read_frame_exr", "decode_frame_exr", "decode_channels",
+           "encode_frame_exr", "read_camera_attributes", "write_frame_exr", "read_frame_exr", "decode_frame_exr", "decode_channels", "verify_frame_exr",
            "read_frame_exr_header", "pixel_defects"]

@@ -51,6 +51,10 @@ class ExrLayout:
     channels: dict[str, int]
     #: (file offset, first line, packed size) of each chunk, in line order
     chunks: tuple[tuple[int, int, int], ...]
+    #: every channel has one sample per pixel (no subsampling)
+    plain: bool = True
+    #: the header's string attributes, name -> text
+    strings: tuple[tuple[str, str], ...] = ()
 
 
 def _utf8(raw: bytes, what: str) -> str:
@@ -133,14 +137,15 @@ def check_exr_bytes(data: bytes, *, inflate: bool = False) -> ExrLayout:
     if not (1 <= width <= MAX_SIDE and 1 <= height <= MAX_SIDE):
         raise ExrDamaged(f"header has an implausible data window ({width}x{height})")
     types = {name: ptype for name, ptype, _, _ in channels}
+    plain = all(xs == 1 and ys == 1 for _, _, xs, ys in channels)
+    strings = tuple((name, value.decode("utf-8")) for name, (kind, value) in attrs.items() if kind == "string")
     lines = LINES_PER_CHUNK.get(compression)
     if lines is None:  # a compression frame EXRs never use: leave the pixel data to OpenEXR
-        return ExrLayout(width, height, compression, types, ())
+        return ExrLayout(width, height, compression, types, (), plain, strings)
     count = -(-height // lines)
     table_end = pos + 8 * count
     if table_end > len(data):
         raise ExrDamaged(f"pixel data does not decode (the file ends inside the offset table, at byte {len(data)})")
-    plain = all(xs == 1 and ys == 1 for _, _, xs, ys in channels)
     line_bytes = width * sum(SAMPLE_BYTES[ptype] for _, ptype, _, _ in channels)
     chunks = []
     for i, offset in enumerate(struct.unpack_from(f"<{count}Q", data, pos)):
@@ -159,7 +164,7 @@ def check_exr_bytes(data: bytes, *, inflate: bool = False) -> ExrLayout:
     for (offset, _, size), (following, _, _) in zip(by_offset, by_offset[1:]):
         if offset + 8 + size > following:
             raise ExrDamaged(f"pixel data does not decode (the chunk at byte {offset} overlaps the next one)")
-    return ExrLayout(width, height, compression, types, tuple(chunks))
+    return ExrLayout(width, height, compression, types, tuple(chunks), plain, strings)
 
 
 def _check_chunk(data: bytes, start: int, size: int, raw: int, compression: int, index: int) -> None:

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from synth.dataset.defects import Defect, Report
-from synth.dataset.exr import decode_frame_exr, pixel_defects
+from synth.dataset.exr import pixel_defects, verify_frame_exr
 from synth.dataset.frame_json import validate_frame_json
 from synth.dataset.index import REPAIR_HINT, ManifestError, parse_manifest, read_manifest_bytes
 from synth.dataset.layout import (FRAME_KEY_RE, KIND_TEXT, MANIFEST_FILE, MAX_FRAME_JSON_BYTES, SHARD_ID_RE,
@@ -73,7 +73,7 @@ def check_frame_data(shard: str, key: str, json_bytes: bytes | None, exr_bytes: 
     if exr_bytes is None:
         return out
     try:
-        px = decode_frame_exr(exr_bytes, where, verify=True)
+        px = verify_frame_exr(exr_bytes, where)
     except SynthError as e:
         out.append(Defect(shard, key, "exr", e.what))
         return out
@@ -84,7 +84,7 @@ def check_frame_data(shard: str, key: str, json_bytes: bytes | None, exr_bytes: 
                                                  f"{want[0]}x{want[1]}"))
     if px["rgba"].dtype != np.float16:
         out.append(Defect(shard, key, "exr", f"RGBA stored as {px['rgba'].dtype}, expected HALF"))
-    hk = px["header"].get("synthFrameKey")
+    hk = px["frame_key"]
     if hk is not None and hk != key:
         out.append(Defect(shard, key, "exr", f"header names frame {str(hk)[:80]!r}"))
     for msg in pixel_defects(px):
