@@ -16,9 +16,13 @@ quality: speed against error. One planned identity (with its assets) at 256x256;
 settings: Cycles settings against the preset's, on every frame of a plan's first expression
   per identity (``--identities``): seconds in Cycles' render call and PSNR / fringe RMSE against
   a ``--reference-spp`` render (denoised), paired per frame. Variants are ``+``-joined parts:
-  base, sppN, fastpf (denoising prefilter FAST), dqbalanced / dqfast (OIDN quality),
-  diffN / glossN / transN / transpN / maxN (bounces), nolt (no light tree), burley (skin
-  subsurface), nbcloth / nbskin (no bump on cloth / skin). Each identity renders its variants
+  base, sppN, adN (adaptive threshold N/1000), noad, adminN (adaptive minimum samples),
+  nodenoise, fastpf (denoising prefilter FAST), dqbalanced / dqfast (OIDN quality), noguides
+  (OIDN without albedo/normal), diffN / glossN / transN / transpN / maxN (bounces), nocaustics,
+  blurglossyN (N/10), nolt (no light tree), thick / ribbons (hair curve shape), burley (skin
+  subsurface), sssrN (skin subsurface radius N %), nbcloth / nbskin (no bump on cloth / skin),
+  threadsN, tileN, nopd (no persistent data), hide<class> (hair, beard, eyebrows, eyelashes,
+  clothing, glasses, headwear). Each identity renders its variants
   in turn (reversed every other identity), each from a dropped render cache.
 memory: RSS of one process building, rendering (1 view, ci preset) and resetting 20
   identity scenes in turn (what a worker does between recycles).
@@ -164,7 +168,24 @@ def quality(args) -> None:
 # --------------------------------------------------------------------------- settings
 
 _DEFAULTS = ("diffuse_bounces", "glossy_bounces", "transmission_bounces", "transparent_max_bounces",
-             "volume_bounces", "use_light_tree", "denoising_prefilter", "denoising_quality")
+             "volume_bounces", "use_light_tree", "denoising_prefilter", "denoising_quality", "denoising_input_passes",
+             "caustics_reflective", "caustics_refractive", "blur_glossy", "tile_size", "use_auto_tile",
+             "adaptive_min_samples")
+#: segmentation classes a ``hide<class>`` variant part can hide (benchmarks/render_cost.py's cost per class)
+HIDEABLE = ("hair", "beard", "eyebrows", "eyelashes", "clothing", "glasses", "headwear")
+
+
+def _hide_class(cls: str, undo: list) -> None:
+    """Hide from the render every object all of whose materials belong to ``cls``."""
+    import bpy
+
+    from synth.dataset.segmentation import CLASSES
+
+    for ob in bpy.data.objects:
+        mats = [s.material for s in getattr(ob, "material_slots", ()) if s.material is not None]
+        if mats and all(m.pass_index == CLASSES[cls] for m in mats) and not ob.hide_render:
+            ob.hide_render = True
+            undo.append(lambda ob=ob: setattr(ob, "hide_render", False))
 
 
 def _apply_variant(variant: str, sc, defaults: dict, undo: list) -> None:
@@ -175,19 +196,54 @@ def _apply_variant(variant: str, sc, defaults: dict, undo: list) -> None:
 
     while undo:  # links removed by nbcloth / nbskin, subsurface methods changed by burley
         undo.pop()()
-    bscene.configure_render(sc.render_cfg, sc.width, sc.height)
-    c = bpy.context.scene.cycles
+    parts = variant.split("+")
+    cfg = dataclasses.replace(sc.render_cfg, denoise=False) if "nodenoise" in parts else sc.render_cfg
+    bscene.configure_render(cfg, sc.width, sc.height)  # also the compositor's alpha denoiser, on or off
+    scene = bpy.context.scene
+    c = scene.cycles
     for k, v in defaults.items():
-        setattr(c, k, v)
-    for part in variant.split("+"):
-        if part == "base":
+        if k == "curve_shape":
+            scene.cycles_curves.shape = v
+        else:
+            setattr(c, k, v)
+    for part in parts:
+        if part in ("base", "nodenoise"):
             continue
         head = part.rstrip("0123456789")
         num = int(part[len(head):]) if part[len(head):] else None
-        attr = {"spp": "samples", "diff": "diffuse_bounces", "gloss": "glossy_bounces",
-                "trans": "transmission_bounces", "transp": "transparent_max_bounces", "max": "max_bounces"}
+        attr = {"spp": "samples", "diff": "diffuse_bounces", "gloss": "glossy_bounces", "tile": "tile_size",
+                "trans": "transmission_bounces", "transp": "transparent_max_bounces", "max": "max_bounces",
+                "admin": "adaptive_min_samples"}
         if head in attr and num is not None:
             setattr(c, attr[head], num)
+            if head == "tile":
+                c.use_auto_tile = True
+        elif head == "ad" and num is not None:  # adaptive sampling, threshold in thousandths
+            c.use_adaptive_sampling, c.adaptive_threshold = True, num / 1000.0
+        elif part == "noad":
+            c.use_adaptive_sampling = False
+        elif head == "threads" and num is not None:
+            scene.render.threads_mode, scene.render.threads = "FIXED", num
+        elif part == "nopd":
+            scene.render.use_persistent_data = False
+        elif part == "noguides":
+            c.denoising_input_passes = "RGB"
+        elif part == "nocaustics":
+            c.caustics_reflective = c.caustics_refractive = False
+        elif head == "blurglossy" and num is not None:  # in tenths
+            c.blur_glossy = num / 10.0
+        elif part in ("thick", "ribbons"):
+            scene.cycles_curves.shape = part.upper()
+        elif part.startswith("hide") and part[4:] in HIDEABLE:
+            _hide_class(part[4:], undo)
+        elif head == "sssr" and num is not None:  # skin subsurface radius in percent of the planned
+            for m in bpy.data.materials:
+                for n in (m.node_tree.nodes if m.node_tree else ()):
+                    if n.bl_idname == "ShaderNodeBsdfPrincipled" and n.inputs["Subsurface Weight"].default_value > 0:
+                        sock = n.inputs["Subsurface Scale"]
+                        old = sock.default_value
+                        sock.default_value = old * num / 100.0
+                        undo.append(lambda sock=sock, old=old: setattr(sock, "default_value", old))
         elif part == "fastpf":
             c.denoising_prefilter = "FAST"
         elif part in ("dqbalanced", "dqfast"):
@@ -213,6 +269,14 @@ def _apply_variant(variant: str, sc, defaults: dict, undo: list) -> None:
             raise SystemExit(f"unknown variant part {part!r} (see benchmarks/render.py's docstring)")
 
 
+def engine_defaults() -> dict:
+    """The Cycles settings a variant may change, as the scene has them (restored before each variant)."""
+    import bpy
+
+    scene = bpy.context.scene
+    return {**{k: getattr(scene.cycles, k) for k in _DEFAULTS}, "curve_shape": scene.cycles_curves.shape}
+
+
 def settings(args) -> None:
     import bpy
 
@@ -236,7 +300,7 @@ def settings(args) -> None:
                                {"name": hm.data.name, "sha256": plan.model_sha256()}, software_versions(), sid)
             sc.set_expression(ident.expressions[0])
             if defaults is None:
-                defaults = {k: getattr(bpy.context.scene.cycles, k) for k in _DEFAULTS}
+                defaults = engine_defaults()
             frames = ident.expressions[0].frames
             _apply_variant("base", sc, defaults, undo)
             bscene.configure_render(dataclasses.replace(sc.render_cfg, samples=args.reference_spp, denoise=True),

@@ -1,0 +1,408 @@
+"""Render cost at the production framing: speed against error, and what each asset class costs.
+
+    python benchmarks/render_cost.py pick W [--candidates 300 --seed 11 --preset production]
+    python benchmarks/render_cost.py reference W [--full-spp 1024 --crop-spp 4096 --cases ...]
+    python benchmarks/render_cost.py variants W --variants base spp64 ad20 ... [--cases ...]
+    python benchmarks/render_cost.py classes W            # base and hide<class> for each asset class
+    python benchmarks/render_cost.py persistent W --views 5
+    python benchmarks/render_cost.py score W              # PSNR / LPIPS / fringe (torch; no bpy)
+    python benchmarks/render_cost.py report W [--plot docs/render_cost.png]
+
+pick: plans ``--candidates`` identities at the preset and keeps the first identity of each costly
+  case (long curly hair, braids, a full beard, glasses, a hat, bare skin: no hair, beard, glasses
+  or headwear) that has an expression opening the jaw (jaw rotation + jawOpen >= 0.3); of it the
+  least active expression and the one with the widest jaw opening, and of each the most frontal
+  of its planned views: 12 frames, named ``<case>_<neutral|open>``.
+reference: per frame a converged render (``--full-spp``, no denoising, no adaptive stop) and two
+  crops rendered with Cycles' border at ``--crop-spp``: 128x128 (at 512x512; scaled with the
+  resolution) over the eyes, brows and hairline (from the frame's landmarks) and over the hair
+  silhouette at the top of the head (from the reference's alpha).
+variants: every frame with each variant (``+``-joined parts of benchmarks/render.py's
+  ``_apply_variant``: samples, adaptive threshold, denoiser, bounces, caustics, light tree, hair
+  curve shape, subsurface, threads, tiles, persistent data, hidden classes).
+score: against the references: PSNR (sRGB, alpha > 0.5) and LPIPS (the project's VGG LPIPS, on the
+  colour composited over black) of the whole frame and of each crop, and the fringe RMSE.
+
+Every stage keeps what it made under W (renders as ``W/renders/<variant>/<frame>.npz``) and skips it
+when rerun, so a long study is run in pieces. Times are Cycles' render call (scene sync, sampling,
+denoising), the frames of one identity rendered in one scene, each variant after a dropped render
+cache (benchmarks/render.py ``settings``' protocol).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from synth.io import atomic_write_json  # noqa: E402
+
+#: the costly cases of the study: name -> test on an identity's assets ({class: AssetPick or None})
+CASES = {
+    "long_curly": lambda a: _id(a, "hair") == "long_curly",
+    "braids": lambda a: _id(a, "hair") == "braids",
+    "full_beard": lambda a: _id(a, "beard") in ("full_long", "short_full"),
+    "glasses": lambda a: _id(a, "glasses") is not None,
+    "hat": lambda a: _id(a, "headwear") is not None,
+    "bare": lambda a: all(_id(a, c) is None for c in ("hair", "beard", "glasses", "headwear")),
+}
+CROP = 128  # crop side at 512x512
+OPEN_JAW = 0.3  # an identity is used only if one of its expressions opens the jaw at least this much
+CROP_NAMES = ("eyes", "hairline")
+
+
+def _id(assets: dict, cls: str):
+    pick = assets.get(cls)
+    return None if pick is None else pick.id
+
+
+def _frames_file(work: Path) -> Path:
+    return work / "frames.json"
+
+
+def load_frames(work: Path) -> dict:
+    f = _frames_file(work)
+    if not f.is_file():
+        raise SystemExit(f"{f} not found: run `render_cost.py pick {work}` first")
+    return json.loads(f.read_text())
+
+
+# --------------------------------------------------------------------------- pick
+
+
+def pick(args) -> None:
+    from synth.config import load_config
+    from synth.plan.io import load_plan
+    from synth.plan.planner import run_plan
+
+    work = Path(args.work)
+    if _frames_file(work).is_file():
+        print(f"{_frames_file(work)} exists: kept")
+        return
+    cfg = load_config(None, [f'render.preset="{args.preset}"', f"dataset.expressions_per_identity={args.expressions}",
+                             f"dataset.views_per_expression={args.views}"])
+    run_plan(cfg, args.candidates, work / "plan", seed=args.seed)
+    plan = load_plan(work / "plan")
+    names = list(plan.model_data().expression_names)
+
+    def jaw(e) -> float:  # the jaw opening: the jaw joint's rotation, or the jawOpen component
+        code = dict(zip(names, e.expression_code))
+        return float(np.linalg.norm(e.joint_rotations.get("jaw", (0.0, 0.0, 0.0)))) + abs(code.get("jawOpen", 0.0))
+
+    chosen: dict[str, tuple[str, object]] = {}
+    for sid in plan.shard_ids():  # in identity order: the first identity of each case, each used once
+        ident = plan.shard_spec(sid).identities[0]
+        if max(jaw(e) for e in ident.expressions) < OPEN_JAW:
+            continue
+        for case, test in CASES.items():
+            if case not in chosen and test(ident.assets):
+                chosen[case] = (sid, ident)
+                break
+    missing = sorted(set(CASES) - set(chosen))
+    if missing:
+        raise SystemExit(f"no identity among {args.candidates} candidates for {missing}: raise --candidates")
+    frames = []
+    for case in CASES:
+        sid, ident = chosen[case]
+        exprs = list(ident.expressions)
+        neutral = min(exprs, key=lambda e: (e.kind != "neutral", round(float(np.abs(e.expression_code).sum()), 9),
+                                            e.expression_index))
+        others = [e for e in exprs if e is not neutral]
+        opened = max(others, key=lambda e: (round(jaw(e), 9), -e.expression_index))
+        for tag, e in (("neutral", neutral), ("open", opened)):
+            f = min(e.frames, key=lambda f: (round(abs(f.camera.azimuth_deg) + abs(f.camera.elevation_deg), 6),
+                                             f.view_index))
+            frames.append({"name": f"{case}_{tag}", "case": case, "shard": sid, "expression_index": e.expression_index,
+                           "frame_id": f.frame_id, "jaw": round(jaw(e), 6),
+                           "assets": sorted(c for c, p in ident.assets.items() if p is not None)})
+    atomic_write_json(_frames_file(work), {"plan": "plan", "seed": args.seed, "preset": args.preset,
+                                           "frames": frames})
+    for f in frames:
+        print(f"{f['name']:20s} {f['frame_id']}  jaw {f['jaw']:.3f}  {', '.join(f['assets'])}")
+
+
+# --------------------------------------------------------------------------- rendering
+
+
+def _scenes(work: Path, cases: list[str] | None):
+    """(frames of one identity, its IdentityScene) in turn, for the frames of ``cases``."""
+    from blender_scripts import scene as bscene
+    from blender_scripts.worker import IdentityScene, software_versions
+    from synth.model.head import HeadModel
+    from synth.plan.io import load_plan
+    from synth.plan.records import RenderSettings
+
+    meta = load_frames(work)
+    plan = load_plan(work / meta["plan"])
+    hm = HeadModel(plan.model_data())
+    by_shard: dict[str, list[dict]] = {}
+    for f in meta["frames"]:
+        if not cases or f["case"] in cases:
+            by_shard.setdefault(f["shard"], []).append(f)
+    for sid, frames in by_shard.items():
+        spec = plan.shard_spec(sid)
+        ident = spec.identities[0]
+        sc = IdentityScene(ident, hm, RenderSettings.from_json(plan.render_settings()), spec.run_seed,
+                           {"name": hm.data.name, "sha256": plan.model_sha256()}, software_versions(), sid)
+        exprs = {e.expression_index: e for e in ident.expressions}
+        todo = []
+        for f in frames:
+            e = exprs[f["expression_index"]]
+            todo.append((f, e, next(x for x in e.frames if x.frame_id == f["frame_id"])))
+        try:
+            yield todo, sc
+        finally:
+            sc.close()
+            bscene.reset()
+
+
+def _set_border(window: tuple[int, int, int, int] | None, width: int, height: int) -> None:
+    """Render only ``window`` = (x0, y0, x1, y1) in pixels, y down (None: the whole frame)."""
+    import bpy
+
+    r = bpy.context.scene.render
+    r.use_border = window is not None
+    r.use_crop_to_border = False
+    if window is not None:
+        x0, y0, x1, y1 = window
+        r.border_min_x, r.border_max_x = x0 / width, x1 / width
+        r.border_min_y, r.border_max_y = 1.0 - y1 / height, 1.0 - y0 / height
+
+
+def crop_windows(landmarks_2d, alpha: np.ndarray) -> dict[str, tuple[int, int, int, int]]:
+    """The two crop windows of a frame (x0, y0, x1, y1, y down), inside the image: over the eyes,
+    brows and hairline (centred between the eyes, its lower edge a fifth below the eye line), and
+    over the hair silhouette (centred on the top of the head's outline in the middle column)."""
+    h, w = alpha.shape
+    side = max(16, round(CROP * w / 512))
+    lm = np.asarray(landmarks_2d, np.float64)
+    eyes, brows = lm[36:48], lm[17:27]
+    cx = float(eyes[:, 0].mean())
+    bottom = float(eyes[:, 1].mean()) + 0.2 * side
+    cols = np.flatnonzero((alpha > 0.5).any(axis=0))
+    mid = int(round(cx)) if cols.size == 0 else int(np.clip(round(cx), cols.min(), cols.max()))
+    rows = np.flatnonzero(alpha[:, mid] > 0.5)
+    top = float(rows.min()) if rows.size else float(brows[:, 1].min()) - side
+
+    def box(x: float, y: float) -> tuple[int, int, int, int]:
+        x0 = int(np.clip(round(x - side / 2), 0, w - side))
+        y0 = int(np.clip(round(y - side / 2), 0, h - side))
+        return x0, y0, x0 + side, y0 + side
+
+    return {"eyes": box(cx, bottom - side / 2), "hairline": box(cx - side / 4, top)}
+
+
+def _save(path: Path, **arrays) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part.npz")
+    np.savez_compressed(tmp, **arrays)
+    tmp.replace(path)
+
+
+def reference(args) -> None:
+    import dataclasses
+
+    from blender_scripts import scene as bscene
+
+    work = Path(args.work)
+    with tempfile.TemporaryDirectory(prefix="synth-cost-") as d:
+        for todo, sc in _scenes(work, args.cases):
+            for f, e, fr in todo:
+                full = work / "ref" / f"{f['name']}.npz"
+                crops = [work / "ref" / f"{f['name']}_{c}.npz" for c in CROP_NAMES]
+                if full.is_file() and all(p.is_file() for p in crops):
+                    continue
+                sc.set_expression(e)
+                cfg = dataclasses.replace(sc.render_cfg, samples=args.full_spp, denoise=False, adaptive_sampling=False)
+                bscene.configure_render(cfg, sc.width, sc.height)
+                _set_border(None, sc.width, sc.height)
+                if not full.is_file():
+                    out, fj = sc.render(fr, Path(d))
+                    _save(full, rgba=out["rgba"].astype(np.float32), seconds=out["render_seconds"],
+                          landmarks_2d=np.asarray(fj["landmarks_2d"]))
+                    print(f"  {f['name']}: full reference {out['render_seconds']:.0f} s", file=sys.stderr)
+                ref = np.load(full)
+                windows = crop_windows(ref["landmarks_2d"], ref["rgba"][..., 3])
+                cfg = dataclasses.replace(cfg, samples=args.crop_spp)
+                bscene.configure_render(cfg, sc.width, sc.height)
+                for name, path in zip(CROP_NAMES, crops):
+                    if path.is_file():
+                        continue
+                    x0, y0, x1, y1 = windows[name]
+                    _set_border(windows[name], sc.width, sc.height)
+                    out, _ = sc.render(fr, Path(d))
+                    _save(path, rgba=out["rgba"][y0:y1, x0:x1].astype(np.float32), window=np.array(windows[name]),
+                          seconds=out["render_seconds"])
+                    print(f"  {f['name']}: {name} crop {out['render_seconds']:.0f} s", file=sys.stderr)
+                _set_border(None, sc.width, sc.height)
+
+
+def variants(args, variant_list: list[str]) -> None:
+    from benchmarks.render import _apply_variant, engine_defaults
+    from blender_scripts import scene as bscene
+
+    work = Path(args.work)
+    defaults, undo = None, []
+    with tempfile.TemporaryDirectory(prefix="synth-cost-") as d:
+        for n, (todo, sc) in enumerate(_scenes(work, args.cases)):
+            defaults = defaults or engine_defaults()
+            for v in (variant_list if n % 2 == 0 else variant_list[::-1]):
+                paths = [work / "renders" / v / f"{f['name']}.npz" for f, _, _ in todo]
+                if all(p.is_file() for p in paths):
+                    continue
+                _apply_variant(v, sc, defaults, undo)
+                bscene.drop_render_cache()
+                for (f, e, fr), path in zip(todo, paths):
+                    if path.is_file():
+                        continue
+                    sc.set_expression(e)
+                    out, _ = sc.render(fr, Path(d))
+                    _save(path, rgba=out["rgba"].astype(np.float16), seconds=out["render_seconds"])
+                    print(f"  {f['name']} {v}: {out['render_seconds']:.1f} s", file=sys.stderr)
+            _apply_variant("base", sc, defaults, undo)
+
+
+def persistent(args) -> None:
+    """Seconds per view over ``--views`` views of each neutral expression, with and without
+    Cycles' persistent data (BVH and shaders kept between the views of one scene)."""
+    from benchmarks.render import _apply_variant, engine_defaults
+    from blender_scripts import scene as bscene
+
+    work = Path(args.work)
+    out_file = work / "persistent.json"
+    res = json.loads(out_file.read_text()) if out_file.is_file() else {}
+    undo: list = []
+    with tempfile.TemporaryDirectory(prefix="synth-cost-") as d:
+        for todo, sc in _scenes(work, args.cases):
+            defaults = engine_defaults()
+            f, e, _ = todo[0]
+            if f["name"] in res:
+                continue
+            sc.set_expression(e)
+            row = {}
+            for v in ("base", "nopd"):
+                _apply_variant(v, sc, defaults, undo)
+                bscene.drop_render_cache()
+                row[v] = [sc.render(fr, Path(d))[0]["render_seconds"] for fr in e.frames[: args.views]]
+            res[f["name"]] = row
+            atomic_write_json(out_file, res)
+            _apply_variant("base", sc, defaults, undo)
+
+
+# --------------------------------------------------------------------------- score and report
+
+
+def score(args) -> None:
+    from benchmarks.render import fringe_rmse, psnr_masked
+    from prior.metrics import lpips
+    from synth.appearance.srgb import linear_to_srgb
+
+    work = Path(args.work)
+    out_file = work / "scores.json"
+    scores = json.loads(out_file.read_text()) if out_file.is_file() else {}
+
+    def srgb(x: np.ndarray) -> np.ndarray:  # colour over black, sRGB in [0, 1]
+        return np.clip(linear_to_srgb(np.clip(x[..., :3].astype(np.float64), 0, None)), 0, 1).astype(np.float32)
+
+    for vdir in sorted((work / "renders").glob("*")):
+        for path in sorted(vdir.glob("*.npz")):
+            key = f"{vdir.name}/{path.stem}"
+            if key in scores:
+                continue
+            img = np.load(path)
+            ref = np.load(work / "ref" / f"{path.stem}.npz")["rgba"]
+            rgba = img["rgba"].astype(np.float32)
+            row = {"seconds": float(img["seconds"]), "psnr": psnr_masked(rgba, ref, ref[..., 3] > 0.5),
+                   "lpips": float(lpips(srgb(rgba), srgb(ref))), "fringe": fringe_rmse(rgba, ref)}
+            for c in CROP_NAMES:
+                cp = work / "ref" / f"{path.stem}_{c}.npz"
+                if cp.is_file():
+                    cr = np.load(cp)
+                    x0, y0, x1, y1 = (int(v) for v in cr["window"])
+                    mine = rgba[y0:y1, x0:x1]
+                    row[f"psnr_{c}"] = psnr_masked(mine, cr["rgba"], cr["rgba"][..., 3] > 0.5)
+                    row[f"lpips_{c}"] = float(lpips(srgb(mine), srgb(cr["rgba"])))
+            scores[key] = row
+            atomic_write_json(out_file, scores)
+            print(f"  {key}: {row['seconds']:.1f} s, {row['psnr']:.2f} dB, LPIPS {row['lpips']:.4f}", file=sys.stderr)
+
+
+def report(args) -> None:
+    work = Path(args.work)
+    scores = json.loads((work / "scores.json").read_text())
+    by_v: dict[str, dict[str, dict]] = {}
+    for key, row in scores.items():
+        v, frame = key.split("/", 1)
+        by_v.setdefault(v, {})[frame] = row
+    base = by_v.get("base", {})
+    print("| variant | frames | s / frame | time / base (paired) | PSNR dB | LPIPS | eyes PSNR | hairline PSNR | fringe RMSE |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    rows = []
+    for v, frames in sorted(by_v.items(), key=lambda kv: np.mean([r["seconds"] for r in kv[1].values()])):
+        common = [f for f in frames if f in base]
+        ratio = (sum(frames[f]["seconds"] for f in common) / sum(base[f]["seconds"] for f in common)) if common else np.nan
+        m = {k: float(np.nanmean([r.get(k, np.nan) for r in frames.values()]))
+             for k in ("seconds", "psnr", "lpips", "psnr_eyes", "psnr_hairline", "fringe")}
+        rows.append((v, ratio, m))
+        print(f"| {v} | {len(frames)} | {m['seconds']:.1f} | {ratio:.3f} | {m['psnr']:.2f} | {m['lpips']:.4f} | "
+              f"{m['psnr_eyes']:.2f} | {m['psnr_hairline']:.2f} | {m['fringe']:.4f} |")
+    if args.plot and rows:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+        for v, _, m in rows:
+            for a, k, label in ((ax[0], "psnr", "PSNR (dB, sRGB, alpha > 0.5)"), (ax[1], "lpips", "LPIPS")):
+                a.scatter(m["seconds"], m[k], s=12)
+                a.annotate(v, (m["seconds"], m[k]), fontsize=6)
+                a.set_xscale("log")
+                a.set_xlabel("Cycles seconds per frame")
+                a.set_ylabel(label)
+        fig.tight_layout()
+        fig.savefig(args.plot, dpi=130)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("what", choices=("pick", "reference", "variants", "classes", "persistent", "score", "report"))
+    ap.add_argument("work")
+    ap.add_argument("--candidates", type=int, default=300)
+    ap.add_argument("--seed", type=int, default=11)
+    ap.add_argument("--preset", default="production")
+    ap.add_argument("--expressions", type=int, default=13)
+    ap.add_argument("--views", type=int, default=30, help="pick: views planned per expression; persistent: views timed")
+    ap.add_argument("--full-spp", type=int, default=1024)
+    ap.add_argument("--crop-spp", type=int, default=4096)
+    ap.add_argument("--variants", nargs="+", default=["base"])
+    ap.add_argument("--cases", nargs="+", choices=sorted(CASES), default=None)
+    ap.add_argument("--plot", default=None)
+    args = ap.parse_args()
+    if args.what == "pick":
+        pick(args)
+    elif args.what == "reference":
+        reference(args)
+    elif args.what == "variants":
+        variants(args, args.variants)
+    elif args.what == "classes":
+        from benchmarks.render import HIDEABLE
+
+        variants(args, ["base"] + [f"hide{c}" for c in HIDEABLE])
+    elif args.what == "persistent":
+        persistent(args)
+    elif args.what == "score":
+        score(args)
+    else:
+        report(args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,49 @@
+"""benchmarks/render_cost.py: the study's frames are the cases it names, and its crops lie where it says."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+from tests.support.scripts import load_script
+
+rc = load_script("benchmarks/render_cost.py", "render_cost")
+
+
+def test_crop_windows_cover_the_eyes_and_the_top_of_the_head():
+    h = w = 512
+    alpha = np.zeros((h, w))
+    yy, xx = np.mgrid[0:h, 0:w]
+    alpha[(xx - 256) ** 2 / 150 ** 2 + (yy - 300) ** 2 / 200 ** 2 <= 1] = 1.0  # a head, top at row 100
+    lm = np.zeros((68, 2))
+    lm[:, 0], lm[:, 1] = 256, 330
+    lm[36:42] = [[200, 250]] * 6  # eyes
+    lm[42:48] = [[312, 250]] * 6
+    lm[17:27] = [[256, 225]] * 10  # brows
+    win = rc.crop_windows(lm.tolist(), alpha)
+    for x0, y0, x1, y1 in win.values():
+        assert (x1 - x0, y1 - y0) == (128, 128) and 0 <= x0 and x1 <= w and 0 <= y0 and y1 <= h
+    x0, y0, x1, y1 = win["eyes"]
+    assert x0 <= 200 and 312 <= x1 and y0 <= 225 and 250 <= y1  # both eyes and the brows
+    x0, y0, x1, y1 = win["hairline"]
+    assert y0 < 100 < y1 and alpha[y0:y1, x0:x1].min() == 0 and alpha[y0:y1, x0:x1].max() == 1  # the outline
+    small = rc.crop_windows(lm.tolist(), alpha[::8, ::8])  # scaled with the resolution, never under 16 px
+    assert all(x1 - x0 == 16 for x0, _, x1, _ in small.values())
+
+
+def test_pick_finds_every_case_with_an_open_expression(tmp_path):
+    args = argparse.Namespace(work=str(tmp_path), preset="ci", expressions=13, views=3, candidates=120, seed=11)
+    rc.pick(args)
+    meta = json.loads((tmp_path / "frames.json").read_text())
+    names = [f["name"] for f in meta["frames"]]
+    assert names == [f"{c}_{t}" for c in rc.CASES for t in ("neutral", "open")]
+    assert len({f["shard"] for f in meta["frames"]}) == len(rc.CASES)  # one identity per case
+    for f in meta["frames"]:
+        if f["name"].endswith("_open"):
+            assert f["jaw"] >= rc.OPEN_JAW
+    bare = [f for f in meta["frames"] if f["case"] == "bare"][0]
+    assert not {"hair", "beard", "glasses", "headwear"} & set(bare["assets"])
+    rc.pick(args)  # a second run keeps the first's choice
+    assert json.loads((tmp_path / "frames.json").read_text()) == meta
