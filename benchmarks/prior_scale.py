@@ -145,7 +145,7 @@ def measure(ds: Path, buffer: int, ranks: list[int], steps: int, workers: int, r
                       f"MB | epochs {o['swapped_epochs']} |", flush=True)
 
 
-TOOLS = ("validate", "validate --quick", "report", "index rebuild", "resume planning")
+TOOLS = ("validate", "validate -j 1", "validate --quick", "report", "index rebuild", "resume planning")
 
 
 def tool_child(name: str, ds: str) -> None:
@@ -153,9 +153,11 @@ def tool_child(name: str, ds: str) -> None:
     t0 = time.perf_counter()
     if name.startswith("validate"):
         from synth.dataset.validate import validate_dataset
+        from synth.io.process import default_jobs
 
-        rep = validate_dataset(ds, quick=name.endswith("--quick"))
-        what = f"{rep.frames_checked} frames, {len(rep.defects)} defects"
+        jobs = 1 if name.endswith("-j 1") else default_jobs()  # the CLI's default: up to 4 processes
+        rep = validate_dataset(ds, quick=name.endswith("--quick"), partial=True, jobs=jobs)
+        what = f"{rep.frames_checked} frames, {len(rep.defects)} defects, {jobs} process(es)"
     elif name == "report":
         from synth.report.html import write_report
 
