@@ -29,8 +29,7 @@ partner's mirrored onto this side, ``synth.model.meshutil.mesh_mirror``) are sco
 of the point's mean squared residual and the partner's for the candidate's mirror image, so the
 two land on mirror-image surface points of the (symmetric) model; points that are their own
 partner are moved onto the model's midline first (``mesh_midline``). ``--independent`` chooses
-every point on its own (the correspondence before 2026-12-01, left-right asymmetric by up to
-8.8 mm on the face contour).
+every point on its own (left-right asymmetric by up to 8.8 mm on the face contour).
 """
 
 from __future__ import annotations

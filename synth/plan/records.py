@@ -346,7 +346,7 @@ class RenderSettings:
         from dataclasses import fields
 
         d = dict(as_object(d, where))
-        if "adaptive" in d:  # the key's earlier name
+        if "adaptive" in d:  # plans that name it by its short form
             d.setdefault("adaptive_sampling", d.pop("adaptive"))
         names = {f.name for f in fields(cls)}
         extra = sorted(set(d) - names)
