@@ -294,8 +294,10 @@ def main() -> None:
     e = sub.add_parser("export")
     e.add_argument("dataset", type=Path)
     e.add_argument("work", type=Path)
+    e.set_defaults(run=lambda a: export(a.dataset, a.work))
     d = sub.add_parser("detect")
     d.add_argument("work", type=Path)
+    d.set_defaults(run=lambda a: detect(a.work))
     for name in ("derive", "evaluate"):
         s = sub.add_parser(name)
         s.add_argument("work", type=Path)
@@ -304,15 +306,11 @@ def main() -> None:
             s.add_argument("--out", type=Path, default=None, help="directory (default: prior/fit/data)")
             s.add_argument("--independent", action="store_true",
                            help="choose each point on its own, not together with its mirror partner")
+            s.set_defaults(run=lambda a: derive(a.work, a.train, a.out, a.independent))
+        else:
+            s.set_defaults(run=lambda a: evaluate(a.work, a.train))
     a = ap.parse_args()
-    if a.cmd == "export":
-        export(a.dataset, a.work)
-    elif a.cmd == "detect":
-        detect(a.work)
-    elif a.cmd == "derive":
-        derive(a.work, a.train, a.out, a.independent)
-    else:
-        evaluate(a.work, a.train)
+    a.run(a)
 
 
 if __name__ == "__main__":
