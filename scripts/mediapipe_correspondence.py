@@ -29,8 +29,7 @@ partner's mirrored onto this side, ``synth.model.meshutil.mesh_mirror``) are sco
 of the point's mean squared residual and the partner's for the candidate's mirror image, so the
 two land on mirror-image surface points of the (symmetric) model; points that are their own
 partner are moved onto the model's midline first (``mesh_midline``). ``--independent`` chooses
-every point on its own (the correspondence before 2026-12-01, left-right asymmetric by up to
-8.8 mm on the face contour).
+every point on its own (left-right asymmetric by up to 8.8 mm on the face contour).
 """
 
 from __future__ import annotations
@@ -295,8 +294,10 @@ def main() -> None:
     e = sub.add_parser("export")
     e.add_argument("dataset", type=Path)
     e.add_argument("work", type=Path)
+    e.set_defaults(run=lambda a: export(a.dataset, a.work))
     d = sub.add_parser("detect")
     d.add_argument("work", type=Path)
+    d.set_defaults(run=lambda a: detect(a.work))
     for name in ("derive", "evaluate"):
         s = sub.add_parser(name)
         s.add_argument("work", type=Path)
@@ -305,15 +306,11 @@ def main() -> None:
             s.add_argument("--out", type=Path, default=None, help="directory (default: prior/fit/data)")
             s.add_argument("--independent", action="store_true",
                            help="choose each point on its own, not together with its mirror partner")
+            s.set_defaults(run=lambda a: derive(a.work, a.train, a.out, a.independent))
+        else:
+            s.set_defaults(run=lambda a: evaluate(a.work, a.train))
     a = ap.parse_args()
-    if a.cmd == "export":
-        export(a.dataset, a.work)
-    elif a.cmd == "detect":
-        detect(a.work)
-    elif a.cmd == "derive":
-        derive(a.work, a.train, a.out, a.independent)
-    else:
-        evaluate(a.work, a.train)
+    a.run(a)
 
 
 if __name__ == "__main__":

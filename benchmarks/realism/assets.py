@@ -9,7 +9,7 @@ from .common import _neutral_context, _planned_heads
 
 def hats(args) -> dict:
     """Hair under headwear: for planned identities, each hair style a hat may go with and each
-    hat, the groom without the hat (as before 2026-12-01) and with it: strands, the share of
+    hat, the groom without the hat and with it: strands, the share of
     hair points beyond the hat's cut plane (through the crown), groom seconds."""
     import time
 
@@ -102,7 +102,7 @@ HEAD_BREADTH_MM = {"men": (155.0, 6.0), "women": (145.0, 6.0)}
 def shoulders(args) -> dict:
     """The body's breadth against the head's (docs/realism.md, "Arms"): for planned identities
     (neutral), each garment of ``--garments``, the widest extent side to side of the garment
-    and the body below it, without the arms (as before 2026-12-01) and with them
+    and the body below it, without the arms and with them
     (synth.assets.fit.torso.arms), over the head's breadth (its scalp, above the ears), against
     bideltoid over head breadth of measured adults."""
     from synth.assets.fit import torso
@@ -188,7 +188,8 @@ def shoulders(args) -> dict:
 
 def drape_table(args) -> dict:
     """How loose styles hang (synth.assets.fit.hair.drape), with the loose styles' sweep floor
-    and volume as before 2026-12-01 and as now, on the neutral heads of planned identities."""
+    and volume of a flaring field (3 cm below the centre, 0.15: "before") and as set ("now"), on
+    the neutral heads of planned identities."""
     from synth.assets.fit import hair as H
 
     model, hm, ids, codes = _planned_heads(args.seed, args.identities)
@@ -224,8 +225,8 @@ def drape_table(args) -> dict:
 
 def beard_table(args) -> dict:
     """Where beards grow and how long beards hang (synth.assets.fit.beard.shape) on the neutral
-    heads of planned identities: as before 2026-12-01 (the region's own cheek line, the 8 mm fade
-    at the lips and nose too, long beards along the skin and ungathered) and now (cheek line
+    heads of planned identities: without the beard rules (the region's own cheek line, the 8 mm fade
+    at the lips and nose too, long beards along the skin and ungathered) and with them (cheek line
     ``--reach``)."""
     from synth.assets.fit import beard as B
     from synth.assets.fit import masks as M

@@ -18,6 +18,17 @@ def _cat(ita):
     return ita_category(ita)
 
 
+def planned_options(p, identities: int, resolution: int | None = None):
+    """The options of a measurement on planned identities, added to the (sub)parser ``p``:
+    ``--identities`` (the first N planned ones, default ``identities``), ``--seed`` (0) and, where
+    ``resolution`` is given, ``--resolution`` (the render size that sets strand counts)."""
+    p.add_argument("--identities", type=int, default=identities)
+    p.add_argument("--seed", type=int, default=0)
+    if resolution is not None:
+        p.add_argument("--resolution", type=int, default=resolution)
+    return p
+
+
 def _planned_heads(seed: int, n: int, ids=None):
     """(model, HeadModel, identity indices, identity codes) of the first n planned identities
     (or of the identities ``ids``)."""

@@ -25,6 +25,8 @@ import numpy as np
 
 from synth.plan.records import RenderSettings
 
+from .common import planned_options
+
 
 def _save(path: Path, rgba: np.ndarray) -> None:
     import imageio.v3 as iio
@@ -94,11 +96,9 @@ def main() -> None:
     c.add_argument("out")
     c.add_argument("--tag", default="after")
     c.add_argument("--spp", type=int, default=16)
-    k = sub.add_parser("cost")
-    k.add_argument("--identities", type=int, default=3)
+    k = planned_options(sub.add_parser("cost"), 3)
     k.add_argument("--views", type=int, default=2)
     k.add_argument("--repeats", type=int, default=2)
-    k.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
     {"crops": crops, "cost": cost}[args.what](args)
 

@@ -61,7 +61,7 @@ def skin(args) -> dict:
     try:
         from synth.plan.skin import apply_skin_tones
         apply_skin_tones(args.seed, ids, assets, cfg.skin)
-    except ImportError:  # before the skin-tone sampling existed
+    except ImportError:  # a checkout without skin-tone sampling (the start): melanin as sampled
         pass
     alb = np.array([skin_albedo(a["skin"]["params"]["melanin"], a["skin"]["params"]["haemoglobin"]) for a in assets])
     lab, ita = cielab(alb), individual_typology_angle(alb)

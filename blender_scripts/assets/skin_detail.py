@@ -41,8 +41,8 @@ from synth.assets.params import AssetPick, BeardParams
 from synth.dataset.segmentation import CLASSES
 
 
-#: stubble shadow of the ``stubble`` beard for black hair (0.55 before: with the strands on top,
-#: light skin read as a dirty brown patch); identities without a beard draw 0.1-0.3 with
+#: stubble shadow of the ``stubble`` beard for black hair (at 0.55, with the strands on top,
+#: light skin reads as a dirty brown patch); identities without a beard draw 0.1-0.3 with
 #: probability 0.5; both scaled by the hair's :func:`shaft_darkness`
 STUBBLE_SHADOW = 0.3
 

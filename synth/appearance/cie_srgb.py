@@ -17,6 +17,13 @@ import numpy as np
 #: The sample wavelengths of the skin model's spectra (nm): 380, 385, ..., 780.
 WAVELENGTHS = np.arange(380.0, 781.0, 5.0)
 
+#: Linear sRGB -> CIE XYZ: colour-science 0.4.6's sRGB ``matrix_RGB_to_XYZ`` (IEC 61966-2-1),
+#: whose inverse is the ``matrix_XYZ_to_RGB`` in ``SPECTRUM_TO_LINEAR_SRGB``; CIELAB
+#: (:func:`synth.appearance.skin.cielab`) goes back through it, so the two are one conversion.
+LINEAR_SRGB_TO_XYZ = np.array([[0.4124, 0.3576, 0.1805],
+                               [0.2126, 0.7152, 0.0722],
+                               [0.0193, 0.1192, 0.9505]])
+
 SPECTRUM_TO_LINEAR_SRGB = np.array([
     [
         5.851915044362338e-05, 4.671588317254033e-05, 9.22707487407813e-05, 0.00020813095657948647,
@@ -96,6 +103,13 @@ def from_colour_science() -> np.ndarray:
                              illuminant=ill) / 100.0 for row in np.eye(len(lam))]
     xyz = np.stack(cols, axis=1)
     return np.asarray(colour.RGB_COLOURSPACES["sRGB"].matrix_XYZ_to_RGB, np.float64) @ xyz
+
+
+def srgb_to_xyz_from_colour_science() -> np.ndarray:
+    """``LINEAR_SRGB_TO_XYZ`` as colour-science has it (the reference)."""
+    import colour
+
+    return np.asarray(colour.RGB_COLOURSPACES["sRGB"].matrix_RGB_to_XYZ, np.float64)
 
 
 if __name__ == "__main__":  # print the table's rows, to paste above

@@ -34,7 +34,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from synth.appearance.cie_srgb import SPECTRUM_TO_LINEAR_SRGB, WAVELENGTHS
+from synth.appearance.cie_srgb import LINEAR_SRGB_TO_XYZ, SPECTRUM_TO_LINEAR_SRGB, WAVELENGTHS
 #: The skin parameters where a plan gives none (a frame of an identity without a skin pick, a
 #: hand-written plan); planned skins draw both from the catalogue (assets_manifest/skin.toml).
 DEFAULT_MELANIN = 0.05
@@ -119,10 +119,9 @@ def skin_albedo(melanin: float, haemoglobin: float) -> tuple[float, float, float
     return _albedo_cached(round(float(melanin), 7), round(float(haemoglobin), 7))
 
 
-#: Linear sRGB (Rec.709 primaries, D65) -> CIE XYZ, IEC 61966-2-1.
-_SRGB_TO_XYZ = np.array([[0.4124564, 0.3575761, 0.1804375],
-                         [0.2126729, 0.7151522, 0.0721750],
-                         [0.0193339, 0.1191920, 0.9503041]])
+#: Linear sRGB (Rec.709 primaries, D65) -> CIE XYZ: the inverse of the conversion the spectra
+#: take to linear sRGB (:mod:`synth.appearance.cie_srgb`, colour-science's sRGB matrices).
+_SRGB_TO_XYZ = LINEAR_SRGB_TO_XYZ
 _D65_XYZ = _SRGB_TO_XYZ.sum(axis=1)  # the white (1, 1, 1)
 
 

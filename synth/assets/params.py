@@ -30,31 +30,10 @@ from typing import Any, ClassVar, Mapping
 from synth.appearance.skin import DEFAULT_HAEMOGLOBIN, DEFAULT_MELANIN
 from synth.appearance.skin_optics import DEFAULT_WRINKLE_DEPTH
 from synth.assets.classes import CLASSES, NAMES
+from synth.assets.jsonrecord import as_object, of_type, record_from_json, record_to_json, required, spec_error
 from synth.errors import SynthError
 
-FIX = "re-run 'synth plan' (see docs/plan-format.md)"
 UNKNOWN_PARAMETER_FIX = "remove it from the catalogue or add it to the class's record in synth/assets/params.py"
-
-
-def spec_error(what: str, where: str) -> SynthError:
-    return SynthError(f"bad shard spec: {what}", where, FIX)
-
-
-def as_object(d: Any, where: str) -> Mapping:
-    if not isinstance(d, Mapping):
-        raise spec_error(f"expected an object, got {type(d).__name__}", where)
-    return d
-
-
-def required(d: Mapping, key: str, types: type | tuple[type, ...], where: str):
-    """``d[key]``, refused when missing or not of ``types`` (bool is never a number)."""
-    if key not in d:
-        raise spec_error(f"'{key}' is missing", where)
-    v = d[key]
-    numeric = types in (int, float, (int, float))
-    if (numeric and isinstance(v, bool)) or not isinstance(v, types):
-        raise spec_error(f"'{key}' is {type(v).__name__} {str(v)[:40]}, not {getattr(types, '__name__', types)}", where)
-    return v
 
 
 #: The beard's cheek line (0 low, 1 high; synth.assets.fit.masks.cheek_line) where none is planned,
@@ -418,13 +397,12 @@ class Pack:
 
     @classmethod
     def from_json(cls, d: Any, where: str) -> Pack:
-        d = as_object(d, where)
-        s = [required(d, k, str, where) for k in ("class", "file", "asset_root", "object", "sha256", "anchor")]
-        return cls(*s, required(d, "reference_width_m", (int, float), where))
+        readers = {f.name: of_type(str) for f in dataclasses.fields(cls)}
+        readers["reference_width_m"] = of_type((int, float))
+        return record_from_json(cls, d, where, readers, {"cls": "class"})
 
     def to_json(self) -> dict[str, Any]:
-        return {"class": self.cls, "file": self.file, "asset_root": self.asset_root, "object": self.object,
-                "sha256": self.sha256, "anchor": self.anchor, "reference_width_m": self.reference_width_m}
+        return record_to_json(self, {"cls": "class"})
 
 
 @dataclass(frozen=True)

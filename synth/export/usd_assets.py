@@ -66,8 +66,8 @@ def _shell(module: str, cls: str, data, rest: HeadPose, poses: list[HeadPose], r
             return None, f"rebuilt {k} {fitted.info.get(k)} differ from the render's {built[k]}"
     mesh = AssetMesh(cls, fitted.name, CLASSES[cls].segmentation_id)
     meshes = [mesh]
-    if "torso_vertices" in built:  # the body below the bust, the garment rig's second object (renders since
-        from synth.assets.fit import torso  # 2026-12-01; synth.assets.fit.torso)
+    if "torso_vertices" in built:  # the body below the bust, the garment rig's second object
+        from synth.assets.fit import torso
 
         bare = bool(built.get("torso_arms_skin"))  # bare upper arms in the head's skin (tank tops)
         if bare:
@@ -75,7 +75,7 @@ def _shell(module: str, cls: str, data, rest: HeadPose, poses: list[HeadPose], r
             parts = [(f"{fitted.name}_torso", CLASSES[cls].segmentation_id, Vp, Fp),
                      (f"{fitted.name}_arms", SEGMENTATION["skin"], Va, Fa)]
         else:
-            Vt, Ft = torso.garment_torso(fitted, with_arms=bool(built.get("torso_arms")))  # arms since 2026-12-01
+            Vt, Ft = torso.garment_torso(fitted, with_arms=bool(built.get("torso_arms")))  # arms where recorded
             parts = [(f"{fitted.name}_torso", CLASSES[cls].segmentation_id, Vt, Ft)]
         n = sum(len(part[2]) for part in parts)
         if n != built["torso_vertices"]:

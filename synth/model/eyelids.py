@@ -59,7 +59,7 @@ FALLOFF_RADIAL_M = 0.003
 MARGIN_OFFSET_M = 1.0e-4
 #: the lacrimal part: along the fissure this far (metres) from the medial canthus a margin may stand
 #: off the eyeball, by up to LACRIMAL_GAP_M at the canthus (smoothstep taper to 0 at CANTHAL_HOLD_M).
-#: On the builder-8 template the canthus stands 1.5 mm off (planned identities: median 1.6 mm,
+#: On the default template the canthus stands 1.5 mm off (planned identities: median 1.6 mm,
 #: at most 3 mm); a caruncle is a few millimetres across.
 CANTHAL_HOLD_M = 0.004
 LACRIMAL_GAP_M = 0.003

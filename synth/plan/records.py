@@ -19,7 +19,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from synth.assets.params import AssetPick, SkinParams, as_object, assets_from_json, required, spec_error
+from synth.assets.jsonrecord import as_object, of_type, record_from_json, record_to_json, required, spec_error
+from synth.assets.params import AssetPick, SkinParams, assets_from_json
 
 Vec = tuple[float, ...]
 Mat = tuple[tuple[float, ...], ...]
@@ -143,17 +144,16 @@ class Camera:
 
     @classmethod
     def from_json(cls, d: Any, where: str) -> Camera:
-        d = as_object(d, where)
-        return cls(_mat(d, "K", where, 3), _mat(d, "world_to_camera", where, 4), _mat(d, "camera_to_world", where, 4),
-                   required(d, "width", int, where), required(d, "height", int, where), _num(d, "near", where),
-                   _num(d, "far", where), _num(d, "azimuth_deg", where), _num(d, "elevation_deg", where),
-                   _num(d, "radius_m", where), _vec(d, "target", where, 3))
+        def mat(n: int):
+            return lambda d, key, where: _mat(d, key, where, n)
+
+        readers = {"K": mat(3), "world_to_camera": mat(4), "camera_to_world": mat(4), "width": of_type(int),
+                   "height": of_type(int), "near": _num, "far": _num, "azimuth_deg": _num, "elevation_deg": _num,
+                   "radius_m": _num, "target": lambda d, key, where: _vec(d, key, where, 3)}
+        return record_from_json(cls, d, where, readers)
 
     def to_json(self) -> dict[str, Any]:
-        return {"K": self.K, "world_to_camera": self.world_to_camera, "camera_to_world": self.camera_to_world,
-                "width": self.width, "height": self.height, "near": self.near, "far": self.far,
-                "azimuth_deg": self.azimuth_deg, "elevation_deg": self.elevation_deg, "radius_m": self.radius_m,
-                "target": self.target}
+        return record_to_json(self)
 
 
 @dataclass(frozen=True)
@@ -171,11 +171,11 @@ class Frame:
 
     @classmethod
     def from_json(cls, d: Any, where: str) -> Frame:
-        d = as_object(d, where)
-        env = required(d, "environment_index", int, where) if "environment_index" in d else None
-        return cls(required(d, "frame_id", str, where), required(d, "identity_index", int, where),
-                   required(d, "expression_index", int, where), env, required(d, "view_index", int, where),
-                   required(d, "seed", int, where), Camera.from_json(d.get("camera"), f"{where}/camera"))
+        readers = {"environment_index": lambda d, key, where: required(d, key, int, where) if key in d else None}
+        readers |= {k: of_type(str if k == "frame_id" else int)
+                    for k in ("frame_id", "identity_index", "expression_index", "view_index", "seed")}
+        readers["camera"] = lambda d, key, where: Camera.from_json(d.get(key), f"{where}/{key}")
+        return record_from_json(cls, d, where, readers)
 
     def to_json(self) -> dict[str, Any]:
         out: dict[str, Any] = {"frame_id": self.frame_id, "identity_index": self.identity_index,
@@ -194,7 +194,7 @@ class CameraSampling:
     restarts: int
 
     def to_json(self) -> dict[str, int]:
-        return {"candidates": self.candidates, "restarts": self.restarts}
+        return record_to_json(self)
 
 
 @dataclass(frozen=True)
@@ -346,7 +346,7 @@ class RenderSettings:
         from dataclasses import fields
 
         d = dict(as_object(d, where))
-        if "adaptive" in d:  # the key's earlier name
+        if "adaptive" in d:  # plans that name it by its short form
             d.setdefault("adaptive_sampling", d.pop("adaptive"))
         names = {f.name for f in fields(cls)}
         extra = sorted(set(d) - names)

@@ -102,6 +102,23 @@ def test_precomputed_spectrum_to_srgb_is_colour_sciences_value_for_value():
     assert np.array_equal(SPECTRUM_TO_LINEAR_SRGB, from_colour_science())
 
 
+def test_cielab_goes_back_through_colour_sciences_srgb_matrix():
+    """CIELAB of linear sRGB uses the inverse of the matrix the spectra went through to linear
+    sRGB, so a spectrum's XYZ comes back as colour-science computes it, and the sRGB white is
+    L* 100, a* = b* = 0."""
+    import colour
+
+    from synth.appearance.cie_srgb import LINEAR_SRGB_TO_XYZ, srgb_to_xyz_from_colour_science
+    from synth.appearance.skin import cielab
+
+    assert np.array_equal(LINEAR_SRGB_TO_XYZ, srgb_to_xyz_from_colour_science())
+    rgb = np.random.default_rng(3).random((50, 3))
+    white = LINEAR_SRGB_TO_XYZ.sum(axis=1)
+    want = colour.XYZ_to_Lab(rgb @ LINEAR_SRGB_TO_XYZ.T, colour.XYZ_to_xy(white))
+    np.testing.assert_allclose(cielab(rgb), want, atol=1e-9)
+    np.testing.assert_allclose(cielab([1.0, 1.0, 1.0]), [100.0, 0.0, 0.0], atol=1e-9)
+
+
 def test_planning_does_not_import_colour_science():
     import subprocess
     import sys

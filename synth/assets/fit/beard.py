@@ -23,13 +23,13 @@ MIN_PARTIAL_STRANDS = 24
 PARTIAL_DENSITY = {"goatee": 2.0, "moustache": 2.0}
 
 
-#: a long beard's strands leave the skin along its normal over this arc length (m; 0.01 before
-#: 2026-12-01, when the beard stood off the face as a curtain)
+#: a long beard's strands leave the skin along its normal over this arc length (m; at 0.01 the
+#: beard stands off the face as a curtain)
 LONG_LIFT_M = 0.004
-#: a long beard's largest clearance from the skin (m; 0.01 before 2026-12-01)
+#: a long beard's largest clearance from the skin (m)
 LONG_LAYER_M = 0.008
-#: the share of a long beard's growth direction that is straight down from the root on (0 before
-#: 2026-12-01: along the skin only for the first 2 cm)
+#: the share of a long beard's growth direction that is straight down from the root on (at 0 the
+#: strands follow the skin for their first 2 cm and hang from the cheeks as curtains)
 LONG_FALL = 0.5
 #: how strongly a long beard's hair gathers toward the middle below the jaw (per 6 cm off it)
 LONG_GATHER = 0.5
@@ -145,8 +145,7 @@ def groom(ctx, entry) -> Groom:
             out = np.clip((np.abs(p[:, 0] - x_c) - half_w) / 0.01, 0.0, 1.0)[:, None]
             mo = mo * 1.5 + out * 1.8 * UP[None]
         if long:
-            # from the root on, part straight down and part along the skin (LONG_FALL; before
-            # 2026-12-01 along the skin only for the first 2 cm)
+            # from the root on, part straight down and part along the skin (LONG_FALL)
             f = LONG_FALL
             d = (1.0 - f) * normalize(tdown + 1e-9) + (0.35 - 0.2 * f) * nrm + (
                 f + 0.8 * np.clip(s / 0.02, 0, 1))[:, None] * DOWN[None]

