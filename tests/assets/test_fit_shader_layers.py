@@ -10,8 +10,8 @@ from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist
 
 from synth.assets.fit.eyes import eye_coordinates
-from synth.assets.fit.masks import (BEARD_FEATHER_M, distance_to, feather, makeup_masks, region_mask,
-                                    segment_distance, skin_detail_mask, skin_only, soft_region)
+from synth.assets.fit.masks import (BEARD_FEATHER_M, JAW_LINE_TOP, distance_to, feather, jaw_line, makeup_masks,
+                                    region_mask, segment_distance, skin_detail_mask, skin_only, soft_region)
 from synth.model.meshutil import fit_sphere
 
 
@@ -24,6 +24,24 @@ def head(default_head):
 
 
 # --------------------------------------------------------------------------- building blocks
+
+
+def test_the_assets_jaw_line_starts_below_the_canthi_and_ends_at_the_chin(head):
+    """masks.jaw_line: the jaw contour cut at JAW_LINE_TOP canthus-to-chin heights below each
+    lateral canthus (ibug68 0/16 start at the canthi's height), the chin kept, each half evenly
+    spaced in arc length; a contour that starts lower than the cut is kept from its start."""
+    data, V, lm = head
+    J = jaw_line(lm)
+    for top, canthus in ((0, 36), (16, 45)):
+        assert abs(J[top, 2] - (lm[canthus, 2] - JAW_LINE_TOP * (lm[canthus, 2] - lm[8, 2]))) < 1e-9
+    np.testing.assert_allclose(J[8], lm[8], atol=1e-12)
+    np.testing.assert_allclose(J[16 - np.arange(17)] * [-1, 1, 1], J, atol=1e-4)  # symmetric like the points
+    for half in (J[:9], J[8:]):
+        steps = np.linalg.norm(np.diff(half, axis=0), axis=1)
+        assert steps.max() < 1.2 * steps.min()
+    low = lm.copy()
+    low[[0, 16], 2] = lm[8, 2] + 0.5 * (lm[[36, 45], 2] - lm[8, 2])  # a contour starting below the cut
+    np.testing.assert_allclose(jaw_line(low)[[0, 16]], low[[0, 16]], atol=1e-12)
 
 
 def test_feather_distance_and_segment_distance_against_brute_force():

@@ -175,6 +175,40 @@ def test_brow_tails_end_on_the_line_from_the_alar_base_through_the_lateral_canth
         assert abs(L[tail, 0] - L[canthus, 0]) > 0.25 * fissure, tail
 
 
+def test_jaw_contour_starts_on_the_outline_at_the_height_of_the_lateral_canthus(default_model, rest):
+    """iBUG 0/16 start the jaw contour at the height of the lateral canthi (36/45), on the face's
+    outline seen from the front: the most lateral skin in front of the ear at that height. A
+    contour that starts lower (a sixth of the canthus-to-chin height, 15.8 mm, as before) fails."""
+    V, L = rest
+    skin, ears = default_model.regions["skin"], default_model.regions["ears"]
+    for i, canthus in ((0, 36), (16, 45)):
+        assert abs(L[i, 2] - L[canthus, 2]) < 0.001, i
+        s = np.sign(L[i, 0])
+        near = skin[(np.abs(V[skin, 2] - L[i, 2]) < 0.002) & (V[skin, 1] < V[ears, 1].min() - 0.002)]
+        assert abs(np.max(s * V[near, 0]) - s * L[i, 0]) < 0.0015, i  # as lateral as the skin gets there
+
+
+def test_jaw_points_are_evenly_spaced_along_the_outline_seen_from_the_front(rest):
+    """iBUG's jaw points are spaced evenly along the outline in the image, so on the template
+    seen from the front (x, z) consecutive points 0..8 are equally far apart (within 10 %). Even
+    spacing in 3D, as before, crowds the points on the mandible (which runs toward the camera) and
+    spreads them on the cheek: steps from 0.69 to 1.20 of their mean."""
+    _, L = rest
+    steps = np.linalg.norm(np.diff(L[:9][:, [0, 2]], axis=0), axis=1)
+    assert steps.max() < 1.1 * steps.min(), np.round(steps / steps.mean(), 3)
+
+
+def test_face_and_beard_regions_do_not_follow_the_jaw_landmarks(default_model, rest):
+    """The face region's lower boundary and the beard's cheek line are their own jaw line, from
+    0.15 canthus-to-chin heights below the canthus (landmarks.region_jaw_line), not the jaw
+    landmarks, which start at the canthus: the beard's top stays a tenth of that height below the
+    canthi. With the regions bounded by the landmarks the beard grows up the sideburns to the
+    canthi's height (0.001 heights below them)."""
+    V, L = rest
+    height = L[36, 2] - L[8, 2]
+    assert V[default_model.regions["beard"], 2].max() < L[36, 2] - 0.1 * height
+
+
 def test_eye_openings_have_measured_adult_proportions(rest):
     """The template's lid openings (EYE_OPENING) against published adult means (docs/default-model.md,
     "Eye proportions"): fissure ex-en 26-30 mm, intercanthal 31-41 mm, canthal index 36-44, lid

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from synth.assets.fit.groom import Groom, Styling, setup
-from synth.assets.fit.masks import beard_area, below_cheek_line
+from synth.assets.fit.masks import beard_area, below_cheek_line, jaw_line
 from synth.assets.fit.strands import DOWN, LEFT, UP, add_curl, arc_length, grow, push_out_strands, scale_count
 from synth.geometry.normals import normalize
 
@@ -60,7 +60,7 @@ def groom(ctx, entry) -> Groom:
     x_c = 0.5 * (corner_l[0] + corner_r[0])
     half_w = 0.5 * abs(corner_l[0] - corner_r[0])
     lip_top, lip_bot, subnasal, chin = lm[51], lm[57], lm[33], lm[8]
-    jaw = lm[0:17]
+    jaw = jaw_line(lm)
     moustache = bool(prm.moustache)
     mstyle = str(prm.style)
 
@@ -180,13 +180,14 @@ def shape(data, vertices, lm, g: Groom) -> dict:
       the upper lip (to the subnasale) and in the 12 mm under the lower lip, relative to the
       whole region's;
     - ``spread_below_chin``: the 95th percentile of the strand points' distance from the middle
-      3 cm or more below the chin, in jaw half widths (points 0-16); nan without such points."""
+      3 cm or more below the chin, in jaw half widths (masks.jaw_line); nan without such points."""
     from synth.assets.fit.masks import cheek_line, region_mask
 
     V, T = np.asarray(vertices, np.float64), np.asarray(data.triangles)
     lm = np.asarray(lm, np.float64)
     r = g.pts[:, 0]
-    xc, x0 = 0.5 * (lm[0, 0] + lm[16, 0]), 0.5 * abs(lm[16, 0] - lm[0, 0])
+    jaw = jaw_line(lm)
+    xc, x0 = 0.5 * (jaw[0, 0] + jaw[16, 0]), 0.5 * abs(jaw[16, 0] - jaw[0, 0])
     xs, _ = cheek_line(lm, 0.0)
     z_wing = 0.5 * (lm[31, 2] + lm[35, 2])
     ax = np.abs(r[:, 0] - xc)

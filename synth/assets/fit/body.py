@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from synth.assets.fit.attach import Binding, body_query, push_out
-from synth.assets.fit.masks import region_mask
+from synth.assets.fit.masks import jaw_line, region_mask
 from synth.assets.fit.meshops import clip_by_field, level_points, oriented_boundary_loops, resample_loop, subdivide
 from synth.assets.fit.trim import Rim, add_rims, place_rims, push_out_edges, trim_part
 from synth.geometry.normals import normalize, vertex_normals
@@ -48,7 +48,7 @@ class NeckFrame:
     ``ring``: shoulder vertices adjacent to neck vertices (the neck base); ``center``: its
     centroid; angles ``theta = atan2(x - cx, -(y - cy))`` (0 in front, +-pi behind, +pi/2
     at the subject's left). ``z_ring(theta)``: height of the neck base around the neck;
-    ``z_cap(theta)``: highest a collar may rise (1.2 cm under the jaw line, ibug68 0-16,
+    ``z_cap(theta)``: highest a collar may rise (1.2 cm under the jaw line, masks.jaw_line,
     in front of the ears; unlimited behind)."""
 
     def __init__(self, V: np.ndarray, F: np.ndarray, regions: dict, ibug68: np.ndarray):
@@ -64,7 +64,7 @@ class NeckFrame:
         o = np.argsort(th)
         self._th = np.concatenate([th[o] - 2 * np.pi, th[o], th[o] + 2 * np.pi])
         self._z = np.tile(V[ring][o, 2], 3)
-        jaw = np.asarray(ibug68[:17], np.float64)
+        jaw = jaw_line(ibug68)
         jt = self.theta(jaw)
         o = np.argsort(jt)
         self._jt, self._jz = jt[o], jaw[o, 2] - 0.012

@@ -17,6 +17,7 @@ import numpy as np
 from synth.assets.fit.attach import push_out
 from synth.assets.fit.body import Body, Parts, WaveNoise
 from synth.assets.fit.hem import CAP_INSET, HEM_BAND, cap, hem_loops, smooth_loops
+from synth.assets.fit.masks import jaw_line
 
 #: passes of averaging along a torso shell's neckline loops (then evenly respaced)
 NECK_SMOOTHING = 12
@@ -185,8 +186,9 @@ def hanging_strip(body: Body, parts: Parts, slot: int, start: np.ndarray, length
 def hood_up(body: Body, parts: Parts, slot: int, base_off: float):
     lm = body.lm
     brow = 0.5 * (lm[19] + lm[24])
-    ear_y = 0.5 * (lm[0, 1] + lm[16, 1]) + 0.012
-    z0, z1 = 0.5 * (lm[0, 2] + lm[16, 2]), brow[2] + 0.045
+    jaw = jaw_line(lm)
+    ear_y = 0.5 * (jaw[0, 1] + jaw[16, 1]) + 0.012
+    z0, z1 = 0.5 * (jaw[0, 2] + jaw[16, 2]), brow[2] + 0.045
     y1 = brow[1] + 0.03
     V = body.V
     t = np.clip((V[:, 2] - z0) / (z1 - z0), 0.0, 1.0)

@@ -15,6 +15,33 @@ from synth.assets.params import DEFAULT_REACH
 from synth.model.meshutil import smoothstep
 
 
+#: the jaw line the assets fit to starts this far below the lateral canthi, in canthus-to-chin heights
+JAW_LINE_TOP = 0.15
+
+
+def jaw_line(lm: np.ndarray) -> np.ndarray:
+    """(17, 3) the jaw line that beards, collars and hoods fit to, in ibug68's jaw order: the jaw
+    contour (ibug68 0-16) from ``JAW_LINE_TOP`` canthus-to-chin heights below the lateral canthi
+    (36 / 45) down to the chin (8), each half resampled to 9 points evenly spaced in arc length
+    (where the contour starts lower, from 0 / 16 themselves). 300-W's jaw points start at the
+    canthi's height, beside the eyes; these rules mean the lower line, where the default model's
+    beard region ends (its ``region_jaw_line``: the same height)."""
+    from synth.assets.fit.strands import resample_fast
+
+    lm = np.asarray(lm, np.float64)
+    out = np.empty((17, 3))
+    for ids, canthus in ((range(0, 9), 36), (range(16, 7, -1), 45)):
+        P = lm[list(ids)]
+        z_top = lm[canthus, 2] - JAW_LINE_TOP * (lm[canthus, 2] - lm[8, 2])
+        k = int(np.argmax(P[:, 2] <= z_top)) if np.any(P[:, 2] <= z_top) else len(P) - 1
+        if k > 0:
+            a = (P[k - 1, 2] - z_top) / max(P[k - 1, 2] - P[k, 2], 1e-12)
+            P = np.concatenate([(P[k - 1] + a * (P[k] - P[k - 1]))[None], P[k:]])
+        half = resample_fast(P[None], np.array([np.inf]), 9)[0]
+        out[list(ids)] = half
+    return out
+
+
 def region_mask(regions: dict, names, n: int) -> np.ndarray:
     """True on the ``n`` vertices of any of the named regions (absent regions: none)."""
     m = np.zeros(n, bool)
@@ -245,24 +272,25 @@ def soft_region(V: np.ndarray, inside: np.ndarray, sigma: float) -> np.ndarray:
 
 #: how far above a beard's cheek line its roots fade out (metres)
 CHEEK_FADE_M = 0.005
-#: the sideburn's width: the cheek line meets the sideburn this far inside jaw point 0 (metres)
+#: the sideburn's width: the cheek line meets the sideburn this far inside the jaw line's top (metres)
 SIDEBURN_WIDTH_M = 0.012
 
 
 def cheek_line(lm: np.ndarray, reach: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """The upper edge of beard growth in (|x - face centre|, z), from the ibug68 points ``lm``:
     the upper lip up to the subnasale, the moustache's outer end beside the mouth corner, the
-    cheek, and the sideburn's front edge up to jaw point 0 at the ear.
+    cheek, and the sideburn's front edge up to the top of the jaw line (:func:`jaw_line`) at the ear.
 
     ``reach`` (0..1) is how high the line runs over the cheek: at 1 it follows the model's beard
-    region edge (from the nostril's wing straight to jaw point 0, across the cheekbone); at 0
+    region edge (from the nostril's wing straight to the jaw line's top, across the cheekbone); at 0
     the moustache keeps the nostrils' height out to the mouth corner, and the line rises from
-    6 mm above the corner, 6 mm further out, to jaw point 2 below the sideburn, where most men's
+    6 mm above the corner, 6 mm further out, to the jaw line's point 2 below the sideburn, where most men's
     cheek line runs. Returns the polyline's |x| (increasing) and z."""
     lm = np.asarray(lm, np.float64)
+    jaw = jaw_line(lm)
     r = float(np.clip(reach, 0.0, 1.0))
     x31 = 0.5 * abs(lm[35, 0] - lm[31, 0])
-    x0, z0 = 0.5 * abs(lm[16, 0] - lm[0, 0]), 0.5 * (lm[0, 2] + lm[16, 2])
+    x0, z0 = 0.5 * abs(jaw[16, 0] - jaw[0, 0]), 0.5 * (jaw[0, 2] + jaw[16, 2])
     z33, z31 = lm[33, 2], 0.5 * (lm[31, 2] + lm[35, 2])
     high = lambda x: np.interp(x, [0.0, x31, x0], [z33, z31, z0])  # noqa: E731 (the region's own line)
     half_w = 0.5 * abs(lm[54, 0] - lm[48, 0])
@@ -270,7 +298,7 @@ def cheek_line(lm: np.ndarray, reach: float = 1.0) -> tuple[np.ndarray, np.ndarr
     xa = xm + 0.006
     xb = max(x0 - SIDEBURN_WIDTH_M, xa + 0.005)
     za_low = min(0.5 * (lm[48, 2] + lm[54, 2]) + 0.006, z31)
-    zb_low = min(0.5 * (lm[2, 2] + lm[14, 2]), float(high(xb)))
+    zb_low = min(0.5 * (jaw[2, 2] + jaw[14, 2]), float(high(xb)))
     zm = (1 - r) * min(z31, float(high(xm))) + r * float(high(xm))
     za = (1 - r) * za_low + r * float(high(xa))
     zb = (1 - r) * zb_low + r * float(high(xb))
@@ -279,11 +307,12 @@ def cheek_line(lm: np.ndarray, reach: float = 1.0) -> tuple[np.ndarray, np.ndarr
 
 def below_cheek_line(P: np.ndarray, lm: np.ndarray, reach: float = 1.0, fade: float = CHEEK_FADE_M) -> np.ndarray:
     """(N,) weight of the points ``P`` under the cheek line (:func:`cheek_line`): 1 below it,
-    falling smoothly to 0 at ``fade`` metres above it; beyond jaw point 0 it stays at point
-    0's height."""
+    falling smoothly to 0 at ``fade`` metres above it; beyond the jaw line's top it stays at its
+    height."""
     P = np.asarray(P, np.float64)
     lm = np.asarray(lm, np.float64)
     xs, zs = cheek_line(lm, reach)
-    xc = 0.5 * (lm[0, 0] + lm[16, 0])
+    jaw = jaw_line(lm)
+    xc = 0.5 * (jaw[0, 0] + jaw[16, 0])
     z_line = np.interp(np.abs(P[:, 0] - xc), xs, zs)
     return feather(P[:, 2] - z_line, 0.0, max(fade, 1e-6))

@@ -21,7 +21,7 @@ from synth.model.eyelids import build_eyelid_rig, rest_lids
 from synth.model.format import HeadModelData
 from synth.model.identity_gmm import fit_gmm
 
-BUILDER_VERSION = "10"  # bump on every output change; what each version changed: CHANGELOG.md
+BUILDER_VERSION = "11"  # bump on every output change; what each version changed: CHANGELOG.md
 SEED = 20241128
 N_SAMPLES = 3000  # identity samples before mirroring (the PCA sees 2 * N_SAMPLES)
 GMM_COMPONENTS = 6

@@ -24,6 +24,9 @@ IBUG_GROUPS = (("jaw", 17), ("brow_r", 5), ("brow_l", 5), ("nose_bridge", 4), ("
                ("eye_r", 6), ("eye_l", 6), ("lip_outer", 12), ("lip_inner", 8))
 DENSE_LANDMARKS = 600
 CHIN_NORMAL_DOWN = 0.8  # chin landmark: first midline point below the lip whose normal points down by >= asin(0.8)
+JAW_ANGLE = 0.35  # the jaw angle's height below the mouth corners, in mouth-corner-to-chin heights
+JAW_SIDE_SAMPLES = 12  # heights at which the cheek's silhouette is traced, canthus to jaw angle
+REGION_JAW_TOP = 0.15  # the face region's jaw line starts this far below the canthus, in canthus-to-chin heights
 BROW_HEIGHT = (0.40, 0.53, 0.58, 0.55, 0.42)  # brow above the upper lid, in eye widths, medial -> lateral
 BROW_HEAD = -0.10  # medial end of the brow (21/22), in eye widths from the medial canthus (negative: medial)
 #: frontal rays that trace the nose base: spacing in height (m) along a column, and between columns
@@ -40,13 +43,13 @@ def regions_and_landmarks(mesh: Mesh, X: np.ndarray, tris: np.ndarray, family: n
                           joint_rest: np.ndarray, space: TargetSpace, data: Path):
     """(regions, landmarks, landmark names) of the template ``X`` in the model file's layout."""
     f = feature_regions(mesh, X, tris, space, data)
-    pts, tip = ibug68_points(f, X, tris, joint_rest)
+    pts, tip, jaw_line = ibug68_points(f, X, tris, joint_rest)
     P68 = np.array([pts[i] for i in range(68)])
     skin_tri = np.nonzero(f.skin[tris].all(1))[0]
     on_skin = ClosestPoints(X, tris, skin_tri, tie_m=LANDMARK_TIE_M)(P68)
     tri68, bary68 = on_skin.face, on_skin.bary
     names68 = [f"{grp}_{i:02d}" for grp, n in IBUG_GROUPS for i in range(n)]
-    landmark_regions(f, X, family, joint_rest, pts)
+    landmark_regions(f, X, family, joint_rest, pts, jaw_line)
     face = f.reg["face"]
     # spread over the base mesh's face (read from text, so the same bits on every machine; the
     # template's last bits depend on the BLAS kernels, and late picks are near ties)
@@ -61,15 +64,16 @@ def regions_and_landmarks(mesh: Mesh, X: np.ndarray, tris: np.ndarray, family: n
 
 
 def ibug68_points(f: Features, X: np.ndarray, tris: np.ndarray, joint_rest: np.ndarray):
-    """({ibug index: 3D point}, nose-tip vertex). The points lie on (or very near) the skin."""
+    """({ibug index: 3D point}, nose-tip vertex, the face region's jaw line (9, 3)). The points
+    lie on (or very near) the skin."""
     pts: dict[int, np.ndarray] = {}
     _eyes(f, X, pts)
     _mouth(f, X, pts)
     tip = _nose(f, X, joint_rest, pts)
     _nose_base(f, X, tris, pts)
     _brows(f, X, tris, pts)
-    _jaw(f, X, tris, joint_rest, pts)
-    return pts, tip
+    jaw_line = _jaw(f, X, tris, joint_rest, pts)
+    return pts, tip, jaw_line
 
 
 def _eyes(f: Features, X: np.ndarray, pts: dict) -> None:
@@ -189,9 +193,11 @@ def _base_outline(X: np.ndarray, vis: np.ndarray, normals: np.ndarray, x: float,
     return hit[k - 1] * (1 - a) + hit[k] * a
 
 
-def _jaw(f: Features, X: np.ndarray, tris: np.ndarray, joint_rest: np.ndarray, pts: dict) -> None:
-    """Chin (gnathion) on the midline profile, cheek silhouette from ear level down to the jaw
-    angle, then the mandible body as a straight side-view line projected onto the skin."""
+def _jaw(f: Features, X: np.ndarray, tris: np.ndarray, joint_rest: np.ndarray, pts: dict) -> np.ndarray:
+    """Chin (8) on the midline profile, and 0..7 / 9..16 spaced evenly, as a frontal view measures
+    length (x and z), along the face's outline from the height of the lateral canthus (36/45) down
+    to the chin: the cheek's silhouette to the jaw angle, then the mandible body. Returns the face
+    region's lower boundary (``region_jaw_line``), kept apart from the points."""
     vn = vertex_normals(X, tris[f.vis_tris])
     profile = midline(f, X, joint_rest)
     chin_line = profile[(X[profile, 2] < pts[57][2]) & (X[profile, 1] < joint_rest[2, 1])]
@@ -204,8 +210,31 @@ def _jaw(f: Features, X: np.ndarray, tris: np.ndarray, joint_rest: np.ndarray, p
     k = int(np.nonzero(g < 0)[0][0])
     a = g[k - 1] / (g[k - 1] - g[k])
     pts[8] = X[chin_line[k - 1]] * (1 - a) + X[chin_line[k]] * a
-    z0 = pts[36][2] - 0.15 * (pts[36][2] - pts[8][2])
-    zg = pts[48][2] - 0.35 * (pts[48][2] - pts[8][2])
+    contour = _outline(f, X, tris, joint_rest, pts, pts[36][2], JAW_SIDE_SAMPLES)
+    for i, p in enumerate(polyline_at(contour, np.linspace(0.0, 1.0, 9), axes=(0, 2))[:8]):
+        pts[i] = p
+        pts[16 - i] = p * [-1, 1, 1]
+    return region_jaw_line(f, X, tris, joint_rest, pts)
+
+
+def region_jaw_line(f: Features, X: np.ndarray, tris: np.ndarray, joint_rest: np.ndarray,
+                    pts: dict) -> np.ndarray:
+    """(9, 3) the lower boundary of the face region (and the beard's cheek line), right side to
+    the chin: the outline from ``REGION_JAW_TOP`` canthus-to-chin heights below the lateral canthus,
+    9 points evenly spaced in 3D arc length. It is not the jaw landmarks (those start at the
+    canthus): the regions, and the dense landmarks sampled on the face, stay where they were."""
+    z_top = pts[36][2] - REGION_JAW_TOP * (pts[36][2] - pts[8][2])
+    return polyline_at(_outline(f, X, tris, joint_rest, pts, z_top, 8), np.linspace(0.0, 1.0, 9))
+
+
+def _outline(f: Features, X: np.ndarray, tris: np.ndarray, joint_rest: np.ndarray, pts: dict, z_top: float,
+             n_side: int) -> np.ndarray:
+    """The right half of the face's outline from height ``z_top`` to the chin (8): the frontal
+    silhouette of the cheek (the most lateral skin point in front of the ear, at ``n_side``
+    heights) down to the jaw angle at ``z48 - JAW_ANGLE (z48 - z8)``, then the mandible body as
+    the straight side-view line from the jaw angle to the chin, projected onto the skin radially
+    from the vertical axis through the jaw joint."""
+    zg = pts[48][2] - JAW_ANGLE * (pts[48][2] - pts[8][2])
     y_ear = X[f.reg["ears"], 1].min()
 
     def silhouette(z):
@@ -213,7 +242,7 @@ def _jaw(f: Features, X: np.ndarray, tris: np.ndarray, joint_rest: np.ndarray, p
         p = p[(p[:, 1] < y_ear - 0.002) & (p[:, 0] < 0)]
         return p[np.argmin(p[:, 0])]
 
-    side = np.array([silhouette(z) for z in np.linspace(z0, zg, 8)])
+    side = np.array([silhouette(z) for z in np.linspace(z_top, zg, n_side)])
     angle = side[-1]
     origins, dirs = [], []
     for t in np.linspace(0.0, 1.0, 12)[1:-1]:
@@ -224,7 +253,4 @@ def _jaw(f: Features, X: np.ndarray, tris: np.ndarray, joint_rest: np.ndarray, p
         origins.append(o)
         dirs.append(d / np.linalg.norm(d))
     body_line = surface_hits(X, tris[f.vis_tris], np.array(origins), np.array(dirs), farthest=True)
-    contour = np.concatenate([side, body_line, pts[8][None]])
-    for i, p in enumerate(polyline_at(contour, np.linspace(0.0, 1.0, 9))[:8]):
-        pts[i] = p
-        pts[16 - i] = p * [-1, 1, 1]
+    return np.concatenate([side, body_line, pts[8][None]])

@@ -146,19 +146,19 @@ def feature_regions(mesh: Mesh, X: np.ndarray, tris: np.ndarray, space: TargetSp
 
 
 def landmark_regions(f: Features, X: np.ndarray, family: np.ndarray, joint_rest: np.ndarray,
-                     pts: dict[int, np.ndarray]) -> None:
+                     pts: dict[int, np.ndarray], jaw_line: np.ndarray) -> None:
     """Add face, neck, shoulders, scalp, skin, brow and beard to ``f.reg``, bounded by the
-    ibug68 points ``pts`` (before they are snapped to triangles)."""
+    ibug68 points ``pts`` (before they are snapped to triangles) and, below, by ``jaw_line`` ((9, 3),
+    the right side's outline down to the chin; landmarks.region_jaw_line)."""
     V = len(X)
     reg, skin, visible = f.reg, f.skin, f.visible
-    P68 = np.array([pts[i] for i in range(68)])
     # hairline estimate: forehead height ~ the height from the nasion down to the hollow of the upper
     # lip's profile (the deepest midline point between the nose tip and the upper lip)
     lip = midline(f, X, joint_rest)
     lip = lip[(X[lip, 2] < pts[30][2]) & (X[lip, 2] > pts[51][2])]
     z_trichion = pts[27][2] + HAIRLINE_FACTOR * (pts[27][2] - X[lip[np.argmax(X[lip, 1])], 2])
-    jx = np.abs(P68[:9, 0])[::-1]
-    jz = P68[:9, 2][::-1]
+    jx = np.abs(jaw_line[:, 0])[::-1]
+    jz = jaw_line[:, 2][::-1]
     below_jaw = X[:, 2] < np.interp(np.abs(X[:, 0]), jx, jz)
     head = skin & (family == 2)
     front = X[:, 1] < X[reg["ears"], 1].min()
@@ -176,9 +176,9 @@ def landmark_regions(f: Features, X: np.ndarray, family: np.ndarray, joint_rest:
         d, _ = cKDTree(line).query(X)
         reg[f"brow_{t}"] = np.nonzero(visible & (d < BROW_BAND_M) & mask(reg["face"], V))[0]
     reg["brow"] = np.concatenate([reg["brow_l"], reg["brow_r"]])
-    # beard: below the cheek line (alar base -> jaw point 0), lower face and upper neck, no lips/nose
-    cx = np.array([0.0, abs(pts[31][0]), abs(pts[0][0]), 1.0])
-    cz = np.array([pts[33][2], pts[31][2], pts[0][2], pts[0][2]])
+    # beard: below the cheek line (alar base -> the jaw line's top), lower face and upper neck, no lips/nose
+    cx = np.array([0.0, abs(pts[31][0]), abs(jaw_line[0, 0]), 1.0])
+    cz = np.array([pts[33][2], pts[31][2], jaw_line[0, 2], jaw_line[0, 2]])
     under_cheek = X[:, 2] < np.interp(np.abs(X[:, 0]), cx, cz)
     neck_mid = pts[8][2] - 0.5 * (pts[8][2] - joint_rest[0, 2])
     beard = visible & ~mask(reg["lips"], V) & ~f.nose & (

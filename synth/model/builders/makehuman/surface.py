@@ -99,9 +99,10 @@ def surface_hits(X: np.ndarray, tris: np.ndarray, origins: np.ndarray, dirs: np.
     return np.einsum("nk,nkc->nc", bary, X[tris[tri]])
 
 
-def polyline_at(points: np.ndarray, fractions) -> np.ndarray:
-    """Points at the given arc-length fractions of a polyline."""
-    seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
+def polyline_at(points: np.ndarray, fractions, axes=None) -> np.ndarray:
+    """Points at the given arc-length fractions of a polyline; with ``axes`` (e.g. ``(0, 2)``, the
+    frontal view's x and z) the length is measured over those coordinates only."""
+    seg = np.linalg.norm(np.diff(points if axes is None else points[:, list(axes)], axis=0), axis=1)
     s = np.concatenate([[0.0], np.cumsum(seg)])
     out = []
     for f in fractions:
