@@ -7,7 +7,7 @@
     synth prior info RUN
     synth prior fit IMAGES... --prior RUN --out FIT [--landmarks auto|json|mediapipe] [--steps N]
                     [--preset small|paper] [--config F] [--set key=value] [--no-pretraining] [--model PATH]
-    synth prior render FIT [--orbit N] [--size S] [--cameras cameras.json] -o DIR
+    synth prior render FIT [--orbit N] [--size S] [--frame head|input] [--span DEG] [--cameras cameras.json] -o DIR
     synth prior eval FIT --gt DATASET [--views 3,4,5] [--json] [--save DIR]
 
 Bad input gets one line ``synth: error: ...`` and exit code 2, with nothing written; Ctrl-C
@@ -111,7 +111,13 @@ def render_cmd(
                                                                            "identity)."),
     expression: Optional[int] = typer.Option(None, "--expression", "-e", help="Run: expression index of that "
                                                                                "identity."),
-    orbit: int = typer.Option(8, "--orbit", help="Views on a circle about the vertical axis."),
+    orbit: int = typer.Option(8, "--orbit", help="Number of views (a run: on a circle about the vertical axis; "
+                                                 "a fit: see --frame)."),
+    frame: str = typer.Option("head", "--frame", help="Fit: 'head' (views centred on the fitted head, 0.5 m across "
+                                                      "at the face, over --span degrees about the frontal input) or "
+                                                      "'input' (the photo's own framing, orbiting the full circle)."),
+    span: Optional[float] = typer.Option(None, "--span", help="Fit, head framing: degrees of azimuth the views "
+                                                              "cover (default 80: -40 .. +40)."),
     size: Optional[int] = typer.Option(None, "--size", help="Image size in pixels (square; default: the dataset's "
                                                             "or the fit's inputs')."),
     cameras: Optional[Path] = typer.Option(None, "--cameras", help="Fit: render the views of this cameras.json "
@@ -131,13 +137,15 @@ def render_cmd(
                              str(run), "drop them (a fit renders its own face)")
         from prior.fit.novel import render_fit
 
-        files = render_fit(run, out, orbit_views=orbit, size=size, cameras=cameras, device=dev)
+        files = render_fit(run, out, orbit_views=orbit, size=size, cameras=cameras, device=dev, framing=frame,
+                           span_deg=span)
     else:
         if identity is None or expression is None:
             raise SynthError("rendering a prior run needs --identity and --expression", str(run),
                              "pass both (synth prior info RUN lists them), or pass a fit directory")
-        if cameras is not None:
-            raise SynthError("--cameras renders a fit, not a prior run", str(run), "pass a fit directory")
+        if cameras is not None or frame != "head" or span is not None:
+            raise SynthError("--cameras, --frame and --span render a fit, not a prior run", str(run),
+                             "pass a fit directory")
         from prior.render_views import render_run
 
         files = render_run(run, identity, expression, out, orbit_views=orbit, size=size, device=dev)

@@ -1,10 +1,13 @@
 """Novel views of a fitted face (``synth prior render FIT``).
 
 Cameras live in the fit's frame (the head model at rest, where the fitted input cameras are).
-Either an orbit of ``N`` views about the vertical axis (world Z) through the ray bounds'
+Either ``N`` views framed on the head (``head``, the default: :func:`head_cameras`, centred on
+the fitted face at the frontal input camera's distance, over +-40 degrees of azimuth by
+default), or an orbit of ``N`` views about the vertical axis (world Z) through the ray bounds'
 centre, starting at the most frontal input camera, with that camera's fitted intrinsics scaled
-to ``size`` x ``size``; or the views of a ``cameras.json`` (the file ``render`` writes: per view
-``K``, ``camera_to_world``, ``width``, ``height`` and optionally ``key``).
+to ``size`` x ``size`` (``input``: the photo's own framing); or the views of a ``cameras.json``
+(the file ``render`` writes: per view ``K``, ``camera_to_world``, ``width``, ``height`` and
+optionally ``key``).
 
 At every view the conditioning code is interpolated from the per-image codes by inverse squared
 distance between the view's camera and the input cameras (paper Eq. 8,
@@ -23,7 +26,7 @@ import numpy as np
 from prior.fit.fitdir import FittedFace, load_fit
 from prior.fit.interpolate import interpolation_weights
 from prior.render_views import orbit, output_dir, render_image, scaled_camera, write_view
-from synth.conventions import invert_rigid
+from synth.conventions import invert_rigid, orbit_camera_to_world
 from synth.errors import SynthError
 from synth.io import atomic_write_json
 
@@ -76,6 +79,8 @@ def read_cameras(path) -> list[dict]:
 
 
 def orbit_cameras(fit: FittedFace, n: int, size: int | None) -> list[dict]:
+    """The ``input`` framing: the most frontal input camera turned about the vertical axis through
+    the ray bounds' centre, 360/n degrees apart, with its intrinsics."""
     i = frontal_index(fit.camera_to_world, fit.centre)
     (W, H), K = fit.size, fit.K[i]
     if size is not None:
@@ -84,13 +89,54 @@ def orbit_cameras(fit: FittedFace, n: int, size: int | None) -> list[dict]:
             for k, c2w in enumerate(orbit(fit.camera_to_world[i], fit.centre, n))]
 
 
+#: the ``head`` framing's defaults: views over +-40 degrees about the frontal input camera, 0.5 m
+#: across at the face (the head, hair and neck, as synth's training frames frame them)
+HEAD_SPAN_DEG, HEAD_FIELD_M = 80.0, 0.5
+
+
+def head_cameras(fit: FittedFace, n: int, size: int | None, span_deg: float = HEAD_SPAN_DEG,
+                 field_m: float = HEAD_FIELD_M) -> list[dict]:
+    """The ``head`` framing: ``n`` views looking at the fitted face's centre (its ibug68 landmarks'
+    centroid) from the most frontal input camera's distance and elevation, at azimuths spread evenly
+    over ``span_deg`` about that camera's (one view: its azimuth), each with the principal point at
+    the image centre and a focal length that makes the image ``field_m`` wide at the face. A photo
+    of a person, shoulders and all, is rendered centred on the head, whatever its own framing."""
+    target = np.asarray(fit.info["face_centre"], np.float64)
+    i = frontal_index(fit.camera_to_world, target)
+    d = fit.camera_to_world[i][:3, 3] - target
+    dist = float(np.linalg.norm(d))
+    az0 = float(np.degrees(np.arctan2(d[0], -d[1])))
+    el0 = float(np.degrees(np.arctan2(d[2], np.hypot(d[0], d[1]))))
+    W = H = int(size) if size is not None else int(min(fit.size))
+    f = W * dist / field_m
+    K = np.array([[f, 0.0, W / 2.0], [0.0, f, H / 2.0], [0.0, 0.0, 1.0]])
+    azimuths = [az0] if n == 1 else list(np.linspace(az0 - span_deg / 2.0, az0 + span_deg / 2.0, n))
+    return [{"key": f"orbit{k:03d}", "K": K, "camera_to_world": orbit_camera_to_world(a, el0, dist, target),
+             "width": W, "height": H} for k, a in enumerate(azimuths)]
+
+
+FRAMINGS = ("head", "input")
+
+
 def render_fit(fit_dir, out_dir, *, orbit_views: int = 8, size: int | None = None, cameras=None,
-               device="cpu") -> list[Path]:
+               device="cpu", framing: str = "head", span_deg: float | None = None) -> list[Path]:
     """Render novel views of a fit (see the module docstring)."""
     if orbit_views < 1 or (size is not None and size < 1):
         raise SynthError("--orbit and --size must be at least 1", "synth prior render", "pass positive numbers")
+    if framing not in FRAMINGS:
+        raise SynthError(f"unknown framing {framing!r}", "synth prior render --frame", f"use one of {FRAMINGS}")
+    if span_deg is not None and not 0.0 <= span_deg <= 360.0:
+        raise SynthError(f"--span {span_deg} is outside 0-360 degrees", "synth prior render", "pass 0 to 360")
+    if span_deg is not None and framing == "input":
+        raise SynthError("--span sets the head framing's arc; the input framing orbits the full circle",
+                         "synth prior render", "drop --span, or use --frame head")
     fit = load_fit(fit_dir, device)
-    views = read_cameras(cameras) if cameras is not None else orbit_cameras(fit, orbit_views, size)
+    if cameras is not None:
+        views = read_cameras(cameras)
+    elif framing == "head":
+        views = head_cameras(fit, orbit_views, size, HEAD_SPAN_DEG if span_deg is None else span_deg)
+    else:
+        views = orbit_cameras(fit, orbit_views, size)
     out_dir = output_dir(out_dir)
     written, cams = [], []
     chunk = fit.render_chunk

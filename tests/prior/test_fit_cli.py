@@ -81,6 +81,38 @@ def test_render_orbit_and_cameras(world, fitted, tmp_path):
         assert np.array_equal(a, np.asarray(Image.open(tmp_path / "again" / f"{k}_colour.png")))
 
 
+def test_render_framed_on_the_head_or_as_the_input(world, fitted, tmp_path):
+    """The default framing looks at the fitted face from the frontal input camera's distance over
+    +-40 degrees (the face centre projects to the image centre); ``--frame input`` is the photo's own
+    framing orbiting the full circle, as before."""
+    from prior.fit.novel import frontal_index
+    from synth.conventions import invert_rigid
+
+    fit = json.loads((fitted / "fit.json").read_text())
+    face = np.asarray(fit["face_centre"])
+    c2w_in = np.asarray([c["camera_to_world"] for c in fit["cameras"]])
+    i = frontal_index(c2w_in, face)
+    r = synth("prior", "render", fitted, "--orbit", 3, "--size", 10, "--span", 60, "-o", tmp_path / "head")
+    assert r.returncode == 0, r.stderr
+    views = json.loads((tmp_path / "head" / "cameras.json").read_text())["views"]
+    az = []
+    for v in views:
+        K, w2c = np.asarray(v["K"]), invert_rigid(np.asarray(v["camera_to_world"]))
+        p = K @ (w2c[:3, :3] @ face + w2c[:3, 3])
+        assert p[:2] / p[2] == pytest.approx([5.0, 5.0], abs=1e-9)  # the face at the image centre
+        d = np.asarray(v["camera_to_world"])[:3, 3] - face
+        assert np.linalg.norm(d) == pytest.approx(np.linalg.norm(c2w_in[i][:3, 3] - face))
+        assert K[0, 0] == pytest.approx(10 * np.linalg.norm(d) / 0.5)  # 0.5 m across at the face
+        az.append(np.degrees(np.arctan2(d[0], -d[1])))
+    d0 = c2w_in[i][:3, 3] - face
+    az0 = np.degrees(np.arctan2(d0[0], -d0[1]))
+    assert np.asarray(az) == pytest.approx([az0 - 30, az0, az0 + 30], abs=1e-6)
+    r = synth("prior", "render", fitted, "--orbit", 2, "--size", 10, "--frame", "input", "-o", tmp_path / "input")
+    assert r.returncode == 0, r.stderr
+    first = json.loads((tmp_path / "input" / "cameras.json").read_text())["views"][0]
+    assert np.asarray(first["camera_to_world"]) == pytest.approx(c2w_in[frontal_index(c2w_in, fit["bounds"]["centre"])])
+
+
 def test_eval_frontal_held_out_views(world, fitted, tmp_path):
     test = world[3]
     r = synth("prior", "eval", fitted, "--gt", test, "--json", "--save", tmp_path / "ev")
@@ -198,6 +230,11 @@ def test_render_and_eval_errors(world, fitted, tmp_path):
     assert "select a training identity" in one_line_error(
         synth("prior", "render", fitted, "--identity", 0, "-o", tmp_path / "v"))
     assert "needs --identity and --expression" in one_line_error(synth("prior", "render", run, "-o", tmp_path / "v"))
+    for args, says in ((("--span", 400), "outside 0-360"), (("--frame", "side"), "unknown framing"),
+                       (("--frame", "input", "--span", 90), "drop --span")):
+        assert says in one_line_error(synth("prior", "render", fitted, *args, "-o", tmp_path / "v"))
+    assert "render a fit, not a prior run" in one_line_error(
+        synth("prior", "render", run, "-i", 0, "-e", 0, "--span", 90, "-o", tmp_path / "v"))
     bad = tmp_path / "cams.json"
     bad.write_text('{"views": [{"K": [1, 2]}]}')
     assert "cameras file is malformed" in one_line_error(
