@@ -18,7 +18,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("synth", "blender_scripts", "prior", "renderer_jobs")
-EXTRAS = {"render", "prior", "farm", "export", "fit"}
+EXTRAS = {"render", "prior", "farm", "export", "fit", "judge"}
 
 
 def z_read(wheel: Path, name: str) -> bytes:

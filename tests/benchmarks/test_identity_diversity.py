@@ -1,0 +1,59 @@
+"""benchmarks/identity_diversity.py's figures on synthetic embeddings: pairs, ROC AUC, the threshold fraction."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from benchmarks import identity_diversity as idd
+
+
+def test_pairs_are_every_unordered_pair_once_with_their_distances_and_labels():
+    emb = np.array([[0.0, 0.0], [3.0, 4.0], [0.0, 1.0], [6.0, 8.0]])
+    i, j = idd.pair_index(4)
+    assert list(zip(i.tolist(), j.tolist())) == [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+    assert idd.pair_distances(emb) == pytest.approx([5.0, 1.0, 10.0, np.hypot(3, 3), 5.0, np.hypot(6, 7)])
+    assert idd.same_pairs(["a", "b", "a", "b"]).tolist() == [False, True, False, False, True, False]
+
+
+def test_roc_auc_is_the_mann_whitney_probability_with_ties_as_halves():
+    same = np.array([True, True, False, False, False])
+    assert idd.roc_auc(np.array([0.1, 0.2, 0.5, 0.6, 0.7]), same) == 1.0  # separated
+    assert idd.roc_auc(np.array([0.8, 0.9, 0.5, 0.6, 0.7]), same) == 0.0  # reversed
+    # same 0.3 beats different 0.5 and 0.7, ties 0.3 (half), loses to nothing else -> 2.5; same 0.6
+    # beats 0.7 only -> 1; (2.5 + 1) / (2 * 3)
+    assert idd.roc_auc(np.array([0.3, 0.6, 0.3, 0.5, 0.7]), same) == pytest.approx(3.5 / 6)
+    assert np.isnan(idd.roc_auc(np.array([0.1, 0.2]), np.array([True, True])))
+
+
+def test_roc_auc_agrees_with_counting_every_pair_of_pairs():
+    rng = np.random.default_rng(3)
+    d = np.round(rng.random(300), 2)  # many ties
+    same = rng.random(300) < 0.2
+    pos, neg = d[same], d[~same]
+    brute = ((pos[:, None] < neg[None]).sum() + 0.5 * (pos[:, None] == neg[None]).sum()) / (len(pos) * len(neg))
+    assert idd.roc_auc(d, same) == pytest.approx(brute, abs=1e-12)
+
+
+def test_threshold_fraction_is_strictly_below():
+    assert idd.fraction_under(np.array([0.59, 0.6, 0.61, 0.2]), 0.6) == 0.5
+    assert np.isnan(idd.fraction_under(np.array([])))
+
+
+def test_summary_of_synthetic_identities_splits_same_pairs_by_expression():
+    rng = np.random.default_rng(0)
+    centres = rng.normal(size=(6, 128))
+    centres *= 0.5 / np.linalg.norm(centres, axis=1, keepdims=True)  # different people ~0.7 apart
+    ident = np.repeat(np.arange(6), 4)
+    expr = np.tile([0, 0, 1, 1], 6)
+    noise = np.where(expr[:, None] == 0, 0.002, 0.01) * rng.normal(size=(24, 128))  # expression 1 farther
+    s = idd.summarise(centres[ident] + noise, ident, expr)
+    assert (s["faces"], s["pairs_same"], s["pairs_different"]) == (24, 36, 240)
+    assert s["auc"] == 1.0 and s["same_over_threshold"] == 0
+    assert s["different_under_threshold"] == pytest.approx(s["different_under_count"] / 240)
+    assert 0.5 < s["different_median"] < 0.9
+    within, across = s["same_within_expression"], s["same_across_expressions"]
+    assert within[0] < across[0] and max(within[1], across[1]) == s["same"][1]
+    # shrink the people towards one face: more different pairs fall under the threshold, AUC stays
+    t = idd.summarise(0.5 * centres[ident] + noise, ident, expr)
+    assert t["different_under_threshold"] > s["different_under_threshold"] and t["auc"] == 1.0
