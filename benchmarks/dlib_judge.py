@@ -36,14 +36,22 @@ def main(argv: list[str]) -> int:
     if len(argv) < 2:
         print("usage: dlib_judge.py OUT.json IMAGE_OR_DIR [IMAGE_OR_DIR ...]", file=sys.stderr)
         return 2
+    import importlib.util
+
     import dlib
-    import face_recognition_models as frm
     import numpy as np
     from PIL import Image
 
+    # the weights' files, found without importing face_recognition_models (its __init__ needs
+    # pkg_resources, i.e. setuptools, which an environment need not have)
+    spec = importlib.util.find_spec("face_recognition_models")
+    if spec is None or not spec.submodule_search_locations:
+        print("face_recognition_models is not installed (pip install '.[judge]')", file=sys.stderr)
+        return 2
+    models = Path(list(spec.submodule_search_locations)[0]) / "models"
     detector = dlib.get_frontal_face_detector()
-    shape = dlib.shape_predictor(frm.pose_predictor_five_point_model_location())
-    net = dlib.face_recognition_model_v1(frm.face_recognition_model_location())
+    shape = dlib.shape_predictor(str(models / "shape_predictor_5_face_landmarks.dat"))
+    net = dlib.face_recognition_model_v1(str(models / "dlib_face_recognition_resnet_model_v1.dat"))
     out = {}
     for path in images_of(argv[1:]):
         img = np.ascontiguousarray(np.asarray(Image.open(path).convert("RGB")))

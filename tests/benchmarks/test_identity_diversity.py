@@ -57,3 +57,29 @@ def test_summary_of_synthetic_identities_splits_same_pairs_by_expression():
     # shrink the people towards one face: more different pairs fall under the threshold, AUC stays
     t = idd.summarise(0.5 * centres[ident] + noise, ident, expr)
     assert t["different_under_threshold"] > s["different_under_threshold"] and t["auc"] == 1.0
+
+
+def test_the_judge_finds_the_astronaut_and_embeds_her(tmp_path):
+    """benchmarks/dlib_judge.py in the project's environment (the judge extra): the face of
+    scikit-image's astronaut photo is found and gets a unit-scale 128-D embedding; the same
+    photo twice gives the same embedding (no jitter), distance 0, far under the 0.6 threshold."""
+    import json
+    import subprocess
+    import sys
+
+    import numpy as np
+    from PIL import Image
+    from skimage import data
+
+    Image.fromarray(data.astronaut()).save(tmp_path / "a.png")
+    Image.fromarray(data.astronaut()).save(tmp_path / "b.png")
+    out = tmp_path / "judge.json"
+    r = subprocess.run([sys.executable, "benchmarks/dlib_judge.py", str(out), str(tmp_path / "a.png"),
+                        str(tmp_path / "b.png")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    res = json.loads(out.read_text())
+    a, b = (res["images"][k]["faces"][0] for k in ("a.png", "b.png"))
+    x0, y0, x1, y1 = a["box"]
+    assert 150 < (x0 + x1) / 2 < 260 and 40 < (y0 + y1) / 2 < 160  # her face, not the patch
+    ea, eb = np.asarray(a["embedding"]), np.asarray(b["embedding"])
+    assert ea.shape == (128,) and 0.5 < np.linalg.norm(ea) < 2.0 and np.linalg.norm(ea - eb) == 0.0
