@@ -186,7 +186,8 @@ def run_photo(path: Path, gt_source: np.ndarray, model, hm, cfg, lines, mapping)
     im = inputs[0]
     gt = to_canvas(im, gt_source * im.photo["decode_scale"])
     io = np.linalg.norm(gt[OUTER_EYE_CORNERS[0]] - gt[OUTER_EYE_CORNERS[1]])
-    return {"fit_to_detector": float(np.linalg.norm(mapped - obs.mean[0], axis=1).mean() / io),"size": im.photo["source_size"], "faces": im.detection["faces"], "face_px": im.detection["face_px"],
+    return {"fit_to_detector": float(np.linalg.norm(mapped - obs.mean[0], axis=1).mean() / io),
+            "size": im.photo["source_size"], "faces": im.detection["faces"], "face_px": im.detection["face_px"],
             "rmse_px": float(fit.rmse_px[0]), "converged": bool(fit.converged), "nme": nme(pred, gt, detected),
             "nme_outline": nme(outline, gt, detected), "jaw_fixed": jaw_split(pred, gt),
             "jaw_outline": jaw_split(outline, gt), "held_out": held_out(model, hm, cfg, obs, corr, gt),
@@ -222,7 +223,8 @@ def print_tables(rows: dict) -> None:
         print(f"\nmedian NME over {len(nme)} photos: {100 * float(np.median(nme)):.2f} % (fixed jaw), "
               f"{100 * float(np.median(outline)):.2f} % (jaw as annotated: on the visible outline, spaced evenly)")
     print()
-    print(markdown_table(["photo", "jaw along the contour: fixed / annotated", "jaw across the contour: fixed / annotated"],
+    print(markdown_table(["photo", "jaw along the contour: fixed / annotated",
+                          "jaw across the contour: fixed / annotated"],
                          [[name, *(f"{pct(r['jaw_fixed'][k], 1)} / {pct(r['jaw_outline'][k], 1)} %"
                                    for k in ("along", "across"))] for name, r in fitted.items()]))
     print()
