@@ -90,7 +90,8 @@ def test_tables_show_the_sources_per_photo(B, capsys):
     n = {k: 0.01 * (i + 1) for i, k in enumerate(["all", *B.REGIONS, "same7_fit", "same7_detector"])}
     row = {"size": [100, 80], "faces": 1, "face_px": 50.0, "rmse_px": 0.5, "converged": True, "nme": n,
            "nme_outline": n, "jaw_fixed": {"along": 0.1, "across": 0.2}, "jaw_outline": {"along": 0.1, "across": 0.2},
-           "fit_to_detector": 0.01, "seconds": 1.0, "held_out": {k: {"distance": 0.01, "outwards": 0.0} for k in B.HELD_OUT},
+           "fit_to_detector": 0.01, "seconds": 1.0,
+           "held_out": {k: {"distance": 0.01, "outwards": 0.0} for k in B.HELD_OUT},
            "sources": {"oracle": {**n, "all": 0.0234}, "mediapipe": {**n, "all": 0.0876}, "oracle_rmse_px": 0.1}}
     B.print_tables({"face": row, "other": {"error": "no face"}})
     out = capsys.readouterr().out
