@@ -19,11 +19,17 @@ identity, expression and joint rotation.
 For a posed head and a camera, with ``n_j`` the image normal of the projected fixed contour
 (pointing out of the face) at landmark ``j``'s projection ``q_j``, the landmark is
 ``q_j + max(0, max_k (x_jk - q_j) . n_j) n_j`` over the projections ``x_jk`` of its line: moved
-out to the farthest projection of the skin in front of it, and only across the contour (where
-along the outline the 17 points sit is the model's definition). A maximum of continuous
-functions, so no discrete choice is made; ``n_j``'s side comes from the sign of the projected
-contour's area (a face-sized number), and a contour of under :data:`MIN_AREA_PX2` (seen edge-on)
-is left as it is.
+out to the farthest projection of the skin in front of it, and only across the contour. A
+maximum of continuous functions, so no discrete choice is made; ``n_j``'s side comes from the sign
+of the projected contour's area (a face-sized number), and a contour of under
+:data:`MIN_AREA_PX2` (seen edge-on) is left as it is.
+
+Along the outline, 300-W's jaw points are spaced evenly from the ear-level point (0, 16) to the
+chin (8), as the outline shows in the image; a fixed point of the skin is not (seen from above,
+from below or from the side, the skin's even spacing foreshortens unevenly).
+:func:`spaced_evenly` keeps the anchors (:data:`IBUG68_JAW_ANCHORS`: 0, 8, 16, each on the
+outline after the move across) and puts the points between two anchors at equal arc lengths of
+the polyline through the moved points; :func:`annotated_jaw` does both.
 
 Used by the photo benchmark (benchmarks/photo_landmarks.py) to score the jaw as annotated. Not in
 the fit: its contour points are mediapipe's face-oval points, whose correspondence was derived from
@@ -44,6 +50,9 @@ from synth.model.meshutil import barycentric_points
 
 #: ibug68 points that follow the face's outline
 IBUG68_CONTOUR = tuple(range(17))
+#: jaw points that stay where the model puts them (on the outline); the rest are spaced evenly
+#: along the outline between them (:func:`spaced_evenly`): the ear-level ends and the chin
+IBUG68_JAW_ANCHORS = (0, 8, 16)
 #: the ibug68 nose tip: the face's front is the direction from the head's centre to it
 IBUG68_NOSE_TIP = 30
 #: a projected contour enclosing less than this (pixels squared) is seen edge-on and left as it is
@@ -154,3 +163,30 @@ def visible_contour(lines: ContourLines, triangles: np.ndarray, vertices: np.nda
     valid = np.arange(S)[None] < lines.count[:, None]
     reach = np.where(valid, np.einsum("lsc,lc->ls", x - q[:, None], normal), 0.0)
     return q + np.maximum(reach.max(1), 0.0)[:, None] * normal
+
+
+def spaced_evenly(points: np.ndarray, anchors=IBUG68_JAW_ANCHORS) -> np.ndarray:
+    """(L, 2): ``points`` (L, 2) along a contour, the ``anchors`` (increasing indices, first 0 and
+    last L - 1) kept, and the points between two anchors moved along the polyline through
+    ``points`` to equal arc lengths between them (module docstring)."""
+    p = np.asarray(points, np.float64)
+    a = [int(k) for k in anchors]
+    if a[0] != 0 or a[-1] != len(p) - 1 or np.any(np.diff(a) <= 0):
+        raise SynthError(f"anchors {a} must increase from 0 to {len(p) - 1}", "contour",
+                         "pass the indices of the contour's fixed points, ends included")
+    out = p.copy()
+    for lo, hi in zip(a[:-1], a[1:]):
+        seg = p[lo:hi + 1]
+        s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(seg, axis=0), axis=1))])
+        at = np.linspace(0.0, s[-1], hi - lo + 1)
+        out[lo:hi + 1] = np.stack([np.interp(at, s, seg[:, 0]), np.interp(at, s, seg[:, 1])], 1)
+        out[hi] = seg[-1]  # exactly the anchor
+    return out
+
+
+def annotated_jaw(lines: ContourLines, triangles: np.ndarray, vertices: np.ndarray, fixed_px: np.ndarray,
+                  project, anchors=IBUG68_JAW_ANCHORS) -> np.ndarray:
+    """(L, 2) pixels: the contour landmarks as 300-W annotates them, moved out across the contour to
+    the visible outline (:func:`visible_contour`) and spaced evenly along it between the
+    ``anchors`` (:func:`spaced_evenly`); arguments as :func:`visible_contour`'s."""
+    return spaced_evenly(visible_contour(lines, triangles, vertices, fixed_px, project), anchors)
