@@ -18,7 +18,7 @@ Stages (each resumable: finished outputs are kept and skipped):
 2. train: one prior per rung, prior_claim's ``train`` (same steps for every rung).
 3. fit: every prior (0 = no pre-training, from the largest rung's configuration) on every test
    scene of both sets, from 3 and from 1 input views, evaluated on the 6 held-out views
-   (prior_claim's ``fit``). ``--rungs`` picks priors (several processes can share the fits);
+   (prior_claim's ``fit``). ``--rungs`` and ``--views`` pick rows (several processes can share the fits);
    a prior still training is skipped, or waited for with ``--wait``.
 4. report: per set, prior size and view count the mean PSNR/SSIM/LPIPS in the face mask and the
    per-scene PSNRs (markdown, ``W/sizes.json``); the plot with ``--figure``.
@@ -58,12 +58,12 @@ def set_dir(work: Path, name: str) -> Path:
     return work if name == "synthetic" else work / name
 
 
-def rows(p: dict, rungs=None) -> list[tuple[str, int, int]]:
+def rows(p: dict, rungs=None, views=None) -> list[tuple[str, int, int]]:
     """(name, rung, views) of prior_claim's fit rows; rung 0 (no pre-training) runs from the largest
     rung's configuration. 3-view rows first: a run cut short has them for every prior."""
     big = max(p["rungs"])
     out = []
-    for v in VIEW_COUNTS:
+    for v in [v for v in VIEW_COUNTS if views is None or v in views]:
         for n in [0, *p["rungs"]]:
             if rungs is None or n in rungs:
                 out.append((f"none_views{v}" if n == 0 else f"ids{n}_views{v}", n or big, v))
@@ -155,12 +155,13 @@ def pending(work: Path, rws) -> list:
     return out
 
 
-def fit(work: Path, p: dict, scale: float, device: str, times: pc.Times, rungs=None, wait: bool = False) -> None:
+def fit(work: Path, p: dict, scale: float, device: str, times: pc.Times, rungs=None, views=None,
+        wait: bool = False) -> None:
     """Every row on every scene of both sets, scene by scene (synthetic scene k, then ICT scene k);
     rows whose prior has not finished training are left for a later pass (``wait``) or run."""
     steps = max(1, round(p["train_steps"] * scale))
     t0 = time.perf_counter()
-    todo = pending(work, rows(p, rungs))
+    todo = pending(work, rows(p, rungs, views))
     while todo:
         ready = [r for r in todo if prior_ready(work, r[1], steps)]
         n_scenes = max(len(pc.scenes(set_dir(work, s))) for s in SETS)
@@ -177,7 +178,8 @@ def fit(work: Path, p: dict, scale: float, device: str, times: pc.Times, rungs=N
             time.sleep(60)
     if todo:
         pc.log(f"fit: {len(todo)} rows left: their priors are not trained yet")
-    times.record("fit_sizes" + ("" if rungs is None else "_rungs" + "_".join(map(str, rungs))), t0)
+    times.record("fit_sizes" + ("" if rungs is None else "_rungs" + "_".join(map(str, rungs)))
+                 + ("" if views is None else "_views" + "_".join(map(str, views))), t0)
 
 
 # --------------------------------------------------------------------------- report
@@ -277,6 +279,7 @@ def main(argv=None) -> int:
     ap.add_argument("--ict", type=Path, default=ICT_DEFAULT,
                     help="ICT-FaceKit checkout or sample (default: $SYNTH_ICT_FACEKIT_DIR or ../shared/ict-facekit)")
     ap.add_argument("--rungs", default=None, help="fit: only these priors (training identities, 0 = none; e.g. 1,15)")
+    ap.add_argument("--views", default=None, help="fit: only these input view counts (e.g. 3)")
     ap.add_argument("--wait", action="store_true", help="fit: wait for priors still training instead of leaving "
                     "their rows")
     ap.add_argument("--figure", type=Path, default=None, help="report: write the plot here (e.g. docs/prior_sizes.png)")
@@ -296,7 +299,8 @@ def main(argv=None) -> int:
         pc.train(a.work, p, a.scale, a.device, times)
     if a.stage in ("all", "fit"):
         rungs = None if a.rungs is None else [int(x) for x in a.rungs.split(",")]
-        fit(a.work, p, a.scale, a.device, times, rungs=rungs, wait=a.wait)
+        views = None if a.views is None else [int(x) for x in a.views.split(",")]
+        fit(a.work, p, a.scale, a.device, times, rungs=rungs, views=views, wait=a.wait)
     if a.stage in ("all", "report"):
         report(a.work, p, times, a.figure)
     return 0
