@@ -252,6 +252,8 @@ def plot(res: dict, path: Path) -> None:
                       "lpips": "LPIPS (lower is better)"}[m], fontsize=10)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
+    fig.suptitle("few-shot fits of held-out heads: mean over scenes, bars from the worst to the best scene",
+                 fontsize=10)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=90)
