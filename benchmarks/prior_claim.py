@@ -9,8 +9,8 @@ not make it worse (Table S1).
 Stages (each resumable: finished outputs are kept and skipped):
 
 1. render: one training dataset of the largest rung's identities (``synth render --preset preview``
-   at the prior's resolution; the smaller rungs are subsets of it, linked, so every frame is
-   rendered once), and a test dataset of held-out identities (never trained on; identity indices
+   at the prior's resolution; the smaller rungs are its first shards, so every frame is rendered
+   once), and a test dataset of held-out identities (never trained on; identity indices
    after the training ones, random non-neutral expressions) at ``test_res``, from a hand-made plan:
    ``synth plan``'s identities, expressions, assets and lighting, with every expression's cameras
    replaced by fixed ones: views 0-2 the inputs (frontal, +45 and -45 degrees azimuth), views 3-8
@@ -165,14 +165,10 @@ def render(work: Path, p: dict, times: Times) -> None:
         times.record("render_test", t0, frames=p["test_ids"] * p["test_expressions"] * len(TEST_VIEWS))
 
 
-def subset(work: Path, n: int) -> Path:
-    """A dataset of the first ``n`` training identities: links to their committed shards."""
-    out = work / "subsets" / f"ids{n:03d}"
-    if not out.is_dir():
-        (out / "shards").mkdir(parents=True)
-        for k in range(n):
-            (out / "shards" / f"shard_{k:06d}").symlink_to((work / "ds_train" / "shards" / f"shard_{k:06d}").resolve())
-    return out
+def subset(work: Path, n: int) -> list[Path]:
+    """The first ``n`` training identities: their shard directories, a training source as a list of
+    shard paths (one identity per shard)."""
+    return [work / "ds_train" / "shards" / f"shard_{k:06d}" for k in range(n)]
 
 
 # --------------------------------------------------------------------------- train
@@ -214,7 +210,8 @@ def scenes(work: Path) -> list[tuple[int, int]]:
 
 
 def fit_rows(p: dict) -> list[tuple[str, int | None, int]]:
-    """(row name, rung or None for no pre-training, number of input views)."""
+    """(row name, rung, number of input views); a name starting with "none" is the fit from a randomly
+    initialised field (the rung's run gives only its configuration)."""
     big = max(p["rungs"])
     rows = [("none", big, 3)] + [(f"ids{n}", n, 3) for n in p["rungs"]]
     return rows + [(f"ids{big}_views{v}", big, v) for v in (1, 2)]
@@ -241,7 +238,7 @@ def fit(work: Path, p: dict, scale: float, device: str, times: Times, rows=None,
             log(f"fit: {name}{tag} on identity {ident} expression {expr} ({nviews} views)")
             if not (out / "fit").is_dir():
                 fit_face(frames, work / "runs" / f"ids{rung:03d}{tag}", out / "fit", landmarks="json", sets=sets,
-                         pretrained=name != "none", device=device, log=lambda m: None)
+                         pretrained=not name.startswith("none"), device=device, log=lambda m: None)
             t1 = time.perf_counter()
             res = evaluate_fit(out / "fit", work / "ds_test", views=HELD_OUT, device=device,
                                save=out / "views" if nviews == 3 else None)

@@ -59,3 +59,55 @@ def test_claim_test_plan_has_fixed_cameras(tmp_path):
                 assert fr["camera"]["azimuth_deg"] == az
     assert pc.scaled_sets(["finetune.steps=10", "finetune.lr_init=0.5"], 2.0) == ["finetune.steps=20",
                                                                                    "finetune.lr_init=0.5"]
+
+
+def _bench(name: str):
+    import importlib.util
+    import sys
+
+    sys.path.insert(0, str(ROOT / "benchmarks"))  # prior_sizes imports prior_claim
+    spec = importlib.util.spec_from_file_location(name, ROOT / "benchmarks" / f"{name}.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_sizes_one_hot_plan_and_rows(tmp_path):
+    """benchmarks/prior_sizes.py: identity k of the test plan gets the one-hot code on dimension k
+    and the look-at target of that head; everything else is the source plan's. Its fit rows: 3
+    views before 1, no pre-training from the largest rung's configuration."""
+    import numpy as np
+
+    from synth.model.default import load_default_model
+    from synth.plan import io
+    from synth.plan.identities import look_at_targets
+    from tests.prior.test_cli import synth
+
+    ps = _bench("prior_sizes")
+    r = synth("plan", "-n", 2, "--start", 3, "--seed", 1, "--out", tmp_path / "p0",
+              "--set", "dataset.views_per_expression=2", "--set", "dataset.expressions_per_identity=1")
+    assert r.returncode == 0, r.stderr
+    ps.one_hot_plan(tmp_path / "p0", tmp_path / "p1")
+    a, b = io.load_plan(tmp_path / "p0"), io.load_plan(tmp_path / "p1")
+    model = load_default_model()
+    for k, sid in enumerate(b.shard_ids()):
+        ia, ib = a.shard(sid)["identities"][0], b.shard(sid)["identities"][0]
+        assert ib["identity_index"] == 3 + k and ib["expressions"] == ia["expressions"]
+        code = np.asarray(ib["identity_code"])
+        assert code[k] == 1.0 and np.count_nonzero(code) == 1 and len(code) == len(ia["identity_code"])
+        np.testing.assert_allclose(ib["target"], look_at_targets(model, code, "head", [0, 0, 0])[0], atol=1e-6)
+        assert ib["target"] != ia["target"]
+    p = ps.PROFILES["cpu"]
+    assert ps.rows(p)[:4] == [("none_views3", 60, 3), ("ids1_views3", 1, 3), ("ids15_views3", 15, 3),
+                              ("ids60_views3", 60, 3)]
+    assert ps.rows(p, [0, 15]) == [("none_views3", 60, 3), ("ids15_views3", 15, 3), ("none_views1", 60, 1),
+                                   ("ids15_views1", 15, 1)]
+    assert [ps.rung_of(n) for n, _, _ in ps.rows(p)] == [0, 1, 15, 60] * 2
+
+
+def test_sizes_help_parses():
+    import sys
+
+    r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "prior_sizes.py"), "--help"], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0 and "--rungs" in r.stdout, r.stderr
