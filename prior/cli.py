@@ -93,13 +93,16 @@ def train_cmd(
 
     dev = resolve_device(device)
     dist = init_distributed(dev)
+    finished = False
     try:
         setup = prepare(dataset, out, preset=preset, config_path=config, sets=set_, steps=steps, resume=resume,
                         dist=dist)
         trainer = Trainer(setup, device_for(dist, dev), dist)
         rc = trainer.run()
+        finished = True
     finally:
-        shutdown_distributed()
+        trainer = None  # the DDP model lets go of the process group before it is destroyed
+        shutdown_distributed(wait_for_peers=finished)
     if rc:
         raise typer.Exit(rc)
 

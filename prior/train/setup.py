@@ -74,8 +74,16 @@ def device_for(d: Dist, device: torch.device) -> torch.device:
     return torch.device("cuda", d.local_rank) if device.type == "cuda" else device
 
 
-def shutdown_distributed() -> None:
+def shutdown_distributed(wait_for_peers: bool = False) -> None:
+    """Leave the process group. After a run that ended normally every rank first waits for
+    the others (rank 0 may still be writing the last checkpoint), so no rank tears down its
+    connections while a peer still uses them; after an error nobody waits (a peer may be gone)."""
+    import gc
+
     import torch.distributed as dist
 
     if dist.is_available() and dist.is_initialized():
+        if wait_for_peers and dist.get_world_size() > 1:
+            dist.barrier()
+        gc.collect()  # DDP reducers still holding the group go first
         dist.destroy_process_group()
