@@ -29,7 +29,6 @@ from prior.train import checkpoint as ckpt
 from prior.train import config as run_config
 from prior.train.setup import Dist, fit_scene
 from synth.io import atomic_write_bytes, atomic_write_json
-from synth.io.process import return_freed_memory
 from synth.errors import SynthError
 
 CONFIG_FILE = "config.toml"
@@ -89,8 +88,6 @@ def prepare(dataset, run_dir, *, preset: str | None = None, config_path=None, se
     res = _prepare_all(source, prep_dir, dist or Dist(), progress)
     table = build_table(res, joints=tuple(d.joints), margin=d.bounds_margin, holdout_views=d.holdout_views,
                         planned=source.planned_identities, where=source.describe())
-    del res  # every shard's record: the table keeps what training needs
-    return_freed_memory()
     if resumed is not None:
         if table.layout != resumed.layout:
             raise SynthError(f"dataset codes {table.layout.to_dict()} differ from the checkpoint's "
