@@ -7,6 +7,7 @@ judge extra (``pip install -e .[judge]``, or any venv with numpy, pillow, dlib-b
 face_recognition_models), as a subprocess::
 
     .venv/bin/python -m benchmarks.identity_diversity plan -n 30 -o PLAN -c CONFIG [--code-scale 1.5]
+    .venv/bin/python -m benchmarks.identity_diversity features default WIDE.npz [-n 1000]
     .venv/bin/python -m benchmarks.identity_diversity measure DATASET [DATASET ...] \\
         [--real IMAGE_OR_DIR ... [--real-face-px 75]] [--judge-python PY] [--identities N] [--json OUT.json]
 
@@ -206,11 +207,48 @@ def plan_scaled(argv: list[str], scale: float) -> int:
         GaussianMixture.sample = orig
 
 
+#: inner-face distances between ibug68 points (mm, neutral face): name -> (point, point). The
+#: points are the detector's, near but not at the anthropometric ones (31/35 are the nose base's
+#: ends, a little inside the alae; 48/54 the mouth corners; 39/42 and 36/45 the canthi)
+FEATURE_DISTANCES = {"nose base width (31-35)": (31, 35), "mouth width (48-54)": (48, 54),
+                     "intercanthal (39-42)": (39, 42), "biocular (36-45)": (36, 45),
+                     "eye fissure (36-39)": (36, 39), "nose height (27-33)": (27, 33),
+                     "lower face (33-8)": (33, 8)}
+
+
+def feature_spread(models: list[str], n: int, seed: int) -> int:
+    """Per model: 1st / 50th / 99th percentile and standard deviation of each of
+    :data:`FEATURE_DISTANCES` over ``n`` planned identities (the default config's codes)."""
+    from synth.config import Config
+    from synth.model.default import load_default_model
+    from synth.model.format import read_model
+    from synth.model.head import HeadModel
+    from synth.plan.identities import planned_codes
+
+    print("| model | " + " | ".join(FEATURE_DISTANCES) + " |")
+    print("|---|" + "---:|" * len(FEATURE_DISTANCES))
+    for path in models:
+        model = load_default_model() if path == "default" else read_model(path)
+        codes = planned_codes(seed, np.arange(n), model, Config().identity)
+        pts = HeadModel(model, np.float64).landmarks(codes, np.zeros((n, model.expression_dims))) * 1000.0
+        cells = []
+        for a, b in FEATURE_DISTANCES.values():
+            d = np.linalg.norm(pts[:, a] - pts[:, b], axis=1)
+            lo, mid, hi = np.percentile(d, [1, 50, 99])
+            cells.append(f"{lo:.1f} / {mid:.1f} / {hi:.1f} (SD {d.std():.1f})")
+        print(f"| {path} | " + " | ".join(cells) + " |")
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.identity_diversity", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     p = sub.add_parser("plan", help="synth plan with identity codes scaled about the prior's mean")
     p.add_argument("--code-scale", type=float, default=1.0)
+    f = sub.add_parser("features", help="inner-face distances of planned identities per model")
+    f.add_argument("models", nargs="+", help="head model .npz files, or 'default'")
+    f.add_argument("-n", type=int, default=1000)
+    f.add_argument("--seed", type=int, default=0)
     m = sub.add_parser("measure", help="judge rendered datasets (and real photos)")
     m.add_argument("datasets", nargs="*")
     m.add_argument("--real", nargs="*", default=[], help="real photos (files or folders of PNGs)")
@@ -224,6 +262,10 @@ def main(argv=None) -> int:
     args, rest = ap.parse_known_args(argv)
     if args.cmd == "plan":
         return plan_scaled(rest, args.code_scale)
+    if args.cmd == "features":
+        if rest:
+            ap.error(f"unrecognised arguments: {' '.join(rest)}")
+        return feature_spread(args.models, args.n, args.seed)
     if rest:
         ap.error(f"unrecognised arguments: {' '.join(rest)}")
     rows = {}

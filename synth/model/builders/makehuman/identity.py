@@ -15,6 +15,9 @@ from synth.model.builders.makehuman.sources import check_files
 AGE_YEARS = (18.0, 80.0)
 MODIFIER_SIGMA = 0.3  # std-dev of two-sided face/head modifiers (MakeHuman slider units, clipped to [-1, 1])
 ONE_SIDED_SIGMA = 0.25  # half-normal scale of one-sided shape modifiers (head-oval, chin-triangle, ...)
+#: the modifier groups of the inner face, whose two-sided modifiers a build may draw wider
+#: (``feature_sigma``; benchmarks/identity_diversity.py, docs/realism.md "Identity diversity")
+FEATURE_GROUPS = ("nose", "mouth", "eyes", "ears", "chin", "cheek", "eyebrows")
 ASYMMETRY_SIGMA = 0.05  # per-side deviation of left/right modifiers
 MODIFIER_GROUPS = ("head", "neck", "nose", "mouth", "eyes", "ears", "chin", "cheek", "forehead", "eyebrows")
 # pose-like or sideways modifiers that are not identity features
@@ -90,13 +93,13 @@ def modifiers(data: Path) -> list[dict]:
                 o = {"negative-left": neg_l, "positive-left": pos_l, "negative-right": "r" + neg_l[1:],
                      "positive-right": "r" + pos_l[1:]}
             if o is None:  # one-sided shape modifier
-                mods.append({"name": c["name"], "sided": False, "one_sided": True,
+                mods.append({"name": c["name"], "group": grp, "sided": False, "one_sided": True,
                              "files": {"pos": root / grp / f"{t[0]}.target.gz"}})
             elif c["has_left_and_right"]:
-                mods.append({"name": c["name"], "sided": True, "one_sided": False, "files": {
+                mods.append({"name": c["name"], "group": grp, "sided": True, "one_sided": False, "files": {
                     k: root / grp / f"{o[k]}.target.gz" for k in _SIDED_KEYS}})
             else:
-                mods.append({"name": c["name"], "sided": False, "one_sided": False, "files": {
+                mods.append({"name": c["name"], "group": grp, "sided": False, "one_sided": False, "files": {
                     "neg": root / grp / f"{o['negative-unsided']}.target.gz",
                     "pos": root / grp / f"{o['positive-unsided']}.target.gz"}})
     check_files([p for m in mods for p in m["files"].values()], "MakeHuman target")
@@ -116,8 +119,12 @@ def modifier_files(mods: list) -> list[Path]:
     return out
 
 
-def sample_identity_weights(rng: np.random.Generator, n: int, macro: list, mods: list) -> np.ndarray:
-    """(n, n_targets) target weights: macro targets first, then each modifier's files in order."""
+def sample_identity_weights(rng: np.random.Generator, n: int, macro: list, mods: list,
+                            feature_sigma: float = MODIFIER_SIGMA) -> np.ndarray:
+    """(n, n_targets) target weights: macro targets first, then each modifier's files in order.
+    Two-sided modifiers of the :data:`FEATURE_GROUPS` are drawn with ``feature_sigma``, the others
+    with :data:`MODIFIER_SIGMA`; with the same generator state the draws are the same people,
+    their features scaled (numpy draws N(0, s) as s times one standard normal)."""
     years = rng.uniform(*AGE_YEARS, n)
     age = np.where(years < 25.0, 0.1875 + (years - 11.0) / 14.0 * 0.3125, 0.5 + (years - 25.0) / 65.0 * 0.5)
     gender = rng.beta(0.5, 0.5, n)
@@ -133,21 +140,26 @@ def sample_identity_weights(rng: np.random.Generator, n: int, macro: list, mods:
             w = w * vals[var][val]
         cols.append(w)
     for m in mods:
+        sigma = feature_sigma if m["group"] in FEATURE_GROUPS else MODIFIER_SIGMA
         if m["one_sided"]:
             cols.append(np.abs(rng.normal(0.0, ONE_SIDED_SIGMA, n)).clip(0, 1))
         elif m["sided"]:
-            common = rng.normal(0.0, MODIFIER_SIGMA, n)
+            common = rng.normal(0.0, sigma, n)
             for side in ("left", "right"):
                 v = np.clip(common + rng.normal(0.0, ASYMMETRY_SIGMA, n), -1, 1)
                 cols += [np.maximum(-v, 0.0), np.maximum(v, 0.0)]
         else:
-            v = np.clip(rng.normal(0.0, MODIFIER_SIGMA, n), -1, 1)
+            v = np.clip(rng.normal(0.0, sigma, n), -1, 1)
             cols += [np.maximum(-v, 0.0), np.maximum(v, 0.0)]
     return np.stack(cols, 1)
 
 
-def identity_pca(W: np.ndarray, T: np.ndarray, TJ: np.ndarray, Tm: np.ndarray, TJm: np.ndarray, k: int):
+def identity_pca(W: np.ndarray, T: np.ndarray, TJ: np.ndarray, Tm: np.ndarray, TJm: np.ndarray, k: int,
+                 W_mean: np.ndarray | None = None):
     """Exact PCA of the samples X = [W T; W Tm] (rows: samples, mirrored samples) without forming X.
+    The returned mean (the template's offset) is that of ``W_mean``'s samples when given (the
+    components and codes stay those of ``W`` about its own mean): a wider spread about the same
+    template.
 
     Returns mean (3V,), joint mean (3J,), basis (k, 3V) orthonormal, std (k,), joint basis
     (k, 3J), codes of all samples (2N, k), rank, fraction of the variance the k components explain.
@@ -164,6 +176,10 @@ def identity_pca(W: np.ndarray, T: np.ndarray, TJ: np.ndarray, Tm: np.ndarray, T
     W2[n:, nt:] = W
     wbar = W2.mean(0)
     Wc = W2 - wbar
+    if W_mean is not None:
+        W2[:n, :nt] = W_mean
+        W2[n:, nt:] = W_mean
+        wbar = W2.mean(0)
     Sw = Wc.T @ Wc / (2 * n - 1)  # covariance of target weights
     lam, E = np.linalg.eigh(K)
     good = lam > lam.max() * 1e-12
