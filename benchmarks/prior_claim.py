@@ -373,25 +373,36 @@ def bf16_check(work: Path, p: dict, scale: float, device: str, times: Times) -> 
               f"{b['lpips']:.4f} |")
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("stage", choices=["all", "render", "train", "fit", "report", "bf16"])
+def stage_arguments(description: str, stages: list[str], profiles: dict) -> argparse.ArgumentParser:
+    """The options of a staged prior benchmark (this one, prior_sizes.py): stage, work folder,
+    profile, step scale, device, torch threads."""
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("stage", choices=stages)
     ap.add_argument("--work", type=Path, required=True, help="working directory (datasets, runs, fits, results)")
-    ap.add_argument("--profile", choices=sorted(PROFILES), default="cpu")
+    ap.add_argument("--profile", choices=sorted(profiles), default="cpu")
     ap.add_argument("--scale", type=float, default=1.0, help="multiply training/fitting steps and rays per step")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--threads", type=int, default=1,
-                    help="torch threads (on a loaded machine, more threads than free cores is much slower)")
+                    help="torch threads (one per process on shared cores: more threads than free cores is much slower)")
+    return ap
+
+
+def stage_start(a, profiles: dict) -> tuple[dict, Times]:
+    """Set the torch threads, make the work folder; the profile and the stage timer."""
+    import torch
+
+    torch.set_num_threads(a.threads)
+    a.work.mkdir(parents=True, exist_ok=True)
+    return profiles[a.profile], Times(a.work)
+
+
+def main(argv=None) -> int:
+    ap = stage_arguments(__doc__.splitlines()[0], ["all", "render", "train", "fit", "report", "bf16"], PROFILES)
     ap.add_argument("--scenes", default=None, help="fit: only these test scenes (indices, e.g. 0,1), so that "
                     "several processes can share the fits")
     ap.add_argument("--figure", type=Path, default=None, help="write the Fig. 5-like figure here (report)")
     a = ap.parse_args(argv)
-    import torch
-
-    torch.set_num_threads(a.threads)
-    p = PROFILES[a.profile]
-    a.work.mkdir(parents=True, exist_ok=True)
-    times = Times(a.work)
+    p, times = stage_start(a, PROFILES)
     times.data["load_start"] = list(os.getloadavg())
     if a.stage in ("all", "render"):
         render(a.work, p, times)

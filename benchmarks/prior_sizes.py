@@ -26,7 +26,6 @@ Stages (each resumable: finished outputs are kept and skipped):
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -271,13 +270,7 @@ def report(work: Path, p: dict, times: pc.Times, figure: Path | None) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("stage", choices=["all", "render", "train", "fit", "report"])
-    ap.add_argument("--work", type=Path, required=True, help="working directory (datasets, runs, fits, results)")
-    ap.add_argument("--profile", choices=sorted(PROFILES), default="cpu")
-    ap.add_argument("--scale", type=float, default=1.0, help="multiply training/fitting steps and rays per step")
-    ap.add_argument("--device", default="cpu")
-    ap.add_argument("--threads", type=int, default=1, help="torch threads (one per process on shared cores)")
+    ap = pc.stage_arguments(__doc__.splitlines()[0], ["all", "render", "train", "fit", "report"], PROFILES)
     ap.add_argument("--ict", type=Path, default=ICT_DEFAULT,
                     help="ICT-FaceKit checkout or sample (default: $SYNTH_ICT_FACEKIT_DIR or ../shared/ict-facekit)")
     ap.add_argument("--rungs", default=None, help="fit: only these priors (training identities, 0 = none; e.g. 1,15)")
@@ -286,12 +279,7 @@ def main(argv=None) -> int:
                     "their rows")
     ap.add_argument("--figure", type=Path, default=None, help="report: write the plot here (e.g. docs/prior_sizes.png)")
     a = ap.parse_args(argv)
-    import torch
-
-    torch.set_num_threads(a.threads)
-    p = PROFILES[a.profile]
-    a.work.mkdir(parents=True, exist_ok=True)
-    times = pc.Times(a.work)
+    p, times = pc.stage_start(a, PROFILES)
     if a.stage in ("all", "render"):
         if not (a.ict / "FaceXModel").is_dir() and not any(a.ict.glob("identity*.obj")):
             raise SystemExit(f"{a.ict}: no ICT-FaceKit sample here (pass --ict DIR)")
