@@ -6,7 +6,8 @@ distance is below 0.6, 99.38 % on LFW), run by benchmarks/dlib_judge.py in a Pyt
 judge extra (``pip install -e .[judge]``, or any venv with numpy, pillow, dlib-bin and
 face_recognition_models), as a subprocess::
 
-    .venv/bin/python -m benchmarks.identity_diversity plan -n 30 -o PLAN -c CONFIG [--code-scale 1.5]
+    .venv/bin/python -m benchmarks.identity_diversity plan -n 30 -o PLAN -c CONFIG [--code-scale 1.5] \
+        [--feature-range intercanthal=26,45 ...]
     .venv/bin/python -m benchmarks.identity_diversity features default WIDE.npz [-n 1000]
     .venv/bin/python -m benchmarks.identity_diversity measure DATASET [DATASET ...] \\
         [--real IMAGE_OR_DIR ... [--real-face-px 75]] [--judge-python PY] [--identities N] [--json OUT.json]
@@ -188,32 +189,62 @@ def print_table(rows: dict) -> None:
               + (f"{s['same_over_threshold']}/{s['pairs_same']}" if s["pairs_same"] else "-") + " |")
 
 
-def plan_scaled(argv: list[str], scale: float) -> int:
-    """``synth plan ARGV`` with every sampled identity code moved to mean + scale (code - mean)."""
+def plan_scaled(argv: list[str], scale: float, feature_ranges: dict[str, tuple[float, float]] | None = None) -> int:
+    """``synth plan ARGV`` with every sampled identity code moved to mean + scale (code - mean),
+    and with ``feature_ranges`` (:data:`FEATURE_DISTANCES` key -> mm range) added to the
+    head-shape rule's ranges: a draw outside them is redrawn as one outside a head range is (the
+    distances come from float landmarks here, not the rule's exact sums: a what-if)."""
     from synth.cli.main import main
     from synth.geometry import exact
     from synth.model.identity_gmm import GaussianMixture
+    from synth.plan import head_shapes as hs
 
-    orig = GaussianMixture.sample
+    orig, measure, bounds = GaussianMixture.sample, hs.measure_codes, hs.bounds_of
 
     def sample(self, rng, n, max_mahalanobis=None, max_tries=1000):
         mean = exact.lincomb(self.weights, self.means)
         return mean + scale * (orig(self, rng, n, max_mahalanobis, max_tries) - mean)
 
+    def measure_codes(model, codes, sets=None):
+        m = measure(model, codes, sets)
+        return {**m, **{k: v for k, v in feature_distances(model, codes).items() if k in feature_ranges}}
+
     GaussianMixture.sample = sample
+    if feature_ranges:
+        hs.measure_codes, hs.bounds_of = measure_codes, lambda cfg: {**bounds(cfg), **feature_ranges}
     try:
         return main(["plan", "-j", "1", *argv])
     finally:
-        GaussianMixture.sample = orig
+        GaussianMixture.sample, hs.measure_codes, hs.bounds_of = orig, measure, bounds
+
+
+def _feature_range(text: str) -> tuple[str, tuple[float, float]]:
+    key, _, rng = text.partition("=")
+    lo, _, hi = rng.partition(",")
+    try:
+        if key not in FEATURE_DISTANCES:
+            raise ValueError
+        return key, (float(lo), float(hi))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give KEY=LO,HI in mm, KEY one of {', '.join(FEATURE_DISTANCES)}")
 
 
 #: inner-face distances between ibug68 points (mm, neutral face): name -> (point, point). The
 #: points are the detector's, near but not at the anthropometric ones (31/35 are the nose base's
 #: ends, a little inside the alae; 48/54 the mouth corners; 39/42 and 36/45 the canthi)
-FEATURE_DISTANCES = {"nose base width (31-35)": (31, 35), "mouth width (48-54)": (48, 54),
-                     "intercanthal (39-42)": (39, 42), "biocular (36-45)": (36, 45),
-                     "eye fissure (36-39)": (36, 39), "nose height (27-33)": (27, 33),
-                     "lower face (33-8)": (33, 8)}
+FEATURE_DISTANCES = {"nose_base": ("nose base width (31-35)", 31, 35), "mouth": ("mouth width (48-54)", 48, 54),
+                     "intercanthal": ("intercanthal (39-42)", 39, 42), "biocular": ("biocular (36-45)", 36, 45),
+                     "fissure": ("eye fissure (36-39)", 36, 39), "nose_height": ("nose height (27-33)", 27, 33),
+                     "lower_face": ("lower face (33-8)", 33, 8)}
+
+
+def feature_distances(model, codes) -> dict[str, np.ndarray]:
+    """:data:`FEATURE_DISTANCES` (mm) of the neutral heads of identity codes (N, Ki)."""
+    from synth.model.head import HeadModel
+
+    codes = np.atleast_2d(np.asarray(codes, np.float64))
+    pts = HeadModel(model, np.float64).landmarks(codes, np.zeros((len(codes), model.expression_dims))) * 1000.0
+    return {k: np.linalg.norm(pts[:, a] - pts[:, b], axis=1) for k, (_, a, b) in FEATURE_DISTANCES.items()}
 
 
 def feature_spread(models: list[str], n: int, seed: int) -> int:
@@ -222,18 +253,15 @@ def feature_spread(models: list[str], n: int, seed: int) -> int:
     from synth.config import Config
     from synth.model.default import load_default_model
     from synth.model.format import read_model
-    from synth.model.head import HeadModel
     from synth.plan.identities import planned_codes
 
-    print("| model | " + " | ".join(FEATURE_DISTANCES) + " |")
+    print("| model | " + " | ".join(label for label, _, _ in FEATURE_DISTANCES.values()) + " |")
     print("|---|" + "---:|" * len(FEATURE_DISTANCES))
     for path in models:
         model = load_default_model() if path == "default" else read_model(path)
-        codes = planned_codes(seed, np.arange(n), model, Config().identity)
-        pts = HeadModel(model, np.float64).landmarks(codes, np.zeros((n, model.expression_dims))) * 1000.0
+        dist = feature_distances(model, planned_codes(seed, np.arange(n), model, Config().identity))
         cells = []
-        for a, b in FEATURE_DISTANCES.values():
-            d = np.linalg.norm(pts[:, a] - pts[:, b], axis=1)
+        for d in dist.values():
             lo, mid, hi = np.percentile(d, [1, 50, 99])
             cells.append(f"{lo:.1f} / {mid:.1f} / {hi:.1f} (SD {d.std():.1f})")
         print(f"| {path} | " + " | ".join(cells) + " |")
@@ -245,6 +273,8 @@ def main(argv=None) -> int:
     sub = ap.add_subparsers(dest="cmd", required=True)
     p = sub.add_parser("plan", help="synth plan with identity codes scaled about the prior's mean")
     p.add_argument("--code-scale", type=float, default=1.0)
+    p.add_argument("--feature-range", type=_feature_range, action="append", default=[],
+                   help="KEY=LO,HI: also redraw identities whose inner-face distance KEY (mm) is outside")
     f = sub.add_parser("features", help="inner-face distances of planned identities per model")
     f.add_argument("models", nargs="+", help="head model .npz files, or 'default'")
     f.add_argument("-n", type=int, default=1000)
@@ -261,7 +291,7 @@ def main(argv=None) -> int:
     m.add_argument("--json", help="write the figures here")
     args, rest = ap.parse_known_args(argv)
     if args.cmd == "plan":
-        return plan_scaled(rest, args.code_scale)
+        return plan_scaled(rest, args.code_scale, dict(args.feature_range))
     if args.cmd == "features":
         if rest:
             ap.error(f"unrecognised arguments: {' '.join(rest)}")

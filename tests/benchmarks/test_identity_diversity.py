@@ -106,3 +106,25 @@ def test_feature_spread_of_the_default_and_of_a_model_with_one_identity_directio
     for c in one:
         lo, mid, hi = (x.strip() for x in c.split("(")[0].split("/"))
         assert lo == mid == hi and c.endswith("(SD 0.0)")
+
+
+def test_plan_with_a_feature_range_redraws_the_identities_outside_it(tmp_path):
+    import json
+
+    from synth.model.default import load_default_model
+
+    def planned(out, *extra):
+        assert idd.main(["plan", *extra, "-n", "6", "-o", str(out), "-q"]) == 0
+        rows = [i for f in sorted((out / "shards").glob("*.json")) for i in json.loads(f.read_text())["identities"]]
+        return np.array([r["identity_code"] for r in rows])
+
+    free = planned(tmp_path / "free")
+    narrow = planned(tmp_path / "narrow", "--feature-range", "intercanthal=34.0,36.0")
+    m = load_default_model()
+    before, after = idd.feature_distances(m, free)["intercanthal"], idd.feature_distances(m, narrow)["intercanthal"]
+    inside = (before >= 34.0) & (before <= 36.0)
+    assert not inside.all()  # the range bites on these six
+    assert np.array_equal(free[inside], narrow[inside])  # a draw inside is kept
+    assert ((after >= 34.0) & (after <= 36.0)).all()  # the redraws land inside
+    with pytest.raises(SystemExit):
+        idd.main(["plan", "--feature-range", "chin=1,2", "-n", "1", "-o", str(tmp_path / "bad")])
