@@ -8,7 +8,8 @@ the sdist as ``benchmarks/photo_landmarks.py`` does and never copied into the re
 cheek (the centroid of the lower eyelid's middle, the nose's side, the mouth corner and the jaw
 point below them: ibug 41, 31, 48, 2 and 46, 35, 54, 14) and the forehead (the brows' middle,
 19 and 24, moved up the face's midline, 27 -> 33 reversed, by 0.35 inter-ocular distances), each
-``--patch`` (0.3) inter-ocular distances wide. Every face is first scaled so that its inter-ocular
+``--patch`` (0.3) inter-ocular distances wide; a cheek patch not inside the face's outline (jaw
+and brows: the far cheek of a turned face) is left out. Every face is first scaled so that its inter-ocular
 distance (outer eye corners, 36-45) is ``--iod`` pixels (default: the renders' median), so the
 patches are compared at the same pixel scale. A patch is read as display luma (sRGB-encoded
 Rec.709 weights; renders are encoded from their linear colour, over mid grey where not opaque),
@@ -48,6 +49,18 @@ def patch_boxes(lm: np.ndarray, frac: float) -> dict[str, tuple[float, float, fl
     return boxes
 
 
+def on_the_face(lm: np.ndarray, box: tuple[float, float, float]) -> bool:
+    """Whether a patch's four corners lie inside the face's outline (jaw 0-16, then the brows
+    26-17): a cheek patch on the far side of a turned face crosses it."""
+    from matplotlib.path import Path as Outline
+
+    lm = np.asarray(lm, np.float64)
+    outline = Outline(np.concatenate([lm[0:17], lm[26:16:-1]]))
+    cx, cy, side = box
+    h = 0.5 * side
+    return bool(outline.contains_points([(cx - h, cy - h), (cx + h, cy - h), (cx - h, cy + h), (cx + h, cy + h)]).all())
+
+
 def band_contrast(patch: np.ndarray) -> np.ndarray:
     """RMS contrast of a square luma patch in each of :data:`BANDS` (len(BANDS),)."""
     p = np.asarray(patch, np.float64)
@@ -77,6 +90,8 @@ def face_patches(luma: np.ndarray, lm: np.ndarray, iod_px: float, frac: float) -
     scale = iod_px / float(np.linalg.norm(np.asarray(lm)[36] - np.asarray(lm)[45]))
     out = {}
     for name, (cx, cy, side) in patch_boxes(lm, frac).items():
+        if name.startswith("cheek") and not on_the_face(lm, (cx, cy, side)):
+            continue
         n = max(int(round(side * scale)), 8)
         half = 0.5 * n / scale
         box = (cx - half, cy - half, cx + half, cy + half)

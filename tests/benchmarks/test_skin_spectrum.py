@@ -42,6 +42,11 @@ def test_patches_sit_on_the_cheeks_and_above_the_brows_and_scale_with_the_face()
     lm[2], lm[14] = (35, 85), (105, 85)
     lm[19], lm[24] = (50, 40), (90, 40)
     lm[27], lm[33] = (70, 50), (70, 78)
+    t = np.linspace(0, np.pi, 17)
+    lm[0:17] = np.stack([70 - 60 * np.cos(t), 50 + 60 * np.sin(t)], 1)  # the face's outline: jaw and brows
+    lm[17:27] = np.stack([np.linspace(12, 128, 10), np.full(10, 38.0)], 1)
+    lm[19], lm[24] = (50, 40), (90, 40)
+    lm[2], lm[14] = (35, 85), (105, 85)
     b = ss.patch_boxes(lm, 0.3)
     (rx, ry, rs), (lx, ly, ls), (fx, fy, fs) = b["cheek_r"], b["cheek_l"], b["forehead"]
     assert rx + lx == pytest.approx(140) and ry == pytest.approx(ly) and rs == ls == pytest.approx(18)
@@ -49,3 +54,12 @@ def test_patches_sit_on_the_cheeks_and_above_the_brows_and_scale_with_the_face()
     luma = np.random.default_rng(0).uniform(0.4, 0.6, (140, 140))
     p = ss.face_patches(luma, lm, 120.0, 0.3)  # scaled x2: 36 px patches
     assert {k: v.shape for k, v in p.items()} == {k: (36, 36) for k in b}
+
+
+def test_a_cheek_patch_across_the_outline_is_left_out():
+    t = np.linspace(0, np.pi, 17)
+    lm = np.zeros((68, 2))
+    lm[0:17] = np.stack([70 - 40 * np.cos(t), 50 + 40 * np.sin(t)], 1)  # jaw: a half circle below y = 50
+    lm[17:27] = np.stack([np.linspace(32, 108, 10), np.full(10, 45.0)], 1)
+    assert ss.on_the_face(lm, (70, 70, 10))
+    assert not ss.on_the_face(lm, (108, 70, 10))  # over the jaw line
