@@ -255,10 +255,10 @@ def feature_spread(models: list[str], n: int, seed: int) -> int:
     from synth.model.format import read_model
     from synth.plan.identities import planned_codes
 
+    loaded = {path: load_default_model() if path == "default" else read_model(path) for path in models}
     print("| model | " + " | ".join(label for label, _, _ in FEATURE_DISTANCES.values()) + " |")
     print("|---|" + "---:|" * len(FEATURE_DISTANCES))
-    for path in models:
-        model = load_default_model() if path == "default" else read_model(path)
+    for path, model in loaded.items():
         dist = feature_distances(model, planned_codes(seed, np.arange(n), model, Config().identity))
         cells = []
         for d in dist.values():
@@ -316,4 +316,10 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from synth.errors import SynthError
+
+    try:
+        sys.exit(main())
+    except SynthError as e:  # bad input: one line, exit 2
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)

@@ -168,4 +168,10 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from synth.errors import SynthError
+
+    try:
+        sys.exit(main())
+    except SynthError as e:  # bad input: one line, exit 2
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)
