@@ -106,7 +106,7 @@ def main() -> None:
     ap.add_argument("--iters", type=int, default=20, help="timed fine-tuning steps (after the warm-up)")
     ap.add_argument("--warmup", type=int, default=5)
     ap.add_argument("--size", type=int, default=1024, help="side of the rendered view")
-    ap.add_argument("--chunk", type=int, default=65536, help="rays per chunk when rendering")
+    ap.add_argument("--chunk", type=int, default=16384, help="rays per chunk when rendering")
     ap.add_argument("--dry", action="store_true", help="CPU, small preset, few rays: a smoke test")
     ap.add_argument("--out", type=Path, default=None)
     a = ap.parse_args()
@@ -135,6 +135,8 @@ def main() -> None:
         res[f"finetune_{tag}_last_psnr"] = hist[-1]["psnr"]
     if device.type == "cuda":
         res["peak_memory_gib"] = torch.cuda.max_memory_allocated() / 2**30
+        torch.cuda.empty_cache()
+    print(json.dumps(res), flush=True)  # the fine-tuning figures stand even if a render fails
     K = views.K[0] * np.array([[a.size / in_size], [a.size / in_size], [1.0]])
     model.eval()
     full = scfg.samples_per_level

@@ -29,6 +29,21 @@ def test_gpu_script_dry_run_on_cpu(tmp_path):
     assert "| samples per level |" in r.stdout
 
 
+@pytest.mark.slow
+def test_gpu_stream_script_dry_run_on_cpu(tmp_path):
+    """benchmarks/prior_gpu_stream.sh --dry: both runs train (in memory and streaming) and the table prints."""
+    r = subprocess.run(["bash", str(ROOT / "benchmarks" / "prior_gpu_stream.sh"), "--dry"], capture_output=True,
+                       text=True, env={**os.environ, "OUT": str(tmp_path / "out"), "WORK": str(tmp_path / "w")},
+                       timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    rates = json.loads((tmp_path / "out" / "prior_gpu_stream.json").read_text())
+    assert rates["0"] > 0 and rates["2"] > 0
+    for buf in (0, 2):
+        recs = [json.loads(line) for line in (tmp_path / "out" / f"stream_buf{buf}.jsonl").read_text().splitlines()]
+        assert [rec["step"] for rec in recs] == [2, 4]
+    assert "| streaming, buffer 2 |" in r.stdout and "streaming / in memory:" in r.stdout
+
+
 def test_claim_test_plan_has_fixed_cameras(tmp_path):
     """benchmarks/prior_claim.py's test plan: every expression's views at TEST_VIEWS around its
     target at TEST_RADIUS_M, everything else the source plan's."""
