@@ -127,6 +127,10 @@ def main() -> None:
     res = {"device": torch.cuda.get_device_name(0) if device.type == "cuda" else "cpu", "preset": name,
            "torch": torch.__version__, "rays_per_step": fcfg.rays_per_step, "input_size": in_size,
            "samples_per_level": list(scfg.samples_per_level), "paper_steps": fit_config.preset("paper").finetune.steps}
+    # fine-tuning from random weights at the fit's learning rate empties the field within a step or two
+    # (zero density everywhere), which times the same but renders black at every sample count: the
+    # render rows use the initial (random, non-empty) field
+    initial = {k: v.detach().clone() for k, v in model.state_dict().items()}
     for tag, bf16 in (("fp32", False), ("bf16", True)):
         dt, hist = time_finetune(model, views, w, dataclasses.replace(fcfg, bf16=bf16), a.warmup, a.iters, device)
         res[f"finetune_{tag}_s_per_step"] = dt
@@ -137,6 +141,7 @@ def main() -> None:
         res["peak_memory_gib"] = torch.cuda.max_memory_allocated() / 2**30
         torch.cuda.empty_cache()
     print(json.dumps(res), flush=True)  # the fine-tuning figures stand even if a render fails
+    model.load_state_dict(initial)
     K = views.K[0] * np.array([[a.size / in_size], [a.size / in_size], [1.0]])
     model.eval()
     full = scfg.samples_per_level
@@ -152,7 +157,8 @@ def main() -> None:
             rows.append({"samples": list(samples), "bf16": bf16, "seconds": dt,
                          "psnr_vs_full": psnr(img["rgb"], ref["rgb"]),
                          "max_abs_rgb": float(np.abs(img["rgb"] - ref["rgb"]).max()),
-                         "max_abs_acc": float(np.abs(img["acc"] - ref["acc"]).max())})
+                         "max_abs_acc": float(np.abs(img["acc"] - ref["acc"]).max()),
+                         "max_acc": float(img["acc"].max())})
     res["render"] = rows
     res["render_size"] = a.size
     if a.out is not None:
