@@ -6,7 +6,13 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-demo_out}
 SYNTH=.venv/bin/synth
-$SYNTH render --identities 2 --expressions 2 --views 6 --preset preview --out "$OUT/dataset"
+rc=0
+$SYNTH render --identities 2 --expressions 2 --views 6 --preset preview --out "$OUT/dataset" || rc=$?
+if [ "$rc" -eq 2 ] && [ -f "$OUT/dataset/dataset.json" ]; then
+  # synth's own line says what was refused; the demo's way out is a new DEMO_OUT, not --out
+  echo "demo: $OUT/dataset cannot be resumed by this version (the line above says why; an older model or plan); remove $OUT, or run: make demo DEMO_OUT=another_dir" >&2
+fi
+[ "$rc" -eq 0 ] || exit "$rc"
 $SYNTH validate "$OUT/dataset"
 for s in shard_000000 shard_000001; do
   $SYNTH preview "$OUT/dataset" --shard "$s" -o "$OUT/preview_$s.png"
