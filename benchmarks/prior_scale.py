@@ -8,6 +8,8 @@ landmarks). Files are not fsynced; everything else, the frame JSON check include
 writer's own path.
 
     python benchmarks/prior_scale.py write --identities 15 --out /tmp/scale15
+    python benchmarks/prior_scale.py write --identities 1500 --views 2 --out /tmp/p1500   # a quick proxy:
+        # the same identity table (13 expressions each) with 2 views per expression, written in ~7 min
     python benchmarks/prior_scale.py measure /tmp/scale15 --buffer 8 --ranks 1 2
     python benchmarks/prior_scale.py webdataset /tmp/scale15        # the plain WebDataset pipeline
     python benchmarks/prior_scale.py tools /tmp/scale15             # synth validate / report / index / resume
@@ -38,14 +40,14 @@ sys.path.insert(0, str(ROOT))
 EXPRESSIONS, VIEWS, SIZE = 13, 30, 32
 
 
-def write(out: Path, identities: int) -> None:
+def write(out: Path, identities: int, views: int = VIEWS) -> None:
     if "numpy" not in sys.modules:  # the scene's 4x4 inverses: OpenBLAS threads only spin on a busy machine
         os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     from synth.dataset.shards import open_dataset
     from tests.prior import scene
     from tests.support import fake_frames as ff
 
-    expected = {f"shard_{i:06d}": [ff.frame_key(i, e, v) for e in range(EXPRESSIONS) for v in range(VIEWS)]
+    expected = {f"shard_{i:06d}": [ff.frame_key(i, e, v) for e in range(EXPRESSIONS) for v in range(views)]
                 for i in range(identities)}
     ds = open_dataset(out, "b" * 64, expected, shard_format="tar")
     t0 = time.perf_counter()
@@ -54,13 +56,13 @@ def write(out: Path, identities: int) -> None:
             for key in expected[sid]:
                 i, e, v = ff.parse_frame_key(key)
                 # the scene's sphere grows with the identity index: 8 sizes, repeated
-                _, px, meta = scene.frame(i % 8, e, v, VIEWS, SIZE, id_size=48)
+                _, px, meta = scene.frame(i % 8, e, v, views, SIZE, id_size=48)
                 meta.update(frame_id=key, identity_index=i)
                 meta["image"]["file"] = f"{key}.exr"
                 meta["model"]["identity"] = [0.01 * i + 0.05 * k for k in range(48)]
                 st.write_frame(key, *px, meta, durable=False)
             st.commit(manifest_extra={"seeds": {"run": 0}, "versions": {"blender": "none"}}, durable=False)
-    n = identities * EXPRESSIONS * VIEWS
+    n = identities * EXPRESSIONS * views
     print(f"wrote {identities} identities, {n} frames in {time.perf_counter() - t0:.0f} s", flush=True)
 
 
@@ -232,6 +234,7 @@ def main() -> None:
     w = sub.add_parser("write")
     w.add_argument("--identities", type=int, required=True)
     w.add_argument("--out", type=Path, required=True)
+    w.add_argument("--views", type=int, default=VIEWS, help="views per expression (30: the paper's shape)")
     m = sub.add_parser("measure")
     m.add_argument("dataset", type=Path)
     m.add_argument("--buffer", type=int, default=8)
@@ -247,7 +250,7 @@ def main() -> None:
     t.add_argument("dataset", type=Path)
     a = ap.parse_args()
     if a.cmd == "write":
-        write(a.out, a.identities)
+        write(a.out, a.identities, a.views)
     elif a.cmd == "tools":
         tools(a.dataset)
     elif a.cmd == "measure":
