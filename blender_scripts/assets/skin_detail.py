@@ -9,6 +9,8 @@ G T-zone, B wrinkle zones, A beard area):
   them (:func:`synth.appearance.skin_optics.spot_weight`): below the pixel a layer is its mean,
   a flat tint over its mask (there the pattern is only sampling noise),
 * redness (cheeks and nose, from ``haemoglobin``),
+* mottling: millimetre-scale fBm unevenness of the albedo over the whole skin (mean 1; browner and
+  redder where darker), faded below the pixel (``synth.appearance.skin_optics.MOTTLE_*``),
 * oiliness -> lower roughness and a stronger sharp specular lobe (coat) in the T-zone,
 * wrinkles (forehead bands, crow's feet, nasolabial folds) as a bump, ``wrinkle_depth``, faded
   by the resolution rule of :mod:`synth.appearance.skin_optics` (``ctx.pixel_m``),
@@ -103,6 +105,21 @@ def stubble_factor(mat, seed: float, strength: float, mask, w: float):
     return _blend_mean(mat, tex, w, so.NOISE_FAC_MEAN, bmat.math_node(mat, "MULTIPLY", mask, strength))
 
 
+def mottle_factor(mat, seed: float, amplitude: float):
+    """Colour socket of the mottling: ``1 - amplitude * (fac - 0.5) * MOTTLE_TINT`` per channel over
+    an fBm noise ``fac`` (mean 1, so the skin's calibrated colour stays on average)."""
+    nt = mat.node_tree
+    n = _tex_node(mat, "ShaderNodeTexNoise", 1.0 / so.MOTTLE_PERIOD_M, seed)
+    n.inputs["Detail"].default_value = so.MOTTLE_DETAIL
+    n.inputs["Roughness"].default_value = so.MOTTLE_ROUGHNESS
+    mix = nt.nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    nt.links.new(n.outputs["Fac"], mix.inputs[0])
+    mix.inputs[6].default_value = (*(1.0 + 0.5 * amplitude * t for t in so.MOTTLE_TINT), 1.0)  # fac 0
+    mix.inputs[7].default_value = (*(1.0 - 0.5 * amplitude * t for t in so.MOTTLE_TINT), 1.0)  # fac 1
+    return mix.outputs[2]
+
+
 def build(ctx, entry: AssetPick) -> Rig:
     p = entry.params
     rng = ctx.rng("skin")
@@ -125,6 +142,12 @@ def build(ctx, entry: AssetPick) -> Rig:
     red = float(np.clip(float(p.haemoglobin) / 0.07, 0, 1))
     bmat.layer_over(mat, "Base Color", (0.75, 0.3, 0.3), bmat.math_node(mat, "MULTIPLY", cheeks, 0.35 * red),
                     blend="MULTIPLY")
+    # mottling: millimetre-scale unevenness of the albedo (mean 1), faded out where even its
+    # coarsest octave is below the pixel
+    w_mo = 1.0 if ctx.pixel_m is None else detail_weight(ctx.pixel_m, so.MOTTLE_PERIOD_M)
+    mottle = so.MOTTLE_AMPLITUDE * w_mo
+    if mottle > 0.0:
+        bmat.layer_over(mat, "Base Color", mottle_factor(mat, seed + 11, mottle), 1.0, blend="MULTIPLY")
     # freckles: small cells, random per cell, thresholded by the amount
     fr = float(p.freckles)
     w_fr = so.spot_weight(ctx.pixel_m, so.FRECKLES)
@@ -188,5 +211,5 @@ def build(ctx, entry: AssetPick) -> Rig:
                detail={"pixel_m": None if ctx.pixel_m is None else round(ctx.pixel_m, 7),
                        "pores": round(float(mat.get("detail_pores", 1.0)), 4),
                        "fine_lines": round(float(mat.get("detail_fine_lines", 1.0)), 4), "wrinkles": round(w_wr, 4),
-                       "freckles": round(w_fr, 4), "age_spots": round(w_ag, 4), "stubble": round(w_st, 4)})
+                       "mottle": round(w_mo, 4), "freckles": round(w_fr, 4), "age_spots": round(w_ag, 4), "stubble": round(w_st, 4)})
     return Rig("skin", [], rec)

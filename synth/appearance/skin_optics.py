@@ -65,6 +65,16 @@ WRINKLES = (0.011, 0.0)  # forehead bands, crow's feet, nasolabial folds
 FRECKLES = (1.0 / 450.0, 0.35)
 AGE_SPOTS = (1.0 / 60.0, 0.25)
 STUBBLE_PERIOD_M = 1.0 / 2500.0
+#: mottling: uneven melanin and blood in the skin at millimetre scales, an fBm noise (Blender's
+#: Noise texture, 4 octaves from MOTTLE_PERIOD_M down) that multiplies the albedo by
+#: 1 + MOTTLE_AMPLITUDE * (fac - 0.5) * MOTTLE_TINT per channel (mean 1: the calibrated skin colour
+#: stays; the darker patches are browner and redder, as melanin and haemoglobin absorb green and
+#: blue more). Set against real photos with benchmarks/skin_spectrum.py (docs/realism.md)
+MOTTLE_PERIOD_M = 0.008
+MOTTLE_DETAIL = 3.0
+MOTTLE_ROUGHNESS = 0.7
+MOTTLE_AMPLITUDE = 0.9
+MOTTLE_TINT = (0.8, 1.0, 1.1)
 #: area fraction of a 3D slice of Blender's 4D Voronoi (randomness 1) whose distance to the
 #: nearest feature point is below r cells (numpy Monte Carlo over 400,000 points, 3^4
 #: neighbour cells; checked against Cycles in tests/blender/test_skin_layers.py)

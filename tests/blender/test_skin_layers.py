@@ -79,6 +79,21 @@ def test_stubble_faded_is_its_mean(tmp_path):
     assert full == pytest.approx(flat, abs=0.02)
 
 
+@pytest.mark.blender
+def test_mottling_keeps_the_mean_colour_and_shows(tmp_path):
+    """The mottling multiplies the albedo by a factor of mean 1 (the skin's calibrated colour stays
+    on average) that varies visibly at millimetre scales."""
+    pytest.importorskip("bpy")
+    from blender_scripts.assets.skin_detail import mottle_factor
+
+    size = 30 * so.MOTTLE_PERIOD_M  # 30 x 30 periods of the coarsest octave
+    mean, spread = _plane_mean(tmp_path, size, lambda m: mottle_factor(m, 3.0, so.MOTTLE_AMPLITUDE))
+    assert mean == pytest.approx(1.0, abs=0.02)
+    assert 0.02 < spread < 0.25  # visible, not a dirty patchwork
+    none, none_spread = _plane_mean(tmp_path, size, lambda m: mottle_factor(m, 3.0, 0.0))
+    assert none == pytest.approx(1.0, abs=1e-5) and none_spread < 1e-6
+
+
 def test_spot_weights_follow_the_pixel():
     # a freckle is 2 x 0.35 cells = 1.56 mm across: resolved at 0.5 mm pixels, a tint at 2 mm
     assert so.spot_weight(None, so.FRECKLES) == 1.0
