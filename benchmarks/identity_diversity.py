@@ -316,10 +316,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    from synth.errors import SynthError
+    from benchmarks.runner import run_cli
 
-    try:
-        sys.exit(main())
-    except SynthError as e:  # bad input: one line, exit 2
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
+    run_cli(main)
