@@ -211,5 +211,6 @@ def build(ctx, entry: AssetPick) -> Rig:
                detail={"pixel_m": None if ctx.pixel_m is None else round(ctx.pixel_m, 7),
                        "pores": round(float(mat.get("detail_pores", 1.0)), 4),
                        "fine_lines": round(float(mat.get("detail_fine_lines", 1.0)), 4), "wrinkles": round(w_wr, 4),
-                       "mottle": round(w_mo, 4), "freckles": round(w_fr, 4), "age_spots": round(w_ag, 4), "stubble": round(w_st, 4)})
+                       "mottle": round(w_mo, 4), "freckles": round(w_fr, 4), "age_spots": round(w_ag, 4),
+                       "stubble": round(w_st, 4)})
     return Rig("skin", [], rec)

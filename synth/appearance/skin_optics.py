@@ -67,7 +67,7 @@ AGE_SPOTS = (1.0 / 60.0, 0.25)
 STUBBLE_PERIOD_M = 1.0 / 2500.0
 #: mottling: uneven melanin and blood in the skin at millimetre scales, an fBm noise (Blender's
 #: Noise texture, 4 octaves from MOTTLE_PERIOD_M down) that multiplies the albedo by
-#: 1 + MOTTLE_AMPLITUDE * (fac - 0.5) * MOTTLE_TINT per channel (mean 1: the calibrated skin colour
+#: 1 - MOTTLE_AMPLITUDE * (fac - 0.5) * MOTTLE_TINT per channel (mean 1: the calibrated skin colour
 #: stays; the darker patches are browner and redder, as melanin and haemoglobin absorb green and
 #: blue more). Set against real photos with benchmarks/skin_spectrum.py (docs/realism.md)
 MOTTLE_PERIOD_M = 0.008
