@@ -21,13 +21,14 @@ if [ "${1:-}" = "--dry" ]; then IDS=2 STEPS=4 PIX=16 DEVICE=cpu PRESET=small LOG
 mkdir -p "$OUT" "$WORK"
 [ -f "$WORK/ds$IDS/dataset.json" ] || timeout 90 "$PY" benchmarks/prior_scale.py write --identities "$IDS" --out "$WORK/ds$IDS" \
     || { echo "writing the dataset failed (exit $?)"; exit 1; }
+failed=0
 for buf in 0 2; do
-    rm -rf "$WORK/run$buf"
+    rm -rf "$WORK/run$buf" "$OUT/stream_buf$buf.jsonl"  # no figures of an earlier run stand in for this one
     timeout 90 "$PY" -m prior.cli train "$WORK/ds$IDS" --out "$WORK/run$buf" --preset "$PRESET" --device "$DEVICE" \
         --steps "$STEPS" --set data.buffer_identities=$buf --set data.views_per_load=1 \
         --set train.identities_per_batch=8 --set train.views_per_identity=8 --set train.pixels_per_view="$PIX" \
         --set train.log_every=$LOG --set train.checkpoint_every=100000 --set train.preview_every=0 \
-        || echo "training with buffer $buf failed or timed out (exit $?)"
+        || { echo "training with buffer $buf failed or timed out (exit $?)"; failed=1; }
     cp "$WORK/run$buf/metrics.jsonl" "$OUT/stream_buf$buf.jsonl" 2>/dev/null || true
 done
 "$PY" - "$OUT" "$IDS" "$PIX" <<'EOF'
@@ -48,3 +49,4 @@ if rows.get("0") and rows.get("2"):
     print(f"\nstreaming / in memory: {rows['2'] / rows['0']:.3f}")
 json.dump(rows, open(out / "prior_gpu_stream.json", "w"))
 EOF
+exit $failed
