@@ -77,7 +77,10 @@ class FinetuneConfig:
     steps: Count = 50_000
     """optimisation steps of the network and w"""
     rays_per_step: Size = 4096
-    """random rays per step, drawn uniformly over the pixels of all input views"""
+    """random rays per step, drawn uniformly over the pixels of all input views (but face_fraction of them)"""
+    face_fraction: Annotated[float, Bounds(0.0, 1.0)] = 0.0
+    """share of each step's rays drawn uniformly among the face regions' pixels (the hull of each image's
+    landmarks, grown by fit.face_grow); 0 = every ray uniform over all pixels"""
     lr_init: Positive = TrainConfig.lr_init
     """learning rate after the warm-up; log-linear decay to lr_final"""
     lr_final: Positive = TrainConfig.lr_final
@@ -115,6 +118,9 @@ class GeneralConfig:
     """seed of every random draw of the fit (patches, rays, stratified jitter, landmark noise)"""
     render_chunk: Size = 4096
     """rays per chunk when rendering whole images"""
+    face_grow: NonNegative = 0.1
+    """the face region (finetune.face_fraction) is the hull of an image's landmarks scaled by 1 + face_grow about
+    its centroid"""
     max_side_px: Annotated[int, Bounds(64)] = 2048
     """photos with a longer side are downscaled to it while decoded: every stage (landmarks, masks, fine-tuning)
     sees the downscaled photo"""

@@ -2,8 +2,10 @@
 
 Every network parameter (proposal and NeRF MLPs) and the latent ``w`` are optimised; the codes
 (beta, per-image psi) and the cameras stay fixed. Each step draws ``rays_per_step`` random
-rays uniformly over the pixels of all input views at their own resolution (no patches) and
-minimises
+rays over the pixels of all input views at their own resolution (no patches): a share
+``face_fraction`` of them uniformly among the pixels of the views' face regions (the hull of each
+image's landmarks, :func:`prior.fit.views.face_region`), the others uniformly over every pixel;
+and minimises
 
     L1(rgb, target) + proposal_weight * L_prop + normal_weight * L_normal
                     + view_weight * L_view + distortion_weight * L_dist
@@ -34,12 +36,24 @@ from synth.errors import SynthError
 FINETUNE_STREAM = 0xF17E
 
 
-def draw_rays(views: ViewSet, step: int, seed: int, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """(view, flat pixel) of ``n`` rays uniform over every pixel of every view (one size)."""
+def draw_rays(views: ViewSet, step: int, seed: int, n: int, face_fraction: float = 0.0,
+              face_pixels: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(view, flat pixel) of ``n`` rays: ``round(face_fraction * n)`` of them uniform over the face
+    regions' pixels (``face_pixels``: their flat indices over all views, :func:`face_pixels`), the
+    rest uniform over every pixel of every view (one size). Without a face region every ray is
+    uniform (the draws of ``face_fraction = 0``)."""
     H, W = views.size
     rng = np.random.default_rng([FINETUNE_STREAM, seed, step])
-    flat = rng.integers(0, len(views) * H * W, n)
+    k = 0 if face_pixels is None or face_pixels.size == 0 else int(round(face_fraction * n))
+    flat = rng.integers(0, len(views) * H * W, n - k)
+    if k:
+        flat = np.concatenate([flat, face_pixels[rng.integers(0, face_pixels.size, k)]])
     return np.divmod(flat, H * W)
+
+
+def face_pixels(views: ViewSet) -> np.ndarray | None:
+    """Flat indices (over all views) of the views' face-region pixels; None without a region."""
+    return None if views.face is None else np.flatnonzero(views.face.reshape(-1))
 
 
 def fit_loss(model, out: dict, target: torch.Tensor, valid: torch.Tensor, cfg: FinetuneConfig) -> dict:
@@ -73,10 +87,11 @@ def finetune(model, views: ViewSet, w0: torch.Tensor, cfg: FinetuneConfig, *, se
     normals = cfg.normal_weight > 0
     bf16, _ = resolve_bf16(cfg.bf16, dev, "finetune.bf16")
     history = []
+    faces = face_pixels(views) if cfg.face_fraction > 0 else None
     model.train()
     for step in range(cfg.steps):
         set_learning_rate(opt, learning_rate(step, cfg))
-        vi, pix = draw_rays(views, step, seed, cfg.rays_per_step)
+        vi, pix = draw_rays(views, step, seed, cfg.rays_per_step, cfg.face_fraction, faces)
         b = views.rays(vi, pix, dev)
         gen = torch.Generator(device=dev).manual_seed(step_seed(FINETUNE_STREAM, seed, step))
         amp = torch.autocast(dev.type, dtype=torch.bfloat16) if bf16 else contextlib.nullcontext()

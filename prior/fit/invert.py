@@ -63,6 +63,30 @@ def draw_patches(views: ViewSet, step: int, seed: int, patches: int, size: int) 
     return np.repeat(v, p * p), pix, p
 
 
+@torch.no_grad()
+def whole_l1(model, views: ViewSet, w: torch.Tensor, *, device="cpu", chunk: int = 4096) -> float:
+    """L1 between the rendered and target colours over every pixel of every view whose ray meets the
+    bounds (no jitter): one fixed measure of how well ``w`` explains the inputs, comparable before and
+    after the inversion (each step's own loss is that of its random patches)."""
+    dev = torch.device(device)
+    H, W = views.size
+    total, count = 0.0, 0.0
+    was_training = model.training
+    model.eval()
+    try:
+        for v in range(len(views)):
+            for s in range(0, H * W, chunk):
+                pix = np.arange(s, min(s + chunk, H * W))
+                b = views.rays(np.full(pix.size, v), pix, dev)
+                out = model(b.rays.with_latent(w.to(dev).reshape(1, -1)), randomized=False)
+                err = (out["rgb"].float() - b.target).abs().mean(-1)
+                total += float((err * b.valid).sum())
+                count += float(b.valid.sum())
+    finally:
+        model.train(was_training)
+    return total / max(count, 1.0)
+
+
 def invert_latent(model, views: ViewSet, w0: torch.Tensor, cfg: InversionConfig, *, seed: int = 0,
                   device="cpu", lpips_net=None, progress=None) -> tuple[torch.Tensor, list[dict]]:
     """Optimise ``w`` (latent_dim,) from ``w0``; returns it and the per-step losses.

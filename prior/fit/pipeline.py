@@ -26,8 +26,8 @@ from prior.fit import config as fit_config
 from prior.fit import fitdir
 from prior.fit.finetune import finetune
 from prior.fit.inputs import observations, read_inputs, resolve_source
-from prior.fit.invert import check_patch_size, invert_latent
-from prior.fit.views import ViewSet, prior_resolution
+from prior.fit.invert import check_patch_size, invert_latent, whole_l1
+from prior.fit.views import ViewSet, face_region, prior_resolution
 from prior.precision import resolve_bf16
 from synth.errors import SynthError
 from synth.io import atomic_dir, atomic_write_bytes, atomic_write_json
@@ -159,7 +159,7 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
         require_mediapipe()
     times = {}
     t0 = time.perf_counter()
-    _, fit = landmark_fit(inputs, source, model, cfg, log)
+    obs, fit = landmark_fit(inputs, source, model, cfg, log)
     times["landmarks_s"] = time.perf_counter() - t0
     log(f"landmarks: {source}, {len(inputs)} images, rmse {', '.join(f'{r:.2f}' for r in fit.rmse_px)} px, "
         f"focal {fit.K[0, 0, 0]:.1f} px, converged {fit.converged}")
@@ -169,7 +169,11 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
     scene = fit_scene(ck.config, ck.identities.centre, ck.identities.radius).model
     centre, radius = np.asarray(scene.scene_center, np.float64), float(scene.scene_radius)
     c2w = np.linalg.inv(fit.world_to_camera)
-    views = ViewSet(np.stack([im.target for im in inputs]).astype(np.float32), fit.K, c2w, codes, centre, radius)
+    W, H = inputs[0].size
+    points = [np.where(obs.used[i][:, None], obs.mean[i], np.nan) for i in range(len(inputs))]
+    faces = np.stack([face_region(p, W, H, cfg.fit.face_grow) for p in points])
+    views = ViewSet(np.stack([im.target for im in inputs]).astype(np.float32), fit.K, c2w, codes, centre, radius,
+                    faces)
     dev = torch.device(device)
     net = build_model(ck.config, ck.layout.size, len(ck.identities.identity_index), dev)
     if pretrained:
@@ -181,6 +185,10 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
     report = _progress(log)
     w, inv_hist = invert_latent(net, low, w0, cfg.inversion, seed=cfg.fit.seed, device=dev, progress=report)
     times["inversion_s"] = time.perf_counter() - t0
+    inv_whole = [whole_l1(net, low, w0, device=dev, chunk=cfg.fit.render_chunk),
+                 whole_l1(net, low, w, device=dev, chunk=cfg.fit.render_chunk)] if inv_hist else []
+    if inv_whole:
+        log(f"inversion: L1 over the whole {low.size[1]}x{low.size[0]} input(s) {inv_whole[0]:.4g} -> {inv_whole[1]:.4g}")
     t0 = time.perf_counter()
     bf16, bf16_line = resolve_bf16(cfg.finetune.bf16, dev, "finetune.bf16")
     log(bf16_line)
@@ -194,6 +202,10 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
                            "path": None if model_path is None else str(Path(model_path).resolve())},
             "config": cfg.to_dict(), "landmark_source": source, "inputs": [im.record() for im in inputs],
             "masks": [im.mask_source for im in inputs],
+            "landmarks_2d": [[None if not np.isfinite(q).all() else [round(float(q[0]), 3), round(float(q[1]), 3)]
+                              for q in p] for p in points],
+            "face_pixels": [int(f.sum()) for f in faces],
+            "model_landmarks_2d": np.round(fit.landmarks_2d, 3).tolist(),
             "cameras": [{"K": fit.K[i].tolist(), "world_to_camera": fit.world_to_camera[i].tolist(),
                          "camera_to_world": c2w[i].tolist(), "width": inputs[i].size[0],
                          "height": inputs[i].size[1]} for i in range(len(inputs))],
@@ -203,7 +215,7 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
             "inversion_size": [low.size[1], low.size[0]]}
     rep = {"landmarks": {"source": source, "rmse_px": fit.rmse_px.tolist(), "converged": fit.converged,
                          "iterations": fit.iterations, "energy": fit.energy, "focal_px": float(fit.K[0, 0, 0])},
-           "inversion": inv_hist, "finetune": ft_hist, "finetune_bf16": bf16, "times": times}
+           "inversion": inv_hist, "inversion_whole_l1": inv_whole, "finetune": ft_hist, "finetune_bf16": bf16, "times": times}
     weights = fitdir.weights_bytes(net, w, ck.config, ck.layout)
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_dir(out) as tmp:
@@ -225,7 +237,9 @@ def report_markdown(info: dict, rep: dict) -> str:
              f"- landmark fit: rmse {', '.join(f'{r:.2f}' for r in lm['rmse_px'])} px, focal {lm['focal_px']:.1f} px, "
              f"converged {lm['converged']}, iterations {lm['iterations']}",
              f"- inversion at {info['inversion_size'][1]}x{info['inversion_size'][0]}: {len(inv)} steps"
-             + (f", loss {inv[0]['loss']:.4g} -> {inv[-1]['loss']:.4g}" if inv else ""),
+             + (f", L1 over the whole input(s) {rep['inversion_whole_l1'][0]:.4g} -> {rep['inversion_whole_l1'][1]:.4g}"
+                f" (the steps' random patches: {inv[0]['loss']:.4g} first, {inv[-1]['loss']:.4g} last)"
+                if inv and rep.get("inversion_whole_l1") else ""),
              f"- fine-tuning: {ft[-1]['step'] if ft else 0} steps"
              + (f", loss {ft[0]['loss']:.4g} -> {ft[-1]['loss']:.4g}, training-ray PSNR {ft[-1]['psnr']:.2f} dB"
                 if ft else ""),

@@ -40,6 +40,7 @@ class ViewSet:
     codes: np.ndarray  # (V, C) float32 conditioning codes (beta || psi) per image
     centre: np.ndarray  # (3,) ray bounds: sphere centre
     radius: float
+    face: np.ndarray | None = None  # (V, H, W) bool: each image's face region (face_region); None = unknown
 
     @property
     def size(self) -> tuple[int, int]:
@@ -73,14 +74,43 @@ class ViewSet:
         if (width, height) == (W, H):
             return self
         S = np.diag([width / W, height / H, 1.0])
+        face = None if self.face is None else resample(self.face[..., None].astype(np.float32), width, height)[..., 0] >= 0.5
         return ViewSet(resample(self.target, width, height), S @ self.K, self.c2w, self.codes, self.centre,
-                       self.radius)
+                       self.radius, face)
 
     def patch_pixels(self, view: int, top: int, left: int, size: int) -> np.ndarray:
         """Flat pixel indices (size * size,) of a square patch, row-major."""
         H, W = self.size
         r, c = np.mgrid[top:top + size, left:left + size]
         return (r * W + c).reshape(-1)
+
+
+def face_region(points: np.ndarray, width: int, height: int, grow: float = 0.0) -> np.ndarray:
+    """(height, width) bool: the pixels whose centres lie inside the convex hull of the landmark
+    positions ``points`` (P, 2) (pixels, finite ones only), the hull scaled by ``1 + grow`` about its
+    centroid. With mediapipe's 478 face-mesh points that is the face from the chin to the forehead."""
+    from matplotlib.path import Path as MplPath
+    from scipy.spatial import ConvexHull, QhullError
+
+    p = np.asarray(points, np.float64).reshape(-1, 2)
+    p = p[np.isfinite(p).all(1)]
+    out = np.zeros((height, width), bool)
+    if len(p) < 3:
+        return out
+    try:
+        hull = p[ConvexHull(p).vertices]
+    except QhullError:  # collinear points: no area
+        return out
+    c = hull.mean(0)
+    hull = c + (hull - c) * (1.0 + grow)
+    x0, y0 = np.floor(np.clip(hull.min(0), 0, [width, height])).astype(int)
+    x1, y1 = np.ceil(np.clip(hull.max(0), 0, [width, height])).astype(int)
+    if x1 <= x0 or y1 <= y0:
+        return out
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    inside = MplPath(hull).contains_points(np.stack([xx.ravel() + 0.5, yy.ravel() + 0.5], 1))
+    out[y0:y1, x0:x1] = inside.reshape(yy.shape)
+    return out
 
 
 def resample(images: np.ndarray, width: int, height: int) -> np.ndarray:

@@ -57,6 +57,12 @@ def test_fit_writes_codes_cameras_weights_and_report(world, fitted):
     rep = json.loads((fitted / "report.json").read_text())
     assert len(rep["inversion"]) == 3 and rep["finetune"][-1]["step"] == 4 and max(rep["landmarks"]["rmse_px"]) < 1
     assert "Fit of 3 image(s)" in (fitted / "report.md").read_text()
+    # the inversion is judged on the whole downscaled inputs (each step's loss is that of its random patches)
+    assert len(rep["inversion_whole_l1"]) == 2 and all(np.isfinite(rep["inversion_whole_l1"]))
+    assert "L1 over the whole input(s)" in (fitted / "report.md").read_text()
+    # the landmarks the fit saw and the fitted model's, and each image's face region
+    assert len(info["landmarks_2d"]) == 3 and np.asarray(info["model_landmarks_2d"]).shape[:2] == (3, 68)
+    assert all(n > 0 for n in info["face_pixels"])
     from safetensors.torch import load_file
 
     t = load_file(str(fitted / "weights.safetensors"))

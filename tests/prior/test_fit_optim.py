@@ -193,3 +193,53 @@ def test_render_image_skips_rays_that_miss_the_bounds(views):
     np.testing.assert_allclose(img["rgb"].reshape(-1, 3), ref["rgb"].clamp(0, 1).numpy(), atol=1e-6)
     np.testing.assert_allclose(img["acc"].reshape(-1), ref["acc"].numpy(), atol=1e-6)
     assert (img["rgb"].reshape(-1, 3)[miss] == 0).all() and (img["depth"].reshape(-1)[miss] == 0).all()
+
+
+def test_face_region_is_the_grown_hull_of_the_landmarks():
+    from prior.fit.views import face_region
+
+    sq = np.array([[10.0, 10.0], [30.0, 10.0], [30.0, 30.0], [10.0, 30.0], [20.0, 20.0], [np.nan, np.nan]])
+    m = face_region(sq, 40, 40)
+    # pixel centres (x + 0.5) inside the hull: columns and rows 10..29
+    assert m.sum() == 20 * 20 and m[10, 10] and m[29, 29] and not m[9, 20] and not m[30, 20]
+    grown = face_region(sq, 40, 40, grow=0.5)  # half-side 10 -> 15 about (20, 20)
+    assert grown.sum() == 30 * 30 and grown[5, 5] and not grown[4, 5]
+    assert face_region(sq, 24, 24).sum() == 14 * 14  # cut by the image
+    assert not face_region(np.array([[1.0, 1.0], [2.0, 2.0], [3.0, 3.0]]), 8, 8).any()  # no area
+    assert not face_region(np.zeros((2, 2)), 8, 8).any()
+
+
+def test_fine_tuning_rays_drawn_on_the_face(views):
+    from prior.fit.finetune import draw_rays, face_pixels
+
+    H, W = views.size
+    # without a face region (or a share of 0) the draws are the uniform ones
+    rng = np.random.default_rng([0xF17E, 3, 5])
+    uniform = np.divmod(rng.integers(0, len(views) * H * W, 100), H * W)
+    for args in ((), (0.5, None), (0.0, np.arange(10))):
+        got = draw_rays(views, 5, 3, 100, *args)
+        assert all(np.array_equal(a, b) for a, b in zip(got, uniform))
+    face = np.zeros((len(views), H, W), bool)
+    face[1, 4:8, 6:10] = True
+    fv = dataclasses.replace(views, face=face)
+    pix = face_pixels(fv)
+    assert pix.size == 16
+    v, p = draw_rays(fv, 5, 3, 100, 0.5, pix)
+    on_face = face[v, p // W, p % W]
+    assert on_face.sum() >= 50 and (v[on_face] == 1).all()
+    # the same step and seed draw the same rays
+    v2, p2 = draw_rays(fv, 5, 3, 100, 0.5, pix)
+    assert np.array_equal(v, v2) and np.array_equal(p, p2)
+    # the region follows a resize (kept where at least half of a low-resolution pixel was face)
+    low = fv.resized(W // 2, H // 2)
+    assert low.face.shape == (len(views), H // 2, W // 2) and low.face[1].sum() == 4
+
+
+def test_whole_image_l1_is_the_fixed_measure_of_the_inversion(views):
+    from prior.fit.invert import whole_l1
+
+    model = tiny_model(seed=3)
+    w = torch.tensor([0.3, -0.2, 0.1, 0.0])
+    expect = full_loss(model, views, w.reshape(1, -1))
+    assert whole_l1(model, views, w, chunk=97) == pytest.approx(expect, rel=1e-5)
+    assert whole_l1(model, views, w, chunk=97) == whole_l1(model, views, w, chunk=97)
