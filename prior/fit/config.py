@@ -144,7 +144,7 @@ SECTIONS: dict[str, type] = configkit.sections(FitConfig)
 
 def _small() -> FitConfig:
     return FitConfig(inversion=InversionConfig(steps=100, patch_size=16, patches=2),
-                     finetune=FinetuneConfig(steps=300, rays_per_step=1024, warmup_steps=20))
+                     finetune=FinetuneConfig(steps=300, rays_per_step=1024, warmup_steps=20, face_fraction=0.5))
 
 
 PRESETS = {"small": _small, "paper": FitConfig}

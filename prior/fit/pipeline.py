@@ -188,7 +188,8 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
     inv_whole = [whole_l1(net, low, w0, device=dev, chunk=cfg.fit.render_chunk),
                  whole_l1(net, low, w, device=dev, chunk=cfg.fit.render_chunk)] if inv_hist else []
     if inv_whole:
-        log(f"inversion: L1 over the whole {low.size[1]}x{low.size[0]} input(s) {inv_whole[0]:.4g} -> {inv_whole[1]:.4g}")
+        log(f"inversion: L1 over the whole {low.size[1]}x{low.size[0]} input(s) "
+            f"{inv_whole[0]:.4g} -> {inv_whole[1]:.4g}")
     t0 = time.perf_counter()
     bf16, bf16_line = resolve_bf16(cfg.finetune.bf16, dev, "finetune.bf16")
     log(bf16_line)
@@ -215,7 +216,8 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
             "inversion_size": [low.size[1], low.size[0]]}
     rep = {"landmarks": {"source": source, "rmse_px": fit.rmse_px.tolist(), "converged": fit.converged,
                          "iterations": fit.iterations, "energy": fit.energy, "focal_px": float(fit.K[0, 0, 0])},
-           "inversion": inv_hist, "inversion_whole_l1": inv_whole, "finetune": ft_hist, "finetune_bf16": bf16, "times": times}
+           "inversion": inv_hist, "inversion_whole_l1": inv_whole, "finetune": ft_hist, "finetune_bf16": bf16,
+           "times": times}
     weights = fitdir.weights_bytes(net, w, ck.config, ck.layout)
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_dir(out) as tmp:

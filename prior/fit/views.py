@@ -74,7 +74,8 @@ class ViewSet:
         if (width, height) == (W, H):
             return self
         S = np.diag([width / W, height / H, 1.0])
-        face = None if self.face is None else resample(self.face[..., None].astype(np.float32), width, height)[..., 0] >= 0.5
+        face = None if self.face is None else \
+            resample(self.face[..., None].astype(np.float32), width, height)[..., 0] >= 0.5
         return ViewSet(resample(self.target, width, height), S @ self.K, self.c2w, self.codes, self.centre,
                        self.radius, face)
 
