@@ -52,15 +52,14 @@ TRAIN_SETS = ["train.identities_per_batch=2", "train.views_per_identity=4", "tra
 SPAN_DEG, ORBIT = 80.0, 5
 
 PROFILES = {
-    # the run in docs/fitting.md: about an hour and a half of the shared 2-core machine
+    # the run in docs/fitting.md: about an hour and a half of the shared 2-core machine (two fit processes)
     "cpu": dict(ids=16, expressions=2, views=10, res=64, seed=1,
                 priors={"ids04_1k": (4, 1000), "ids16_1k": (16, 1000), "ids16_4k": (16, 4000)},
                 # (name, prior, fine-tuning steps, face_fraction)
                 fits=[("uniform_300", "ids16_1k", 300, 0.0),
                       ("face_300", "ids16_1k", 300, 0.5), ("face_1000", "ids16_1k", 1000, 0.5),
                       ("face_3000", "ids16_1k", 3000, 0.5),
-                      ("ids04_face_1000", "ids04_1k", 1000, 0.5),
-                      ("ids16_4k_face_1000", "ids16_4k", 1000, 0.5), ("ids16_4k_face_3000", "ids16_4k", 3000, 0.5)],
+                      ("ids04_face_300", "ids04_1k", 300, 0.5), ("ids16_4k_face_300", "ids16_4k", 300, 0.5)],
                 fit_sets=["inversion.steps=100", "finetune.rays_per_step=1024"], size=128),
     # a few minutes: checks the script, proves nothing
     "tiny": dict(ids=2, expressions=1, views=4, res=32, seed=1, priors={"ids02": (2, 20)},
