@@ -87,11 +87,13 @@ def rank_child(ds: str, prep: str, rank: int, world: int, buffer: int, steps: in
     import numpy as np
 
     from prior.data import Loader, RaySampler, build_table, open_source, prepare
+    from prior.data.prepare import trim_heap
 
     t0 = time.perf_counter()
     src = open_source(ds)
-    table = build_table(prepare(src, Path(prep)), joints=("jaw", "eye_l", "eye_r"), margin=0.05,
+    table = build_table(prepare(src, Path(prep), write_merged=False), joints=("jaw", "eye_l", "eye_r"), margin=0.05,
                         planned=src.planned_identities)
+    trim_heap()  # as training does (prior.train.run.prepare)
     ld = Loader(src, table, seed=0, rank=rank, world=world, buffer_identities=buffer, views_per_load=reuse,
                 read_ahead=2, prepare_dir=Path(prep))
     ld.start()
