@@ -658,14 +658,30 @@ def build_table(result: PrepareResult, *, joints: tuple[str, ...], margin: float
     uk, first, inv = np.unique(flat, return_index=True, return_inverse=True)
     keys = np.stack([uk // span, uk % span + e0], 1)
     views = np.bincount(inv.reshape(-1), np.asarray(f["views"], np.int64), len(keys)).astype(np.int64)
-    blocks = [f["beta"], f["expr"], *(f["joints"][:, jn.index(j)] for j in joints)]
-    codes = np.empty((len(keys), sum(b.shape[1] for b in blocks)), np.float32)
-    for a in range(0, len(keys), 1024):  # in row blocks: no temporary larger than ~200 kB
+    # the codes: the identity code once per latent id when all of an identity's rows agree (as in
+    # every dataset synth renders), else full rows; filled in row blocks, so that no temporary
+    # exceeds ~200 kB
+    beta, blocks = f["beta"], [f["expr"], *(f["joints"][:, jn.index(j)] for j in joints)]
+    psi = np.empty((len(keys), sum(b.shape[1] for b in blocks)), np.float32)
+    ident = np.zeros((M, beta.shape[1]), np.float32)
+    lead = np.r_[True, keys[1:, 0] != keys[:-1, 0]][:len(keys)]  # each latent id's first row
+    ident[keys[lead, 0]] = beta[first[lead]]
+    same = True
+    for a in range(0, len(keys), 1024):
         rows, o = first[a:a + 1024], 0
+        same = same and bool((beta[rows] == ident[keys[a:a + 1024, 0]]).all())
         for b in blocks:
-            codes[a:a + 1024, o:o + b.shape[1]] = b[rows]
+            psi[a:a + 1024, o:o + b.shape[1]] = b[rows]
             o += b.shape[1]
-    del mg, f, blocks
+    if same:
+        code_parts = dict(identity_codes=ident, psi_codes=psi)
+    else:
+        codes = np.empty((len(keys), beta.shape[1] + psi.shape[1]), np.float32)
+        for a in range(0, len(keys), 1024):
+            codes[a:a + 1024, :beta.shape[1]] = beta[first[a:a + 1024]]
+        codes[:, beta.shape[1]:] = psi
+        code_parts = dict(codes=codes)
+    del mg, f, blocks, beta, psi
     if holdout_views and (views <= holdout_views).any():
         (m, e), v = keys[np.argmax(views <= holdout_views)], views[np.argmax(views <= holdout_views)]
         raise SynthError(f"identity {uniq[m]} expression {e} has {v} views, not more than "
@@ -674,7 +690,7 @@ def build_table(result: PrepareResult, *, joints: tuple[str, ...], margin: float
     layout = CodeLayout(int(sizes[0]), int(sizes[1]), tuple(joints))
     info = IdentityInfo(identity_index=uniq, centre=centre, radius=radius, front_K=front_K, front_c2w=front_c2w,
                         front_size=np.where(frames[:, None] > 0, [size[0], size[1]], 0).astype(np.int64),
-                        code_keys=keys.astype(np.int64).reshape(-1, 2), codes=codes.reshape(len(keys), layout.size))
+                        code_keys=keys.astype(np.int64).reshape(-1, 2), **code_parts)
     return Table(layout, info, shards_of, frames, (int(size[1]), int(size[0])), head or {})
 
 

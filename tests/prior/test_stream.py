@@ -78,7 +78,7 @@ def test_prepare_is_incremental_atomic_and_a_noop_when_nothing_is_new(tmp_path):
     assert r5.written == 3
     t5 = build_table(r5, joints=JOINTS, margin=0.05, planned=src.planned_identities)
     for k, v in table.info.arrays().items():
-        np.testing.assert_array_equal(getattr(t5.info, k), v)
+        np.testing.assert_array_equal(t5.info.arrays()[k], v)
 
 
 def test_buffer_bound_holds_and_identities_swap(tmp_path):
@@ -220,7 +220,7 @@ def test_an_identity_over_two_shards_gets_a_sphere_holding_both(tmp_path):
 
 def _same_tables(a, b):
     for k, v in a.info.arrays().items():
-        np.testing.assert_array_equal(getattr(b.info, k), v, err_msg=k)
+        np.testing.assert_array_equal(b.info.arrays()[k], v, err_msg=k)
     np.testing.assert_array_equal(a.frames, b.frames)
     assert a.shards_of == b.shards_of and a.layout == b.layout and a.size == b.size and a.head_model == b.head_model
 
@@ -254,3 +254,26 @@ def test_the_merged_table_builds_the_table_the_records_build(tmp_path, monkeypat
     with pytest.raises(SynthError, match=r"identity 0 have no rotation for joint\(s\) head \(they have: "
                                          r"eye_l, eye_r, jaw, neck\)"):
         build_table(res, joints=(*JOINTS, "head"), margin=0.05)
+
+
+def test_the_identity_code_is_held_once_per_identity_and_saved_as_full_rows(tmp_path):
+    ds = scene.make_dataset(tmp_path / "d", identities=3, views=VIEWS, size=SIZE)
+    src = open_source(ds)
+    res = prepare(src, tmp_path / "p")
+    t = build_table(res, joints=JOINTS, margin=0.05, planned=src.planned_identities)
+    info, size = t.info, t.layout.identity_size
+    assert info.codes is None and info.identity_codes.shape == (3, size)  # every row of an identity agrees
+    full = info.arrays()["codes"]
+    assert full.dtype == np.float32 and full.shape == (len(info.code_keys), t.layout.size)
+    for q, (m, e) in enumerate(info.code_keys.tolist()):
+        np.testing.assert_array_equal(info.code(m, e), full[q])
+    # an identity whose expressions carry different identity codes keeps full rows, exactly
+    rec = dict(res.records[1])
+    rec["beta"] = rec["beta"].copy()
+    rec["beta"][1] += 0.5
+    res.records[1] = rec
+    t2 = build_table(res, joints=JOINTS, margin=0.05, planned=src.planned_identities)
+    assert t2.info.codes is not None and t2.info.identity_codes is None
+    rows = t2.info.code_keys[:, 0] == 1
+    np.testing.assert_array_equal(t2.info.codes[rows][1, :size], rec["beta"][1])
+    np.testing.assert_array_equal(t2.info.codes[~rows], full[~rows])
