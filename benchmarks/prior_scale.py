@@ -13,6 +13,7 @@ writer's own path.
     python benchmarks/prior_scale.py measure /tmp/scale15 --buffer 8 --ranks 1 2
     python benchmarks/prior_scale.py webdataset /tmp/scale15        # the plain WebDataset pipeline
     python benchmarks/prior_scale.py tools /tmp/scale15             # synth validate / report / index / resume
+    python benchmarks/prior_scale.py train-rss /tmp/scale15 --buffer 4   # peak RSS of real training ranks
 
 ``measure`` runs, each in fresh processes: the prepare pass (into a new directory; time and peak
 RSS), then per rank (1 and 2 ranks; 2 run at once) the run's setup path: the table from the
@@ -87,11 +88,13 @@ def rank_child(ds: str, prep: str, rank: int, world: int, buffer: int, steps: in
     import numpy as np
 
     from prior.data import Loader, RaySampler, build_table, open_source, prepare
+    from prior.data.prepare import trim_heap
 
     t0 = time.perf_counter()
     src = open_source(ds)
-    table = build_table(prepare(src, Path(prep)), joints=("jaw", "eye_l", "eye_r"), margin=0.05,
+    table = build_table(prepare(src, Path(prep), write_merged=False), joints=("jaw", "eye_l", "eye_r"), margin=0.05,
                         planned=src.planned_identities)
+    trim_heap()  # as training does (prior.train.run.prepare)
     ld = Loader(src, table, seed=0, rank=rank, world=world, buffer_identities=buffer, views_per_load=reuse,
                 read_ahead=2, prepare_dir=Path(prep))
     ld.start()
@@ -145,6 +148,38 @@ def measure(ds: Path, buffer: int, ranks: list[int], steps: int, workers: int, r
                       f"| {o['rays_per_s']:,.0f} rays/s | paper batch {o['paper_batch_rays']:,} rays in "
                       f"{o['paper_batch_s']:.3f} s | buffer {o['buffer_mb']:.0f} MB | peak RSS {o['peak_rss_mb']:.0f} "
                       f"MB | epochs {o['swapped_epochs']} |", flush=True)
+
+
+def train_rss(ds: Path, ranks: list[int], steps: int, buffer: int) -> None:
+    """Peak RSS of each rank of a real ``synth prior train`` run (``small`` preset, gloo, one
+    process per rank on this machine, a checkpoint at the end): what a training rank holds, with
+    the allocator's state that training steps leave, which the loader-only ``measure`` lacks."""
+    import socket
+
+    with tempfile.TemporaryDirectory() as tmp:
+        for world in ranks:
+            with socket.socket() as sock:
+                sock.bind(("127.0.0.1", 0))
+                port = str(sock.getsockname()[1])
+            run = Path(tmp) / f"run{world}"
+            env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1", "MASTER_ADDR": "127.0.0.1",
+                   "MASTER_PORT": port, "WORLD_SIZE": str(world)}
+            t0 = time.perf_counter()
+            procs = [subprocess.Popen([sys.executable, "-m", "prior.cli", "train", str(ds), "--out", str(run),
+                                       "--steps", str(steps), "--set", f"data.buffer_identities={buffer}"],
+                                      env={**env, "RANK": str(r), "LOCAL_RANK": str(r)}, stdout=subprocess.DEVNULL,
+                                      stderr=subprocess.PIPE, text=True) for r in range(world)]
+            peaks, codes, errs = [], [], []
+            for q in procs:
+                err = q.stderr.read()
+                _, status, usage = os.wait4(q.pid, 0)
+                q.returncode = os.waitstatus_to_exitcode(status)
+                peaks.append(usage.ru_maxrss / 1024)
+                codes.append(q.returncode)
+                errs.append(err.strip().splitlines()[-1:] if q.returncode else [])
+            ok = "ok" if codes == [0] * world else f"exit {codes}: {errs}"
+            print(f"| {world} rank(s) | buffer {buffer} | {steps} steps in {time.perf_counter() - t0:.0f} s | peak RSS "
+                  f"{' / '.join(f'{m:.0f}' for m in peaks)} MB | {ok} |", flush=True)
 
 
 TOOLS = ("validate", "validate -j 1", "validate --quick", "report", "index rebuild", "resume planning")
@@ -248,6 +283,11 @@ def main() -> None:
     b.add_argument("--frames", type=int, default=2000)
     t = sub.add_parser("tools")
     t.add_argument("dataset", type=Path)
+    r = sub.add_parser("train-rss")
+    r.add_argument("dataset", type=Path)
+    r.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
+    r.add_argument("--steps", type=int, default=10)
+    r.add_argument("--buffer", type=int, default=4)
     a = ap.parse_args()
     if a.cmd == "write":
         write(a.out, a.identities, a.views)
@@ -255,6 +295,8 @@ def main() -> None:
         tools(a.dataset)
     elif a.cmd == "measure":
         measure(a.dataset, a.buffer, a.ranks, a.steps, a.workers, a.views_per_load)
+    elif a.cmd == "train-rss":
+        train_rss(a.dataset, a.ranks, a.steps, a.buffer)
     else:
         webdataset_pipeline(a.dataset, a.workers, a.frames)
 

@@ -35,7 +35,7 @@ from typing import Callable
 import numpy as np
 
 from prior.data.codes import CodeLayout
-from prior.data.prepare import Table, build_table, prepare, record_meta
+from prior.data.prepare import Table, build_table, prepare, record_meta, trim_heap
 from prior.data.sources import ShardDamaged, Source, frame_meta, read_shard
 from synth.dataset.reader import decode_frame
 from synth.errors import SynthError
@@ -160,7 +160,7 @@ class Loader:
         if not any(r.shard not in known and r.shard not in self.bad for r in refs):
             return
         res = prepare(self.source, self.prepare_dir, refs=[r for r in refs if r.shard not in self.bad],
-                      warn=self._skip_line)
+                      warn=self._skip_line, write_merged=self.rank == 0)
         self.bad |= set(res.skipped_shards)
         t = self.table
         for k in reversed(range(len(res.records))):  # a new shard unlike the run's frames: skipped, one line
@@ -180,6 +180,9 @@ class Loader:
         except SynthError as e:
             self._skip_line(f"new shards not taken in: {e.what}")
             return
+        finally:
+            del res
+            trim_heap()
         if not np.array_equal(table.info.identity_index, self.table.info.identity_index):
             self._skip_line("new shards not taken in: the dataset's plan changed")
             return

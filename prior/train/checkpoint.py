@@ -24,6 +24,7 @@ import numpy as np
 import torch
 
 from prior.data.codes import CodeLayout
+from prior.data.identities import SAVED as SAVED_IDENTITY_FIELDS
 from prior.data.identities import IdentityInfo
 from prior.train import config as run_config
 from synth.io import atomic_write_bytes, sha256_bytes
@@ -119,8 +120,7 @@ def load(path) -> Checkpoint:
     try:
         cfg = run_config.from_dict(json.loads(meta["config"]), str(path))
         layout = CodeLayout.from_dict(json.loads(meta["layout"]))
-        ident = IdentityInfo(**{k: tensors.pop(f"identities.{k}").numpy()
-                                for k in IdentityInfo.__dataclass_fields__})
+        ident = IdentityInfo(**{k: tensors.pop(f"identities.{k}").numpy() for k in SAVED_IDENTITY_FIELDS})
         step = int(meta["step"])
     except (KeyError, ValueError, TypeError) as e:
         _refuse(path, f"checkpoint lacks or garbles {e}")

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prior.data.prepare import Table, build_table
+from prior.data.prepare import Table, build_table, trim_heap
 from prior.data.prepare import prepare as prepare_pass
 from prior.data.sources import ShardDamaged, Source, frame_meta, open_source, read_shard
 from prior.train import checkpoint as ckpt
@@ -88,6 +88,8 @@ def prepare(dataset, run_dir, *, preset: str | None = None, config_path=None, se
     res = _prepare_all(source, prep_dir, dist or Dist(), progress)
     table = build_table(res, joints=tuple(d.joints), margin=d.bounds_margin, holdout_views=d.holdout_views,
                         planned=source.planned_identities, where=source.describe())
+    del res
+    trim_heap()
     if resumed is not None:
         if table.layout != resumed.layout:
             raise SynthError(f"dataset codes {table.layout.to_dict()} differ from the checkpoint's "
@@ -158,7 +160,7 @@ def _prepare_all(source: Source, prep_dir: Path, dist: Dist, progress):
     if err is not None:
         raise err
     if not dist.main:
-        res = prepare_pass(source, prep_dir)
+        res = prepare_pass(source, prep_dir, write_merged=False)  # rank 0 wrote the merged table
     return res
 
 

@@ -126,3 +126,23 @@ def test_sizes_help_parses():
     r = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "prior_sizes.py"), "--help"], capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 0 and "--rungs" in r.stdout, r.stderr
+
+
+@pytest.mark.slow
+def test_scale_script_writes_measures_and_trains_ranks(tmp_path):
+    """benchmarks/prior_scale.py at toy size: write, the loader-alone measure and real training ranks' peak RSS."""
+    script, ds = str(ROOT / "benchmarks" / "prior_scale.py"), str(tmp_path / "ds")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+
+    def run(*args):
+        r = subprocess.run([os.sys.executable, script, *args], capture_output=True, text=True, env=env, timeout=600)
+        assert r.returncode == 0, r.stderr[-2000:]
+        return r.stdout
+
+    assert "wrote 3 identities, 78 frames" in run("write", "--identities", "3", "--views", "2", "--out", ds)
+    out = run("measure", ds, "--buffer", "2", "--steps", "5", "--ranks", "1")
+    assert "| prepare | 78 frames |" in out and "| 1 rank(s), rank 0 |" in out
+    rows = [x for x in run("train-rss", ds, "--buffer", "2", "--steps", "2", "--ranks", "1", "2").splitlines()
+            if x.startswith("|")]
+    assert len(rows) == 2 and all(x.endswith("| ok |") for x in rows)
+    assert len(rows[1].split("peak RSS ")[1].split(" MB")[0].split(" / ")) == 2  # one figure per rank

@@ -11,6 +11,7 @@ import pytest
 import torch
 
 from prior.data import Loader, RaySampler, build_table, open_source, prepare
+from prior.data.prepare import MERGED_FILE, Merged
 from prior.data import sources as sources_mod
 from prior.data.sources import expand_braces
 from prior.train import checkpoint as ckpt
@@ -46,7 +47,8 @@ def test_prepare_is_incremental_atomic_and_a_noop_when_nothing_is_new(tmp_path):
     ds = scene.make_dataset(tmp_path / "d", identities=3, views=VIEWS, size=SIZE, commit=2)
     src, prep = open_source(ds), ds / ".prior" / "prepare"
     r1 = prepare(src, prep)
-    assert (r1.written, r1.reused) == (2, 0) and sorted(os.listdir(prep)) == ["shard_000000.npz", "shard_000001.npz"]
+    assert (r1.written, r1.reused) == (2, 0)
+    assert sorted(os.listdir(prep)) == ["shard_000000.npz", "shard_000001.npz", MERGED_FILE]
     before = {n: os.stat(prep / n).st_mtime_ns for n in os.listdir(prep)}
     r2 = prepare(src, prep)
     assert (r2.written, r2.reused) == (0, 2)
@@ -54,12 +56,19 @@ def test_prepare_is_incremental_atomic_and_a_noop_when_nothing_is_new(tmp_path):
     scene.commit_identity(ds, 2, views=VIEWS, size=SIZE)
     r3 = prepare(src, prep)
     assert (r3.written, r3.reused) == (1, 2)
-    assert {n: os.stat(prep / n).st_mtime_ns for n in before} == before  # old shards not redone
-    assert not [n for n in os.listdir(prep) if not n.endswith(".npz")]  # no temporary left
+    old = {n: t for n, t in before.items() if n != MERGED_FILE}
+    assert {n: os.stat(prep / n).st_mtime_ns for n in old} == old  # old shards not redone
+    assert not [n for n in os.listdir(prep) if not n.endswith(".npz") and n != MERGED_FILE]  # no temporary left
     table = build_table(r3, joints=JOINTS, margin=0.05, planned=src.planned_identities)
     assert table.frames.tolist() == [2 * VIEWS] * 3
-    # a record cut short (a crash elsewhere) is not trusted: it is recomputed
+    assert len(Merged.load(prep / MERGED_FILE)) == 3  # the merged table holds the new record too
+    # a merged table cut short is rebuilt from the records; a record cut short (a crash elsewhere)
+    # is not trusted: it is recomputed
+    (prep / MERGED_FILE).write_bytes(b"PK\x03\x04 cut")
+    r4 = prepare(src, prep)
+    assert (r4.written, r4.reused) == (0, 3) and len(Merged.load(prep / MERGED_FILE)) == 3
     (prep / "shard_000001.npz").write_bytes(b"PK\x03\x04 cut")
+    os.unlink(prep / MERGED_FILE)
     r4 = prepare(src, prep)
     assert (r4.written, r4.reused) == (1, 2)
     t4 = build_table(r4, joints=JOINTS, margin=0.05, planned=src.planned_identities)
@@ -69,7 +78,7 @@ def test_prepare_is_incremental_atomic_and_a_noop_when_nothing_is_new(tmp_path):
     assert r5.written == 3
     t5 = build_table(r5, joints=JOINTS, margin=0.05, planned=src.planned_identities)
     for k, v in table.info.arrays().items():
-        np.testing.assert_array_equal(getattr(t5.info, k), v)
+        np.testing.assert_array_equal(t5.info.arrays()[k], v)
 
 
 def test_buffer_bound_holds_and_identities_swap(tmp_path):
@@ -207,3 +216,64 @@ def test_an_identity_over_two_shards_gets_a_sphere_holding_both(tmp_path):
     np.testing.assert_allclose(c, 0.5 * (box.min(0) + box.max(0)))  # the merged box's centre
     for cs in (one.info.centre[0], one.info.centre[0] + shift):  # both spheres inside
         assert np.linalg.norm(cs - c) + one.info.radius[0] <= r + 1e-9
+
+
+def _same_tables(a, b):
+    for k, v in a.info.arrays().items():
+        np.testing.assert_array_equal(b.info.arrays()[k], v, err_msg=k)
+    np.testing.assert_array_equal(a.frames, b.frames)
+    assert a.shards_of == b.shards_of and a.layout == b.layout and a.size == b.size and a.head_model == b.head_model
+
+
+def test_the_merged_table_builds_the_table_the_records_build(tmp_path, monkeypatch):
+    import importlib
+
+    prep_mod = importlib.import_module("prior.data.prepare")  # the package exports the function of that name
+    from prior.data.prepare import MergedRecord, PrepareResult, _read_record
+
+    ds = scene.make_dataset(tmp_path / "d", identities=4, views=VIEWS, size=SIZE)
+    src = open_source(ds)
+    monkeypatch.setattr(prep_mod, "MERGE_IN_CHILD_AT", 1)  # the merged table written by a child process
+    res = prepare(src, tmp_path / "p")
+    assert all(isinstance(r, MergedRecord) for r in res.records) and (tmp_path / "p" / MERGED_FILE).is_file()
+    merged = build_table(res, joints=JOINTS, margin=0.05, planned=src.planned_identities)
+    files = PrepareResult([_read_record(tmp_path / "p" / f"{r.shard}.npz") for r in res.refs], list(res.refs))
+    one_by_one = build_table(files, joints=JOINTS, margin=0.05, planned=src.planned_identities)
+    _same_tables(merged, one_by_one)
+    # records of the merged table mixed with records read from their files, in shard order
+    mixed = PrepareResult([res.records[0], dict(files.records[1]), files.records[2], res.records[3]], list(res.refs))
+    _same_tables(build_table(mixed, joints=JOINTS, margin=0.05, planned=src.planned_identities), one_by_one)
+    # a rank that does not write the merged table (not rank 0) reads the records and writes nothing
+    prepare(src, tmp_path / "q", workers=1)
+    os.unlink(tmp_path / "q" / MERGED_FILE)
+    before = sorted(os.listdir(tmp_path / "q"))
+    other = prepare(src, tmp_path / "q", write_merged=False)
+    assert sorted(os.listdir(tmp_path / "q")) == before and other.reused == 4
+    _same_tables(build_table(other, joints=JOINTS, margin=0.05, planned=src.planned_identities), one_by_one)
+    # a missing joint names the identity, the shard and what the frames have
+    with pytest.raises(SynthError, match=r"identity 0 have no rotation for joint\(s\) head \(they have: "
+                                         r"eye_l, eye_r, jaw, neck\)"):
+        build_table(res, joints=(*JOINTS, "head"), margin=0.05)
+
+
+def test_the_identity_code_is_held_once_per_identity_and_saved_as_full_rows(tmp_path):
+    ds = scene.make_dataset(tmp_path / "d", identities=3, views=VIEWS, size=SIZE)
+    src = open_source(ds)
+    res = prepare(src, tmp_path / "p")
+    t = build_table(res, joints=JOINTS, margin=0.05, planned=src.planned_identities)
+    info, size = t.info, t.layout.identity_size
+    assert info.codes is None and info.identity_codes.shape == (3, size)  # every row of an identity agrees
+    full = info.arrays()["codes"]
+    assert full.dtype == np.float32 and full.shape == (len(info.code_keys), t.layout.size)
+    for q, (m, e) in enumerate(info.code_keys.tolist()):
+        np.testing.assert_array_equal(info.code(m, e), full[q])
+    # an identity whose expressions carry different identity codes keeps full rows, exactly
+    rec = dict(res.records[1])
+    rec["beta"] = rec["beta"].copy()
+    rec["beta"][1] += 0.5
+    res.records[1] = rec
+    t2 = build_table(res, joints=JOINTS, margin=0.05, planned=src.planned_identities)
+    assert t2.info.codes is not None and t2.info.identity_codes is None
+    rows = t2.info.code_keys[:, 0] == 1
+    np.testing.assert_array_equal(t2.info.codes[rows][1, :size], rec["beta"][1])
+    np.testing.assert_array_equal(t2.info.codes[~rows], full[~rows])

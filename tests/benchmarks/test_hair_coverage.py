@@ -1,0 +1,48 @@
+"""benchmarks/hair_coverage.py: the covered-scalp measure on geometry with a known answer."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+import hair_coverage as hc  # noqa: E402
+
+
+def _plane(n=4000, seed=0):
+    rng = np.random.default_rng(seed)
+    p = np.column_stack([rng.uniform(-0.02, 0.02, n), rng.uniform(-0.02, 0.02, n), np.zeros(n)])
+    return p, np.tile([0.0, 0.0, 1.0], (n, 1))
+
+
+def _strands(spacing, z, radius_points=8):
+    ys = np.arange(-0.03, 0.03 + 1e-12, spacing)
+    x = np.linspace(-0.03, 0.03, radius_points)
+    return np.stack([np.broadcast_to(x, (len(ys), len(x))), np.broadcast_to(ys[:, None], (len(ys), len(x))),
+                     np.full((len(ys), len(x)), z)], -1)
+
+
+@pytest.mark.parametrize("radius,spacing", [(1e-4, 1e-3), (2e-4, 1e-3), (1e-4, 5e-4)])
+def test_parallel_strands_over_a_plane_cover_two_radii_per_spacing(radius, spacing):
+    S, N = _plane()
+    above = np.array([0.0, 0.0, -1.0])  # looking down
+    total, hit = hc.covered(S, N, _strands(spacing, 0.002), np.full(8, radius), above)
+    assert total == len(S)
+    assert hit / total == pytest.approx(2 * radius / spacing, abs=0.03)
+
+
+def test_strands_behind_the_scalp_or_a_scalp_facing_away_count_nothing():
+    S, N = _plane()
+    above = np.array([0.0, 0.0, -1.0])
+    assert hc.covered(S, N, _strands(1e-3, -0.002), np.full(8, 2e-4), above) == (len(S), 0)  # under the plane
+    assert hc.covered(S, -N, _strands(1e-3, 0.002), np.full(8, 2e-4), above) == (0, 0)  # facing away: not seen
+
+
+def test_the_taper_ends_at_the_tip():
+    class St:
+        root_radius = 1e-4
+    r = hc.radii(St, 5)
+    assert r[0] == 1e-4 and r[-1] == 0.0 and np.all(np.diff(r) < 0)
