@@ -31,7 +31,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -42,6 +41,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from synth.io import atomic_write_json  # noqa: E402
+
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from prior_claim import synth  # noqa: E402  (the synth CLI in a subprocess; exits with its message)
 
 #: the prior training settings of benchmarks/prior_claim.py's cpu profile
 TRAIN_SETS = ["train.identities_per_batch=2", "train.views_per_identity=4", "train.pixels_per_view=32",
@@ -87,14 +89,6 @@ class Times:
         entry = {"seconds": round(time.perf_counter() - t0, 1), "load_end": [round(x, 2) for x in os.getloadavg()],
                  **extra}
         atomic_write_json(self.path, {**self.data, key: entry})
-
-
-def synth(*args) -> None:
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    r = subprocess.run([sys.executable, "-m", "synth.cli.main", *map(str, args)], env=env, text=True,
-                       capture_output=True)
-    if r.returncode != 0:
-        raise SystemExit(f"synth {' '.join(map(str, args[:3]))} failed ({r.returncode}): {r.stderr.strip()[-400:]}")
 
 
 def photo(work: Path) -> Path:
