@@ -27,8 +27,8 @@ field of all records concatenated into one array, and per record its shard, sign
 count and offsets. :func:`prepare` rewrites it whenever the records it returns are not exactly
 the ones it holds (and only then), and trusts it for every shard whose signature it holds, so a
 rank of a run opens one file, not a record per shard, and builds its table from a few large
-arrays: its memory after the table does not grow with scattered small allocations (the record
-files of 1,500 shards, read one by one, left ~10 MB of fragmented heap on every rank).
+arrays: its memory after the table does not grow with scattered small allocations (reading
+1,500 record files one by one fragments ~10 MB of heap).
 :func:`build_table` merges the records (vectorised over the concatenated fields) into the
 run's :class:`Table`.
 """
@@ -352,8 +352,7 @@ def merge_records(records: list) -> Merged:
     """One :class:`Merged` of ``records`` (in order). Runs of consecutive records of one merged
     table are taken as row ranges of its arrays; other records are read from their files one at a
     time. A single merged table taken whole is returned as it is."""
-    if records and all(isinstance(r, MergedRecord) and r.merged is records[0].merged for r in records) \
-            and [r.i for r in records] == list(range(len(records[0].merged))):
+    if records and isinstance(records[0], MergedRecord) and _is_whole(records, records[0].merged):
         return records[0].merged
     parts: list[tuple[dict, list[dict], list[str]]] = []  # (fields, per-record metas, joint names)
     run: list[MergedRecord] = []
