@@ -206,7 +206,41 @@ def _save(path: Path, **arrays) -> None:
     tmp.replace(path)
 
 
+#: seed offsets of the two halves of a reference (distinct from every frame's own seed stream)
+REF_SEEDS = (1_000_003, 2_000_003)
+
+
+def _render_halves(sc, fr, tmp: Path, window, stem: Path) -> dict:
+    """The two halves of a reference (each at the configured spp, its own seed), each kept as
+    ``<stem>.h<k>.npz`` so an interrupted study loses at most one half; returns the halves."""
+    halves = []
+    for k, off in enumerate(REF_SEEDS):
+        hp = stem.with_name(f"{stem.name}.h{k}.npz")
+        if not hp.is_file():
+            out, fj = sc.render(fr, tmp, seed=int(fr.seed) + off)
+            rgba = out["rgba"]
+            if window is not None:
+                x0, y0, x1, y1 = window
+                rgba = rgba[y0:y1, x0:x1]
+            _save(hp, rgba=rgba.astype(np.float32), seconds=out["render_seconds"],
+                  cpu_seconds=out.get("render_cpu_seconds", np.nan), landmarks_2d=np.asarray(fj["landmarks_2d"]))
+            print(f"  {stem.name} half {k}: {out['render_seconds']:.0f} s", file=sys.stderr)
+        halves.append(np.load(hp))
+    return halves
+
+
+def _combine(path: Path, halves, **extra) -> None:
+    """The reference = the mean of its two halves; ``half_diff`` = their difference (RGBA), from
+    which :func:`ref_noise_mse` estimates the reference's own noise."""
+    a, b = halves[0]["rgba"], halves[1]["rgba"]
+    _save(path, rgba=(0.5 * (a + b)).astype(np.float32), half_diff=(a - b).astype(np.float32),
+          landmarks_2d=halves[0]["landmarks_2d"],
+          seconds=float(halves[0]["seconds"]) + float(halves[1]["seconds"]), **extra)
+
+
 def reference(args) -> None:
+    """Per frame a converged full render and two crops, each the mean of two renders at half the
+    spp with independent seeds (no denoising, no adaptive stop)."""
     import dataclasses
 
     from blender_scripts import scene as bscene
@@ -220,28 +254,26 @@ def reference(args) -> None:
                 if full.is_file() and all(p.is_file() for p in crops):
                     continue
                 sc.set_expression(e)
-                cfg = dataclasses.replace(sc.render_cfg, samples=args.full_spp, denoise=False, adaptive_sampling=False)
+                cfg = dataclasses.replace(sc.render_cfg, samples=max(1, args.full_spp // 2), denoise=False,
+                                          adaptive_sampling=False)
                 bscene.configure_render(cfg, sc.width, sc.height)
                 _set_border(None, sc.width, sc.height)
                 if not full.is_file():
-                    out, fj = sc.render(fr, Path(d))
-                    _save(full, rgba=out["rgba"].astype(np.float32), seconds=out["render_seconds"],
-                          landmarks_2d=np.asarray(fj["landmarks_2d"]))
-                    print(f"  {f['name']}: full reference {out['render_seconds']:.0f} s", file=sys.stderr)
+                    _combine(full, _render_halves(sc, fr, Path(d), None, full.with_suffix("")),
+                             spp=args.full_spp)
                 ref = np.load(full)
                 windows = crop_windows(ref["landmarks_2d"], ref["rgba"][..., 3])
-                cfg = dataclasses.replace(cfg, samples=args.crop_spp)
+                cfg = dataclasses.replace(cfg, samples=max(1, args.crop_spp // 2))
                 bscene.configure_render(cfg, sc.width, sc.height)
                 for name, path in zip(CROP_NAMES, crops):
                     if path.is_file():
                         continue
-                    x0, y0, x1, y1 = windows[name]
                     _set_border(windows[name], sc.width, sc.height)
-                    out, _ = sc.render(fr, Path(d))
-                    _save(path, rgba=out["rgba"][y0:y1, x0:x1].astype(np.float32), window=np.array(windows[name]),
-                          seconds=out["render_seconds"])
-                    print(f"  {f['name']}: {name} crop {out['render_seconds']:.0f} s", file=sys.stderr)
+                    _combine(path, _render_halves(sc, fr, Path(d), windows[name], path.with_suffix("")),
+                             window=np.array(windows[name]), spp=args.crop_spp)
                 _set_border(None, sc.width, sc.height)
+                for p in (work / "ref").glob(f"{f['name']}*.h[01].npz"):
+                    p.unlink()
 
 
 def variants(args, variant_list: list[str]) -> None:
@@ -264,7 +296,8 @@ def variants(args, variant_list: list[str]) -> None:
                         continue
                     sc.set_expression(e)
                     out, _ = sc.render(fr, Path(d))
-                    _save(path, rgba=out["rgba"].astype(np.float16), seconds=out["render_seconds"])
+                    _save(path, rgba=out["rgba"].astype(np.float16), seconds=out["render_seconds"],
+                          cpu_seconds=out.get("render_cpu_seconds", np.nan))
                     print(f"  {f['name']} {v}: {out['render_seconds']:.1f} s", file=sys.stderr)
             _apply_variant("base", sc, defaults, undo)
 
@@ -299,17 +332,47 @@ def persistent(args) -> None:
 # --------------------------------------------------------------------------- score and report
 
 
-def score(args) -> None:
-    from benchmarks.render import fringe_rmse, psnr_masked
-    from prior.metrics import lpips
+def _srgb(x: np.ndarray) -> np.ndarray:
+    """Colour over black, sRGB in [0, 1] (float64)."""
     from synth.appearance.srgb import linear_to_srgb
+
+    return np.clip(linear_to_srgb(np.clip(x[..., :3].astype(np.float64), 0, None)), 0, 1)
+
+
+def ref_noise_mse(ref: np.ndarray, half_diff: np.ndarray, mask: np.ndarray) -> float:
+    """The reference's own noise, as the sRGB mean squared error it adds to any comparison with
+    it: its halves A, B = ref +- half_diff / 2 are independent, so var(mean) = E[(A - B)^2] / 4."""
+    a, b = _srgb(ref + 0.5 * half_diff), _srgb(ref - 0.5 * half_diff)
+    return float(np.mean((a - b)[mask] ** 2) / 4.0) if mask.any() else 0.0
+
+
+def psnr_vs_ref(img: np.ndarray, ref: np.ndarray, half_diff: np.ndarray | None, mask: np.ndarray) -> tuple:
+    """(PSNR against the reference, the same with the reference's noise taken out of the error,
+    the reference's own noise as a PSNR), sRGB over ``mask``. The correction subtracts the noise
+    estimate from the measured MSE (an independent-noise identity), floored at a tenth of it."""
+    mse = float(np.mean((_srgb(img) - _srgb(ref))[mask] ** 2)) if mask.any() else 0.0
+    noise = 0.0 if half_diff is None else ref_noise_mse(ref, half_diff, mask)
+    db = lambda m: float("inf") if m <= 0 else 10.0 * np.log10(1.0 / m)  # noqa: E731
+    return db(mse), db(max(mse - noise, 0.1 * noise) if noise > 0 else mse), db(noise)
+
+
+def score(args) -> None:
+    from benchmarks.render import fringe_rmse
+    from prior.metrics import lpips
 
     work = Path(args.work)
     out_file = work / "scores.json"
     scores = json.loads(out_file.read_text()) if out_file.is_file() else {}
 
-    def srgb(x: np.ndarray) -> np.ndarray:  # colour over black, sRGB in [0, 1]
-        return np.clip(linear_to_srgb(np.clip(x[..., :3].astype(np.float64), 0, None)), 0, 1).astype(np.float32)
+    def srgb(x: np.ndarray) -> np.ndarray:
+        return _srgb(x).astype(np.float32)
+
+    def compare(mine: np.ndarray, refz, prefix: str, row: dict) -> None:
+        ref = refz["rgba"]
+        hd = refz["half_diff"] if "half_diff" in refz.files else None
+        raw, corr, noise = psnr_vs_ref(mine, ref, hd, ref[..., 3] > 0.5)
+        row[f"psnr{prefix}"], row[f"psnr_c{prefix}"], row[f"ref_psnr{prefix}"] = raw, corr, noise
+        row[f"lpips{prefix}"] = float(lpips(srgb(mine), srgb(ref)))
 
     for vdir in sorted((work / "renders").glob("*")):
         for path in sorted(vdir.glob("*.npz")):
@@ -317,21 +380,21 @@ def score(args) -> None:
             if key in scores:
                 continue
             img = np.load(path)
-            ref = np.load(work / "ref" / f"{path.stem}.npz")["rgba"]
+            refz = np.load(work / "ref" / f"{path.stem}.npz")
             rgba = img["rgba"].astype(np.float32)
-            row = {"seconds": float(img["seconds"]), "psnr": psnr_masked(rgba, ref, ref[..., 3] > 0.5),
-                   "lpips": float(lpips(srgb(rgba), srgb(ref))), "fringe": fringe_rmse(rgba, ref)}
+            row = {"seconds": float(img["seconds"]),
+                   "cpu_seconds": float(img["cpu_seconds"]) if "cpu_seconds" in img.files else float("nan"),
+                   "fringe": fringe_rmse(rgba, refz["rgba"])}
+            compare(rgba, refz, "", row)
             for c in CROP_NAMES:
                 cp = work / "ref" / f"{path.stem}_{c}.npz"
                 if cp.is_file():
                     cr = np.load(cp)
                     x0, y0, x1, y1 = (int(v) for v in cr["window"])
-                    mine = rgba[y0:y1, x0:x1]
-                    row[f"psnr_{c}"] = psnr_masked(mine, cr["rgba"], cr["rgba"][..., 3] > 0.5)
-                    row[f"lpips_{c}"] = float(lpips(srgb(mine), srgb(cr["rgba"])))
+                    compare(rgba[y0:y1, x0:x1], cr, f"_{c}", row)
             scores[key] = row
             atomic_write_json(out_file, scores)
-            print(f"  {key}: {row['seconds']:.1f} s, {row['psnr']:.2f} dB, LPIPS {row['lpips']:.4f}", file=sys.stderr)
+            print(f"  {key}: {row['seconds']:.1f} s, {row['psnr_c']:.2f} dB, LPIPS {row['lpips']:.4f}", file=sys.stderr)
 
 
 def report(args) -> None:
@@ -380,7 +443,7 @@ def main() -> None:
     ap.add_argument("--preset", default="production")
     ap.add_argument("--expressions", type=int, default=13)
     ap.add_argument("--views", type=int, default=30, help="pick: views planned per expression; persistent: views timed")
-    ap.add_argument("--full-spp", type=int, default=1024)
+    ap.add_argument("--full-spp", type=int, default=512)
     ap.add_argument("--crop-spp", type=int, default=4096)
     ap.add_argument("--variants", nargs="+", default=["base"])
     ap.add_argument("--cases", nargs="+", choices=sorted(CASES), default=None)

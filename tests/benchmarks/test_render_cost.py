@@ -47,3 +47,19 @@ def test_pick_finds_every_case_with_an_open_expression(tmp_path):
     assert not {"hair", "beard", "glasses", "headwear"} & set(bare["assets"])
     rc.pick(args)  # a second run keeps the first's choice
     assert json.loads((tmp_path / "frames.json").read_text()) == meta
+
+
+def test_reference_noise_is_taken_out_of_the_error():
+    rng = np.random.default_rng(0)
+    truth = np.concatenate([rng.uniform(0.2, 0.8, (256, 256, 3)), np.ones((256, 256, 1))], -1)
+    noise = lambda s: np.concatenate([rng.normal(0, s, (256, 256, 3)), np.zeros((256, 256, 1))], -1)  # noqa: E731
+    a, b = truth + noise(0.01), truth + noise(0.01)  # the reference's two halves
+    ref, half_diff = 0.5 * (a + b), a - b
+    img = truth + noise(0.005)  # a good render: the reference's own noise would dominate its error
+    mask = np.ones((256, 256), bool)
+    raw, corr, ref_db = rc.psnr_vs_ref(img, ref, half_diff, mask)
+    true_db = rc.psnr_vs_ref(img, truth, None, mask)[0]
+    assert raw < true_db - 1.0  # uncorrected, the reference's noise hides a third of the error
+    assert abs(corr - true_db) < 0.25 and corr > raw
+    assert abs(ref_db - rc.psnr_vs_ref(ref, truth, None, mask)[0]) < 0.25  # its own noise, estimated
+    assert rc.psnr_vs_ref(ref, ref, np.zeros_like(ref), mask)[1] == float("inf")  # identical, noiseless
