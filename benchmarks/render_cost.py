@@ -1,7 +1,8 @@
 """Render cost at the production framing: speed against error, and what each asset class costs.
 
     python benchmarks/render_cost.py pick W [--candidates 300 --seed 11 --preset production]
-    python benchmarks/render_cost.py reference W [--full-spp 1024 --crop-spp 4096 --cases ...]
+    python benchmarks/render_cost.py study W             # reference, then STUDY's variants one by one
+    python benchmarks/render_cost.py reference W [--full-spp 512 --crop-spp 4096 --cases ...]
     python benchmarks/render_cost.py variants W --variants base spp64 ad20 ... [--cases ...]
     python benchmarks/render_cost.py classes W            # base and hide<class> for each asset class
     python benchmarks/render_cost.py persistent W --views 5
@@ -16,7 +17,11 @@ pick: plans ``--candidates`` identities at the preset and keeps the first identi
 reference: per frame a converged render (``--full-spp``, no denoising, no adaptive stop) and two
   crops rendered with Cycles' border at ``--crop-spp``: 128x128 (at 512x512; scaled with the
   resolution) over the eyes, brows and hairline (from the frame's landmarks) and over the hair
-  silhouette at the top of the head (from the reference's alpha).
+  silhouette at the top of the head (from the reference's alpha). Each is the mean of two renders
+  at half the spp with independent seeds; their difference measures the reference's own noise,
+  which ``score`` takes out of each error (``psnr_c``: corrected; ``ref_psnr``: the noise).
+study: the reference, then every variant of ``--variants`` (default :data:`STUDY`) over all the
+  frames before the next one, so an interrupted study has whole variants.
 variants: every frame with each variant (``+``-joined parts of benchmarks/render.py's
   ``_apply_variant``: samples, adaptive threshold, denoiser, bounces, caustics, light tree, hair
   curve shape, subsurface, threads, tiles, persistent data, hidden classes).
@@ -56,6 +61,12 @@ CASES = {
 CROP = 128  # crop side at 512x512
 OPEN_JAW = 0.3  # an identity is used only if one of its expressions opens the jaw at least this much
 CROP_NAMES = ("eyes", "hairline")
+#: the study's variants in the order it renders them: today's production, then each knob alone
+#: (samples, adaptive threshold, hair curve shape, bounces, light tree, subsurface, denoiser),
+#: then the asset classes' cost (``hide<class>``)
+STUDY = ("base", "spp64", "ad20", "ad50", "ribbons", "diff2+gloss2", "transp4", "nolt", "burley", "spp128",
+         "dqbalanced+fastpf", "noguides", "nocaustics", "spp32", "hidehair", "hidebeard", "hideeyebrows",
+         "hideeyelashes", "hideclothing", "hideglasses", "hideheadwear")
 
 
 def _id(assets: dict, cls: str):
@@ -276,6 +287,17 @@ def reference(args) -> None:
                     p.unlink()
 
 
+#: a ``hide<class>`` part's class as a frame's asset list names it
+_ASSET_OF = {"clothing": "garment"}
+
+
+def _shows(variant: str, frame: dict) -> bool:
+    """Whether ``variant`` changes ``frame``: a variant that hides classes only where the frame has
+    one of them (hiding what is not there would time the base again)."""
+    hidden = [p[4:] for p in variant.split("+") if p.startswith("hide")]
+    return not hidden or any(_ASSET_OF.get(c, c) in frame["assets"] for c in hidden)
+
+
 def variants(args, variant_list: list[str]) -> None:
     from benchmarks.render import _apply_variant, engine_defaults
     from blender_scripts import scene as bscene
@@ -286,12 +308,15 @@ def variants(args, variant_list: list[str]) -> None:
         for n, (todo, sc) in enumerate(_scenes(work, args.cases)):
             defaults = defaults or engine_defaults()
             for v in (variant_list if n % 2 == 0 else variant_list[::-1]):
-                paths = [work / "renders" / v / f"{f['name']}.npz" for f, _, _ in todo]
+                mine = [t for t in todo if _shows(v, t[0])]
+                if not mine:
+                    continue
+                paths = [work / "renders" / v / f"{f['name']}.npz" for f, _, _ in mine]
                 if all(p.is_file() for p in paths):
                     continue
                 _apply_variant(v, sc, defaults, undo)
                 bscene.drop_render_cache()
-                for (f, e, fr), path in zip(todo, paths):
+                for (f, e, fr), path in zip(mine, paths):
                     if path.is_file():
                         continue
                     sc.set_expression(e)
@@ -397,6 +422,38 @@ def score(args) -> None:
             print(f"  {key}: {row['seconds']:.1f} s, {row['psnr_c']:.2f} dB, LPIPS {row['lpips']:.4f}", file=sys.stderr)
 
 
+#: a variant is "within" today's production when, over the frames they share, its mean PSNR (noise
+#: corrected, whole frame and each crop) is at most this much lower and its mean LPIPS at most
+#: LPIPS_TOL higher (issue 41's acceptance rule for the new presets)
+PSNR_TOL, LPIPS_TOL = 0.5, 0.01
+METRICS = ("psnr_c", "lpips", "psnr_c_eyes", "psnr_c_hairline", "lpips_eyes", "lpips_hairline", "fringe")
+
+
+def compare_to_base(by_v: dict[str, dict[str, dict]], base: str = "base") -> list[dict]:
+    """Per variant, paired with ``base`` over the frames both have: CPU and wall seconds per frame
+    and their ratio to the base's, the metrics' means and their differences, and whether it is
+    within the tolerances. Sorted by CPU time."""
+    ref = by_v.get(base, {})
+    rows = []
+    for v, frames in by_v.items():
+        common = sorted(f for f in frames if f in ref)
+        if not common:
+            continue
+        mean = lambda rows_, k: float(np.nanmean([rows_[f].get(k, np.nan) for f in common]))  # noqa: E731
+        cpu = lambda rows_: float(np.nansum([rows_[f].get("cpu_seconds", np.nan) for f in common]))  # noqa: E731
+        wall = lambda rows_: float(sum(rows_[f]["seconds"] for f in common))  # noqa: E731
+        r = {"variant": v, "frames": len(common), "cpu_s": cpu(frames) / len(common), "wall_s": wall(frames) / len(common),
+             "cpu_ratio": cpu(frames) / cpu(ref) if cpu(ref) > 0 else float("nan"), "wall_ratio": wall(frames) / wall(ref)}
+        for k in METRICS:
+            r[k] = mean(frames, k)
+            r["d_" + k] = r[k] - mean(ref, k)
+        psnr_ok = all(not (r["d_" + k] < -PSNR_TOL) for k in ("psnr_c", "psnr_c_eyes", "psnr_c_hairline"))
+        lpips_ok = all(not (r["d_" + k] > LPIPS_TOL) for k in ("lpips", "lpips_eyes", "lpips_hairline"))
+        r["within"] = bool(psnr_ok and lpips_ok)
+        rows.append(r)
+    return sorted(rows, key=lambda r: (r["cpu_ratio"], r["variant"]))
+
+
 def report(args) -> None:
     work = Path(args.work)
     scores = json.loads((work / "scores.json").read_text())
@@ -405,17 +462,21 @@ def report(args) -> None:
         v, frame = key.split("/", 1)
         by_v.setdefault(v, {})[frame] = row
     base = by_v.get("base", {})
-    print("| variant | frames | s / frame | time / base (paired) | PSNR dB | LPIPS | eyes PSNR | hairline PSNR | fringe RMSE |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
-    rows = []
-    for v, frames in sorted(by_v.items(), key=lambda kv: np.mean([r["seconds"] for r in kv[1].values()])):
-        common = [f for f in frames if f in base]
-        ratio = (sum(frames[f]["seconds"] for f in common) / sum(base[f]["seconds"] for f in common)) if common else np.nan
-        m = {k: float(np.nanmean([r.get(k, np.nan) for r in frames.values()]))
-             for k in ("seconds", "psnr", "lpips", "psnr_eyes", "psnr_hairline", "fringe")}
-        rows.append((v, ratio, m))
-        print(f"| {v} | {len(frames)} | {m['seconds']:.1f} | {ratio:.3f} | {m['psnr']:.2f} | {m['lpips']:.4f} | "
-              f"{m['psnr_eyes']:.2f} | {m['psnr_hairline']:.2f} | {m['fringe']:.4f} |")
+    if base:
+        noise = {k: float(np.nanmean([r.get(k, np.nan) for r in base.values()]))
+                 for k in ("ref_psnr", "ref_psnr_eyes", "ref_psnr_hairline")}
+        print(f"references' own noise (PSNR of their mean against the truth, estimated from their halves): "
+              f"frame {noise['ref_psnr']:.2f} dB, eyes crop {noise['ref_psnr_eyes']:.2f} dB, "
+              f"hairline crop {noise['ref_psnr_hairline']:.2f} dB\n")
+    rows = compare_to_base(by_v)
+    print("| variant | frames | CPU s / frame | CPU / base | wall / base | PSNR dB | Δ | eyes PSNR | Δ | hairline PSNR | Δ "
+          "| LPIPS | Δ | eyes LPIPS | hairline LPIPS | fringe RMSE | within |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---:|")
+    for r in rows:
+        print(f"| {r['variant']} | {r['frames']} | {r['cpu_s']:.1f} | {r['cpu_ratio']:.3f} | {r['wall_ratio']:.3f} | "
+              f"{r['psnr_c']:.2f} | {r['d_psnr_c']:+.2f} | {r['psnr_c_eyes']:.2f} | {r['d_psnr_c_eyes']:+.2f} | "
+              f"{r['psnr_c_hairline']:.2f} | {r['d_psnr_c_hairline']:+.2f} | {r['lpips']:.4f} | {r['d_lpips']:+.4f} | "
+              f"{r['lpips_eyes']:.4f} | {r['lpips_hairline']:.4f} | {r['fringe']:.4f} | {'yes' if r['within'] else 'no'} |")
     if args.plot and rows:
         import matplotlib
 
@@ -423,12 +484,13 @@ def report(args) -> None:
         import matplotlib.pyplot as plt
 
         fig, ax = plt.subplots(1, 2, figsize=(10, 4))
-        for v, _, m in rows:
-            for a, k, label in ((ax[0], "psnr", "PSNR (dB, sRGB, alpha > 0.5)"), (ax[1], "lpips", "LPIPS")):
-                a.scatter(m["seconds"], m[k], s=12)
-                a.annotate(v, (m["seconds"], m[k]), fontsize=6)
+        for r in rows:
+            for a, k, label in ((ax[0], "psnr_c", "PSNR (dB, sRGB, alpha > 0.5, reference noise removed)"),
+                                (ax[1], "lpips", "LPIPS")):
+                a.scatter(r["cpu_s"], r[k], s=12, c="tab:green" if r["within"] else "tab:grey")
+                a.annotate(r["variant"], (r["cpu_s"], r[k]), fontsize=6)
                 a.set_xscale("log")
-                a.set_xlabel("Cycles seconds per frame")
+                a.set_xlabel("Cycles CPU seconds per frame")
                 a.set_ylabel(label)
         fig.tight_layout()
         fig.savefig(args.plot, dpi=130)
@@ -436,7 +498,8 @@ def report(args) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=("pick", "reference", "variants", "classes", "persistent", "score", "report"))
+    ap.add_argument("what", choices=("pick", "reference", "study", "variants", "classes", "persistent", "score",
+                                     "report"))
     ap.add_argument("work")
     ap.add_argument("--candidates", type=int, default=300)
     ap.add_argument("--seed", type=int, default=11)
@@ -445,7 +508,7 @@ def main() -> None:
     ap.add_argument("--views", type=int, default=30, help="pick: views planned per expression; persistent: views timed")
     ap.add_argument("--full-spp", type=int, default=512)
     ap.add_argument("--crop-spp", type=int, default=4096)
-    ap.add_argument("--variants", nargs="+", default=["base"])
+    ap.add_argument("--variants", nargs="+", default=None)
     ap.add_argument("--cases", nargs="+", choices=sorted(CASES), default=None)
     ap.add_argument("--plot", default=None)
     args = ap.parse_args()
@@ -453,8 +516,12 @@ def main() -> None:
         pick(args)
     elif args.what == "reference":
         reference(args)
+    elif args.what == "study":
+        reference(args)
+        for v in args.variants or STUDY:
+            variants(args, [v])
     elif args.what == "variants":
-        variants(args, args.variants)
+        variants(args, args.variants or ["base"])
     elif args.what == "classes":
         from benchmarks.render import HIDEABLE
 

@@ -63,3 +63,33 @@ def test_reference_noise_is_taken_out_of_the_error():
     assert abs(corr - true_db) < 0.25 and corr > raw
     assert abs(ref_db - rc.psnr_vs_ref(ref, truth, None, mask)[0]) < 0.25  # its own noise, estimated
     assert rc.psnr_vs_ref(ref, ref, np.zeros_like(ref), mask)[1] == float("inf")  # identical, noiseless
+
+
+def test_a_class_is_hidden_only_in_frames_that_have_it():
+    frame = {"assets": ["eyebrows", "eyelashes", "garment", "hair", "iris", "skin"]}
+    assert rc._shows("base", frame) and rc._shows("spp64+ribbons", frame)
+    assert rc._shows("hidehair", frame) and rc._shows("hideclothing", frame)
+    assert not rc._shows("hideglasses", frame) and not rc._shows("hidebeard+hideheadwear", frame)
+    assert rc._shows("hidebeard+hidehair", frame)
+
+
+def test_a_variant_is_within_only_if_every_measure_is():
+    def row(cpu, psnr, lpips, eyes=None):
+        r = {"seconds": cpu / 2, "cpu_seconds": cpu, "fringe": 0.01}
+        for suffix in ("", "_eyes", "_hairline"):
+            r["psnr_c" + suffix] = psnr if not (suffix == "_eyes" and eyes is not None) else eyes
+            r["lpips" + suffix] = lpips
+        return r
+
+    by_v = {"base": {"a": row(100, 40.0, 0.05), "b": row(300, 38.0, 0.07)},
+            "cheap": {"a": row(20, 39.7, 0.055), "b": row(60, 37.8, 0.075)},
+            "blurry": {"a": row(10, 39.9, 0.07), "b": row(30, 37.9, 0.09)},  # LPIPS +0.02
+            "eyes": {"a": row(20, 40.0, 0.05, eyes=38.0), "b": row(60, 38.0, 0.07, eyes=36.0)},  # an eye crop -2 dB
+            "partial": {"a": row(50, 40.0, 0.05)}}
+    rows = {r["variant"]: r for r in rc.compare_to_base(by_v)}
+    assert rows["base"]["within"] and rows["base"]["cpu_ratio"] == 1.0
+    assert rows["cheap"]["within"] and abs(rows["cheap"]["cpu_ratio"] - 0.2) < 1e-12
+    assert abs(rows["cheap"]["d_psnr_c"] - (-0.25)) < 1e-9
+    assert not rows["blurry"]["within"] and not rows["eyes"]["within"]
+    assert rows["partial"]["frames"] == 1 and rows["partial"]["cpu_ratio"] == 0.5  # paired on its frame only
+    assert [r["variant"] for r in rc.compare_to_base(by_v)][0] == "blurry"  # cheapest first
