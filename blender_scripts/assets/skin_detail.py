@@ -22,7 +22,12 @@ G T-zone, B wrinkle zones, A beard area):
   (drawn with probability 0.5 and a light strength) or has the ``stubble`` beard, as dark as
   the beard's (else the scalp hair's) colour is (:func:`synth.appearance.pigment.shaft_darkness`),
 * scalp shadow where scalp hair grows (``scalp_mask`` attribute,
-  :func:`synth.assets.fit.masks.scalp_hair_area`), as dark as the hair's colour is.
+  :func:`synth.assets.fit.masks.scalp_hair_area`), as dark as the hair's colour is,
+* under-eye darkening (periorbital, deepest at the tear trough) and redness of the ears, over the
+  ``skin_tint`` attribute (:func:`synth.assets.fit.masks.skin_tint_mask`), the first drawn per
+  identity (:data:`UNDER_EYE`), the second from ``haemoglobin`` as the cheeks',
+* vellus hair as a sheen (the Principled BSDF's sheen layer: a soft bright rim at grazing angles),
+  its weight drawn per identity (:data:`VELLUS_SHEEN`).
 
 The base albedo (melanin/haemoglobin) is set by the worker through ``head_materials``.
 """
@@ -38,7 +43,7 @@ from synth.appearance.skin_optics import WRINKLES, detail_weight, sharp_lobe
 from synth.appearance.pigment import pigment, shaft_darkness
 from synth.assets.fit.eyes import lid_margin
 from synth.assets.fit.groom import colour_of, head_frame
-from synth.assets.fit.masks import scalp_hair_area, skin_detail_mask
+from synth.assets.fit.masks import scalp_hair_area, skin_detail_mask, skin_tint_mask
 from synth.assets.params import AssetPick, BeardParams
 from synth.dataset.segmentation import CLASSES
 
@@ -53,6 +58,20 @@ STUBBLE_SHADOW = 0.3
 #: the colour it multiplies the skin by at full strength (the stubble shadow's)
 SCALP_SHADOW = 1.0
 SCALP_SHADOW_COLOUR = (0.35, 0.33, 0.34)
+
+
+#: under-eye darkening: the strength (layer factor at the area's centre) is drawn uniformly in this
+#: range per identity; the colour it multiplies the skin by at strength 1 (a violet-brown shadow:
+#: about -12 L* on mid skin at 1, so -0.5 to -5 over the range)
+UNDER_EYE = (0.05, 0.45)
+UNDER_EYE_COLOUR = (0.72, 0.64, 0.70)
+#: the ears' redness relative to the cheeks' (thin, well-perfused skin)
+EAR_REDNESS = 0.8
+#: vellus hair: the sheen layer's weight, drawn uniformly in this range per identity, its
+#: roughness and tint (the fine hairs scatter a pale, nearly white rim)
+VELLUS_SHEEN = (0.04, 0.2)
+VELLUS_ROUGHNESS = 0.35
+VELLUS_TINT = (0.95, 0.93, 0.9)
 
 
 def _tex_node(mat, kind, scale, seed, vec=None):
@@ -126,6 +145,7 @@ def build(ctx, entry: AssetPick) -> Rig:
     rng.integers(64)  # drawn, not used (the plan gives detail_variant): the draws after it stay aligned
     seed = float(p.detail_variant) * 7.31
     stub_draw, stub_level = float(rng.random()), float(rng.uniform(0.1, 0.3))
+    under_eye, sheen = float(rng.uniform(*UNDER_EYE)), float(rng.uniform(*VELLUS_SHEEN))
     mat = ctx.materials[CLASSES["skin"]]
     nt = mat.node_tree
     V, lm = np.asarray(ctx.vertices), np.asarray(ctx.landmarks["ibug68"])
@@ -206,8 +226,22 @@ def build(ctx, entry: AssetPick) -> Rig:
         nt.links.new(bmat.attribute(mat, "scalp_mask").outputs["Vector"], sm.inputs[0])
         bmat.layer_over(mat, "Base Color", SCALP_SHADOW_COLOUR, bmat.math_node(mat, "MULTIPLY", sm.outputs["X"], scalp),
                         blend="MULTIPLY")
+    # under-eye darkening and the ears' redness over the second mask
+    bmat.write_point_vector(ctx.head.data, "skin_tint", skin_tint_mask(ctx.data, V, lm))
+    tint = nt.nodes.new("ShaderNodeSeparateXYZ")
+    nt.links.new(bmat.attribute(mat, "skin_tint").outputs["Vector"], tint.inputs[0])
+    bmat.layer_over(mat, "Base Color", UNDER_EYE_COLOUR, bmat.math_node(mat, "MULTIPLY", tint.outputs["X"], under_eye),
+                    blend="MULTIPLY")
+    bmat.layer_over(mat, "Base Color", (0.75, 0.3, 0.3),
+                    bmat.math_node(mat, "MULTIPLY", tint.outputs["Y"], 0.35 * EAR_REDNESS * red), blend="MULTIPLY")
+    # vellus hair: a sheen at grazing angles
+    bsdf = bmat.principled(mat)
+    bsdf.inputs["Sheen Weight"].default_value = sheen
+    bsdf.inputs["Sheen Roughness"].default_value = VELLUS_ROUGHNESS
+    bsdf.inputs["Sheen Tint"].default_value = (*VELLUS_TINT, 1.0)
     rec.update(freckles=fr, age_spots=ag, redness=round(red, 4), oiliness=oil, wrinkle_depth=wd,
                pore_scale=pore, stubble_shadow=round(stubble, 4), scalp_shadow=round(scalp, 4),
+               under_eye=round(under_eye, 4), vellus_sheen=round(sheen, 4),
                detail={"pixel_m": None if ctx.pixel_m is None else round(ctx.pixel_m, 7),
                        "pores": round(float(mat.get("detail_pores", 1.0)), 4),
                        "fine_lines": round(float(mat.get("detail_fine_lines", 1.0)), 4), "wrinkles": round(w_wr, 4),

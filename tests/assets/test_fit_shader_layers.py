@@ -11,7 +11,8 @@ from scipy.spatial.distance import cdist
 
 from synth.assets.fit.eyes import eye_coordinates
 from synth.assets.fit.masks import (BEARD_FEATHER_M, JAW_LINE_TOP, distance_to, feather, jaw_line, makeup_masks,
-                                    region_mask, segment_distance, skin_detail_mask, skin_only, soft_region)
+                                    region_mask, segment_distance, skin_detail_mask, skin_only, skin_tint_mask,
+                                    soft_region)
 from synth.model.meshutil import fit_sphere
 
 
@@ -90,6 +91,33 @@ def test_makeup_falls_back_to_the_landmark_lips(head):
     m1, _ = makeup_masks(no_lips, V, lm)
     near = distance_to(V, lm[48:60]) < 0.0005
     assert np.all(m1[near & skin_only(data, len(V)), 0] == 1.0)
+
+
+def test_skin_tint_mask_lies_under_the_eyes_and_on_the_ears(head):
+    """masks.skin_tint_mask: X under each eye (below the lower lid's line, within 2 cm of it,
+    centred on the nose's side of the lid's middle, both eyes alike), nothing above the lids, on
+    the lips, the nose tip or off the skin; Y the ears and a few millimetres around them."""
+    data, V, lm = head
+    m = skin_tint_mask(data, V, lm)
+    assert m.shape == (len(V), 3) and m.min() >= 0 and m.max() <= 1 and not m[:, 2].any()
+    assert not m[~skin_only(data, len(V))].any()
+    ue = m[:, 0]
+    for lower, sign in (((40, 41), 1.0), ((46, 47), -1.0)):
+        lid = lm[list(lower)].mean(0)
+        side = np.sign(V[:, 0] - lm[27][0]) == np.sign(lid[0] - lm[27][0])
+        core = side & (ue > 0.8)
+        assert core.sum() > 20
+        assert np.all(V[ue > 0, 2] < lid[2] + 1e-9)  # below the lid's line: the shadow is not on the lid above it
+        c = V[core].mean(0)
+        assert -0.012 < c[2] - lid[2] < -0.002 and np.linalg.norm(V[side & (ue > 0)] - lid, axis=1).max() < 0.03
+        assert np.sign(lm[27][0] - lid[0]) * (c[0] - lid[0]) > 0.002  # toward the nose
+    assert ue[region_mask(data.regions, ["lips"], len(V))].max() == 0
+    assert ue[np.argmin(np.linalg.norm(V - lm[30], axis=1))] == 0
+    halves = [(ue > 0.5) & (np.sign(V[:, 0] - lm[27][0]) == s) for s in (-1, 1)]
+    assert abs(int(halves[0].sum()) - int(halves[1].sum())) <= 0.1 * max(int(halves[0].sum()), 1)
+    ears = region_mask(data.regions, ["ears"], len(V))
+    assert ears.sum() > 100 and np.mean(m[ears, 1] > 0.5) > 0.9
+    assert np.all(m[~ears, 1][distance_to(V[~ears], V[ears]) > 0.011] == 0)
 
 
 def test_skin_detail_mask(head):

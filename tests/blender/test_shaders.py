@@ -232,3 +232,42 @@ def test_teeth_show_gaps_between_teeth(tmp_path):
     uv, _ = project(K, w2c, ctx.vertices[front][np.argmin(np.abs(ctx.vertices[front][:, 0]))][None])
     cols = np.nonzero(cols_dark)[0]
     assert np.min(np.abs(cols + 0.5 - uv[0, 0])) < 2.0
+
+
+@pytest.mark.blender
+@pytest.mark.slow
+def test_under_eye_darkening_shows_where_its_mask_is(tmp_path, monkeypatch):
+    """The skin rig's under-eye layer at its strongest against none: the skin under the lower
+    lids darker (and only there: the nose bridge unchanged); the vellus sheen drawn in its range."""
+    pytest.importorskip("bpy")
+    from synth.conventions import project
+
+    sd = importlib.import_module("blender_scripts.assets.skin_detail")
+    from synth.assets.fit.masks import skin_tint_mask
+
+    lum = {}
+    for strength in (0.0, 0.6):
+        monkeypatch.setattr(sd, "UNDER_EYE", (strength, strength))
+        ctx, hm = asset_scene.head_context("neutral")
+        ctx.assets = {}
+        rec = sd.build(ctx, AssetPick.coerce("skin", {"id": "procedural_skin", "params": {"haemoglobin": 0.05}})).record()
+        assert rec["under_eye"] == strength and sd.VELLUS_SHEEN[0] <= rec["vellus_sheen"] <= sd.VELLUS_SHEEN[1]
+        lm = ctx.landmarks["ibug68"]
+        r, K, w2c = _render(ctx, tmp_path, target=0.5 * (lm[39] + lm[42]), radius=0.3, fov_deg=10.0)
+        lum[strength] = r["rgba"][..., :3].mean(-1)
+    mask = skin_tint_mask(ctx.data, ctx.vertices, lm)
+    uv, _ = project(K, w2c, ctx.vertices)
+    ij = np.floor(uv).astype(int)
+    inside = (ij[:, 0] >= 0) & (ij[:, 0] < W) & (ij[:, 1] >= 0) & (ij[:, 1] < H)
+
+    def pix(sel):
+        m = np.zeros((H, W), bool)
+        m[ij[sel & inside, 1], ij[sel & inside, 0]] = True
+        return m
+
+    under = pix(mask[:, 0] > 0.8)
+    bridge = pix((mask[:, 0] == 0) & (np.linalg.norm(ctx.vertices - lm[27], axis=1) < 0.012))  # between the eyes
+    assert under.sum() >= 10 and bridge.sum() >= 10, (under.sum(), bridge.sum())
+    drop = 1.0 - lum[0.6][under].mean() / lum[0.0][under].mean()
+    assert 0.08 < drop < 0.4, drop  # about -12 L* at strength 1, scaled by 0.6
+    assert abs(1.0 - lum[0.6][bridge].mean() / lum[0.0][bridge].mean()) < 0.02

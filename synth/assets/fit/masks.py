@@ -200,6 +200,47 @@ def skin_detail_mask(data, V, lm, reach: float = DEFAULT_REACH) -> np.ndarray:
     return np.clip(m, 0, 1)
 
 
+#: the under-eye area (periorbital darkening, the tear trough): an ellipse on the face's plane
+#: centred this far below the lower lid's middle (metres), its half-width this share of the eye's
+#: width, its half-height UNDER_EYE_HALF_HEIGHT_M; full strength inside half of it, none past
+#: UNDER_EYE_OUTER of it
+UNDER_EYE_DROP_M = 0.006
+UNDER_EYE_HALF_WIDTH = 0.55
+UNDER_EYE_HALF_HEIGHT_M = 0.009
+UNDER_EYE_OUTER = 1.4
+
+
+def under_eye_area(V: np.ndarray, lm: np.ndarray) -> np.ndarray:
+    """(V,) the darker skin under each eye, 0 .. 1 (before :func:`skin_only`): an ellipse in
+    the x-z plane below the lower lid (ibug68 41/40 and 47/46 its middle, the corners 36/39 and
+    42/45 the eye's width), shifted a fifth of the eye's width toward the nose (the tear trough
+    is deepest medially), and nothing above the lower lid's line."""
+    V = np.asarray(V, np.float64)
+    out = np.zeros(len(V))
+    for lower, (c0, c1) in (((40, 41), (36, 39)), ((46, 47), (42, 45))):
+        lid = lm[list(lower)].mean(0)
+        width = float(np.linalg.norm(lm[c1] - lm[c0]))
+        medial = np.sign(float(lm[27][0] - lid[0])) * 0.2 * width  # toward the nose bridge
+        cx, cz = lid[0] + medial, lid[2] - UNDER_EYE_DROP_M
+        d = np.hypot((V[:, 0] - cx) / (UNDER_EYE_HALF_WIDTH * width), (V[:, 2] - cz) / UNDER_EYE_HALF_HEIGHT_M)
+        front = V[:, 1] < lid[1] + 0.02  # the face's side of the head (the face looks along -y)
+        below = np.clip((lid[2] - V[:, 2]) / 0.002, 0.0, 1.0)  # faded in over 2 mm under the lid line
+        out = np.maximum(out, feather(d, 0.5, UNDER_EYE_OUTER) * below * front)
+    return out
+
+
+def skin_tint_mask(data, V, lm) -> np.ndarray:
+    """The skin-detail rig's second attribute (V, 3): X the under-eye area (:func:`under_eye_area`),
+    Y the ears (the ``ears`` region where the model has one, feathered 4 mm into the skin around
+    it), Z 0; zero off the skin."""
+    n = len(V)
+    skin = skin_only(data, n).astype(float)
+    ears = region_mask(data.regions, ("ears", "ear_l", "ear_r"), n)
+    ear = soft_region(V, ears, 0.004) if ears.any() else np.zeros(n)
+    m = np.stack([under_eye_area(V, lm), ear, np.zeros(n)], 1) * skin[:, None]
+    return np.clip(m, 0, 1)
+
+
 #: Gaussian width (metres) over which the skin-detail beard area fades out: the region is a
 #: set of vertices 7-11 mm apart, and as a hard 0/1 mask the stubble shadow ended in the
 #: triangles' staircase
