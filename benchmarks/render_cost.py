@@ -328,8 +328,9 @@ def variants(args, variant_list: list[str]) -> None:
 
 
 def persistent(args) -> None:
-    """Seconds per view over ``--views`` views of each neutral expression, with and without
-    Cycles' persistent data (BVH and shaders kept between the views of one scene)."""
+    """Seconds per view (wall, and CPU under ``<variant>_cpu``) over ``--views`` views of each
+    neutral expression, with and without Cycles' persistent data (BVH and shaders kept between
+    the views of one scene)."""
     from benchmarks.render import _apply_variant, engine_defaults
     from blender_scripts import scene as bscene
 
@@ -348,7 +349,9 @@ def persistent(args) -> None:
             for v in ("base", "nopd"):
                 _apply_variant(v, sc, defaults, undo)
                 bscene.drop_render_cache()
-                row[v] = [sc.render(fr, Path(d))[0]["render_seconds"] for fr in e.frames[: args.views]]
+                outs = [sc.render(fr, Path(d))[0] for fr in e.frames[: args.views]]
+                row[v] = [o["render_seconds"] for o in outs]
+                row[v + "_cpu"] = [o["render_cpu_seconds"] for o in outs]
             res[f["name"]] = row
             atomic_write_json(out_file, res)
             _apply_variant("base", sc, defaults, undo)
