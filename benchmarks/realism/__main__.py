@@ -83,6 +83,7 @@ def main(argv=None) -> None:
     p.add_argument("--hair-identities", type=int, default=6)
     p = sub.add_parser("scalp")
     p.add_argument("dataset")
+    planned_options(sub.add_parser("hair-mix"), 10000)
     p = planned_options(sub.add_parser("hair"), 12)
     p.add_argument("--style", default=None, help="only identities planned with this hair style")
     planned_options(sub.add_parser("drape"), 4, 256)
@@ -124,7 +125,7 @@ def main(argv=None) -> None:
         "skin": skin.skin, "plot-skin": skin.plot_skin,
         "framing": frames.framing, "body-end": frames.body_end, "timing": frames.timing, "fringe": frames.fringe,
         "sheet": frames.sheet, "scalp": frames.scalp,
-        "hats": assets.hats, "hair": assets.hair, "shoulders": assets.shoulders, "drape": assets.drape_table,
+        "hats": assets.hats, "hair": assets.hair, "hair-mix": assets.hair_mix, "shoulders": assets.shoulders, "drape": assets.drape_table,
         "beard": assets.beard_table,
         "eyes": eyes.eyes,
         "judge": lambda a: judge.judge(a, _png, CATS), "jaw": judge.jaw_table, "mapping": judge.mapping_table,

@@ -267,3 +267,33 @@ def beard_table(args) -> dict:
     fmt = ("{:.0f}", "{:.0f}", "{:.2f}", "{:.2f}", "{:.2f}")
     print("| " + " | ".join(f"{f.format(x)} / {f.format(y)}" for f, x, y in zip(fmt, b, a)) + " |")
     return {k: v.tolist() for k, v in got.items()}
+
+
+def hair_mix(args) -> dict:
+    """The default mix of scalp hair as the planner draws it: per style its share of ``--identities``
+    identities of ``--seed`` (bald or shaved: no hair pick), how many of them wear a fringe and
+    which partings, and the colours; from the manifest and the rules, so it follows any change."""
+    from collections import Counter
+
+    from synth.assets.catalogue import load_catalogue
+    from synth.plan.assets import sample_assets_batch
+
+    n = int(args.identities)
+    picks = [a.get("hair") for a in sample_assets_batch(args.seed, np.arange(n), load_catalogue(None))]
+    styles = Counter("(none: bald or shaved)" if p is None else p["id"] for p in picks)
+    fringe = Counter(p["id"] for p in picks if p is not None and p["params"].get("fringe"))
+    parting = {s: Counter(str(p["params"]["parting"]) for p in picks if p is not None and p["id"] == s
+                          and "parting" in p["params"]) for s in styles}
+    colours = Counter(str(p["params"].get("colour")) for p in picks if p is not None)
+    print(f"\n### The hair mix ({n:,} planned identities of seed {args.seed})\n")
+    print("| style | share | with a fringe | partings |\n|---|---:|---:|---|")
+    rows = {}
+    for s, k in sorted(styles.items(), key=lambda kv: (-kv[1], kv[0])):
+        part = ", ".join(f"{name} {c / k:.0%}" for name, c in sorted(parting.get(s, Counter()).items()))
+        rows[s] = {"share": k / n, "fringe": fringe.get(s, 0) / k, "parting": dict(parting.get(s, {}))}
+        print(f"| {s} | {k / n:.1%} | {fringe.get(s, 0) / k:.0%} | {part or '-'} |")
+    total = sum(colours.values())
+    print("\n| colour | " + " | ".join(c for c, _ in colours.most_common()) + " |")
+    print("|---|" + "---:|" * len(colours))
+    print("| share of the haired | " + " | ".join(f"{k / total:.1%}" for _, k in colours.most_common()) + " |")
+    return {"styles": rows, "colours": {c: k / total for c, k in colours.items()}}
