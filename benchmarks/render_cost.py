@@ -21,7 +21,9 @@ reference: per frame a converged render (``--full-spp``, no denoising, no adapti
   at half the spp with independent seeds; their difference measures the reference's own noise,
   which ``score`` takes out of each error (``psnr_c``: corrected; ``ref_psnr``: the noise).
 study: the reference, then every variant of ``--variants`` (default :data:`STUDY`) over all the
-  frames before the next one, so an interrupted study has whole variants.
+  frames before the next one, so an interrupted study has whole variants. ``--only open`` keeps
+  the six open-mouth frames (a first stage at half the cost; the chosen settings are then checked
+  on all twelve).
 variants: every frame with each variant (``+``-joined parts of benchmarks/render.py's
   ``_apply_variant``: samples, adaptive threshold, denoiser, bounces, caustics, light tree, hair
   curve shape, subsurface, threads, tiles, persistent data, hidden classes).
@@ -142,8 +144,9 @@ def pick(args) -> None:
 # --------------------------------------------------------------------------- rendering
 
 
-def _scenes(work: Path, cases: list[str] | None):
-    """(frames of one identity, its IdentityScene) in turn, for the frames of ``cases``."""
+def _scenes(work: Path, cases: list[str] | None, expressions: list[str] | None = None):
+    """(frames of one identity, its IdentityScene) in turn, for the frames of ``cases`` whose
+    expression tag (``neutral``, ``open``) is in ``expressions`` (None: all)."""
     from blender_scripts import scene as bscene
     from blender_scripts.worker import IdentityScene, software_versions
     from synth.model.head import HeadModel
@@ -155,7 +158,7 @@ def _scenes(work: Path, cases: list[str] | None):
     hm = HeadModel(plan.model_data())
     by_shard: dict[str, list[dict]] = {}
     for f in meta["frames"]:
-        if not cases or f["case"] in cases:
+        if (not cases or f["case"] in cases) and (not expressions or f["name"].rsplit("_", 1)[1] in expressions):
             by_shard.setdefault(f["shard"], []).append(f)
     for sid, frames in by_shard.items():
         spec = plan.shard_spec(sid)
@@ -258,7 +261,7 @@ def reference(args) -> None:
 
     work = Path(args.work)
     with tempfile.TemporaryDirectory(prefix="synth-cost-") as d:
-        for todo, sc in _scenes(work, args.cases):
+        for todo, sc in _scenes(work, args.cases, args.expressions_only):
             for f, e, fr in todo:
                 full = work / "ref" / f"{f['name']}.npz"
                 crops = [work / "ref" / f"{f['name']}_{c}.npz" for c in CROP_NAMES]
@@ -305,7 +308,7 @@ def variants(args, variant_list: list[str]) -> None:
     work = Path(args.work)
     defaults, undo = None, []
     with tempfile.TemporaryDirectory(prefix="synth-cost-") as d:
-        for n, (todo, sc) in enumerate(_scenes(work, args.cases)):
+        for n, (todo, sc) in enumerate(_scenes(work, args.cases, args.expressions_only)):
             defaults = defaults or engine_defaults()
             for v in (variant_list if n % 2 == 0 else variant_list[::-1]):
                 mine = [t for t in todo if _shows(v, t[0])]
@@ -339,7 +342,7 @@ def persistent(args) -> None:
     res = json.loads(out_file.read_text()) if out_file.is_file() else {}
     undo: list = []
     with tempfile.TemporaryDirectory(prefix="synth-cost-") as d:
-        for todo, sc in _scenes(work, args.cases):
+        for todo, sc in _scenes(work, args.cases, args.expressions_only):
             defaults = engine_defaults()
             f, e, _ = todo[0]
             if f["name"] in res:
@@ -513,6 +516,8 @@ def main() -> None:
     ap.add_argument("--crop-spp", type=int, default=4096)
     ap.add_argument("--variants", nargs="+", default=None)
     ap.add_argument("--cases", nargs="+", choices=sorted(CASES), default=None)
+    ap.add_argument("--only", dest="expressions_only", nargs="+", choices=("neutral", "open"), default=None,
+                    help="only the frames of these expressions (the study's first stage: --only open)")
     ap.add_argument("--plot", default=None)
     args = ap.parse_args()
     if args.what == "pick":
