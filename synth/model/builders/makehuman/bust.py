@@ -86,6 +86,11 @@ class BustData:
     joint_basis: dict[str, np.ndarray]  # name -> (K, 3) rest joint basis
     rotations: dict[str, np.ndarray]  # "girdle_L", "arm_L", ... -> (3, 3) world rotations
     info: dict = field(default_factory=dict)
+    #: with ``build_bust(keep_samples=K)``: the builder's first K identity samples as MakeHuman makes
+    #: them ("rest": (K, Vb, 3) unposed, "joints": name -> (K, 3)), their head codes ("codes"),
+    #: and their macro values ("gender" 0 female .. 1 male, "weight" 0 .. 1, "muscle", "old": the
+    #: share of the 'old' age target, 0 at 25 years .. 1 at 90)
+    samples: dict | None = None
 
     def rest(self, code: np.ndarray) -> np.ndarray:
         c = np.asarray(code, np.float64) * self.scale
@@ -99,6 +104,14 @@ class BustData:
     def joint(self, name: str, code: np.ndarray) -> np.ndarray:
         c = np.asarray(code, np.float64) * self.scale
         return self.joints[name] + c @ self.joint_basis[name]
+
+    def joints_of(self, code: np.ndarray) -> dict[str, np.ndarray]:
+        """The rest joints of an identity code (name -> (3,))."""
+        return {n: self.joint(n, code) for n in self.joints}
+
+    def evaluate(self, code: np.ndarray) -> np.ndarray:
+        """(Vb, 3) the posed bust of ``code`` with its arms cleared of the torso (:func:`clear_arms`)."""
+        return clear_arms(self, self.posed(code), self.joints_of(code))[0]
 
 
 def _rig(data: Path) -> tuple[dict, dict]:
@@ -207,7 +220,7 @@ def select(obj, mesh, Wc: np.ndarray, rig: dict, groups: dict) -> tuple[np.ndarr
     return np.unique(np.concatenate([obj.polys[i] for i in keep])), keep, np.array(in_head, bool)
 
 
-def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48) -> BustData:
+def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_samples: int = 0) -> BustData:
     """Build the bust (module docstring). ``head_model``: the shipped head model
     (:class:`synth.model.format.HeadModelData`) to check the shared vertices and the basis
     against (optional)."""
@@ -227,11 +240,15 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48) -> Bust
     Wc_hm = weight_classes(rig, wts, n_hm)
 
     hm08, poly_ids, in_head_all = select(obj, mesh, Wc_hm, rig, groups)
-    # drop the head model's polygons without a shoulder vertex (its head and neck): family 0 = torso
+    # drop the head model's polygons without a shoulder vertex (family 0 = torso) and without a
+    # vertex that the pose moves (its head and neck): the seam between the head model's remaining
+    # polygons and the bust then does not move with the arms
     _, family = skin_weights(data, mesh)
     fam_hm = np.full(n_hm, -1)
     fam_hm[mesh.kept] = family[: len(mesh.kept)]
-    sel = [(i, h) for i, h in zip(poly_ids, in_head_all) if not h or np.any(fam_hm[obj.polys[i]] == 0)]
+    moves = Wc_hm[:, 0] < 1.0 - 1e-9
+    sel = [(i, h) for i, h in zip(poly_ids, in_head_all)
+           if not h or np.any(fam_hm[obj.polys[i]] == 0) or np.any(moves[obj.polys[i]])]
     poly_ids = [i for i, _ in sel]
     head_polys = np.array([h for _, h in sel], bool)
     hm08 = np.unique(np.concatenate([obj.polys[i] for i in poly_ids]))
@@ -336,10 +353,26 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48) -> Bust
         info["shipped_template_max_diff"] = float(np.abs(np.asarray(head_model.template, np.float64)[
             head_rows[shared]] - rest_template[shared]).max())
         info["shipped_scale_max_rel_diff"] = float(np.abs(np.asarray(head_model.identity_scale)[:k] / std[:k] - 1).max())
+    samples = None
+    if keep_samples:
+        K = int(keep_samples)
+        keys = [k for _, k in macro]
+
+        def share(var, val):
+            cols = [i for i, k in enumerate(keys) if len(k) == 4 and (var, val) in k]  # universal targets
+            return W[:K, cols].sum(1)
+
+        ex_j = base_j + (W[:K] @ BJ.reshape(nt, -1)).reshape(K, -1, 3)
+        samples = {"rest": P[hm08] + (W[:K] @ B.reshape(nt, -1)).reshape(K, Vb, 3),
+                   "joints": {nm: ex_j[:, i] for i, nm in enumerate(jnames)}, "codes": codes[:K],
+                   "gender": share("gender", "male"),
+                   "weight": 0.5 + 0.5 * (share("weight", "max") - share("weight", "min")),
+                   "muscle": 0.5 + 0.5 * (share("muscle", "max") - share("muscle", "min")),
+                   "old": share("age", "old")}
     return BustData(hm08=hm08, polys=polys, triangles=tris, head_rows=head_rows, head_polys=head_polys,
                     mirror=mirror, rest_template=rest_template, rest_basis=rest_basis, template=template,
                     basis=basis_posed, scale=std, weights=Wcl, joints=joints, joint_basis=joint_basis,
-                    rotations=rot, info=info)
+                    rotations=rot, info=info, samples=samples)
 
 
 def save_bust(b: BustData, path: Path) -> None:
@@ -384,8 +417,9 @@ PENETRATION_WEIGHT = 0.1
 PENETRATION_BELOW = 0.13
 
 
-def arm_torso_penetration(b: BustData, V: np.ndarray, code: np.ndarray) -> dict[str, float]:
-    """How deep (m) each posed arm's vertices ``V`` (Vb, 3) of identity ``code`` go inside the
+def arm_torso_penetration(b: BustData, V: np.ndarray, J: dict[str, np.ndarray]) -> dict[str, float]:
+    """How deep (m) each posed arm's vertices ``V`` (Vb, 3) of the identity whose rest joints are
+    ``J`` go inside the
     torso's surface: the largest negative signed distance (vertex-normal sign, robust on the open
     bust) of arm vertices under the armpit to the torso's triangles beside them; 0 when none is
     inside. Side "L", "R"."""
@@ -397,7 +431,7 @@ def arm_torso_penetration(b: BustData, V: np.ndarray, code: np.ndarray) -> dict[
     zc = V[F, 2].mean(1)
     out = {}
     for k, (s, _) in enumerate(SIDES):
-        az = float(posed_joint(b, f"{ARM_BONE}.{s}", code)[2])
+        az = float(posed_joint(b, f"{ARM_BONE}.{s}", J)[2])
         faces = np.nonzero(torso & (zc < az - PENETRATION_BELOW + 0.03))[0]
         arm = np.nonzero((b.weights[:, 2 + 2 * k] >= 1 - PENETRATION_WEIGHT) & (V[:, 2] < az - PENETRATION_BELOW))[0]
         if not len(arm) or not len(faces):
@@ -416,23 +450,24 @@ CLEARANCE_STEPS = 4
 CLEARANCE_MAX_DEG = 25.0
 
 
-def posed_joint(b: BustData, name: str, code: np.ndarray) -> np.ndarray:
-    """A rest joint of the identity ``code`` where :func:`pose` takes it: the shoulder joint turns
-    with the girdle, the elbow with the girdle and the arm; other joints stay."""
-    j = b.joint(name, code)
+def posed_joint(b: BustData, name: str, J: dict[str, np.ndarray]) -> np.ndarray:
+    """A rest joint of ``J`` (an identity's rest joints, :meth:`BustData.joints_of`) where
+    :func:`pose` takes it: the shoulder joint turns with the girdle, the elbow with the girdle and
+    the arm; other joints stay."""
+    j = np.asarray(J[name], np.float64)
     bone, s = name.rsplit(".", 1)
     if bone not in (ARM_BONE, ELBOW_BONE):
         return j
-    g = b.joint(f"{GIRDLE_BONE}.{s}", code)
+    g = np.asarray(J[f"{GIRDLE_BONE}.{s}"], np.float64)
     R1, R2 = b.rotations[f"girdle_{s}"], b.rotations[f"arm_{s}"]
     if bone == ELBOW_BONE:
-        a = b.joint(f"{ARM_BONE}.{s}", code)
+        a = np.asarray(J[f"{ARM_BONE}.{s}"], np.float64)
         j = (j - a) @ R2.T + a
     return (j - g) @ R1.T + g
 
 
-def clear_arms(b: BustData, V: np.ndarray, code: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
-    """(vertices, extra abduction per side in degrees): the posed bust ``V`` of ``code`` with each
+def clear_arms(b: BustData, V: np.ndarray, J: dict[str, np.ndarray]) -> tuple[np.ndarray, dict[str, float]]:
+    """(vertices, extra abduction per side in degrees): the posed bust ``V`` (rest joints ``J``) with each
     arm turned out about its (posed) shoulder joint, about the front-back axis, until its vertices
     under the armpit are :data:`CLEARANCE_MARGIN` outside the torso (:func:`arm_torso_penetration`).
     The linear model poses every identity with the template's rotations; a heavy body's chest
@@ -441,15 +476,15 @@ def clear_arms(b: BustData, V: np.ndarray, code: np.ndarray) -> tuple[np.ndarray
     V = np.array(V, np.float64, copy=True)
     extra = {}
     for k, (s, sign) in enumerate(SIDES):
-        a = posed_joint(b, f"{ARM_BONE}.{s}", code)
+        a = posed_joint(b, f"{ARM_BONE}.{s}", J)
         w = b.weights[:, 2 + 2 * k]
         total = 0.0
         for _ in range(CLEARANCE_STEPS):
-            depth = arm_torso_penetration(b, V, code)[s]
+            depth = arm_torso_penetration(b, V, J)[s]
             if depth <= CLEARANCE_TOL:
                 break
             # the arm's length to the deepest region: about the distance to the elbow
-            r = float(np.linalg.norm(posed_joint(b, f"{ELBOW_BONE}.{s}", code) - a))
+            r = float(np.linalg.norm(posed_joint(b, f"{ELBOW_BONE}.{s}", J) - a))
             step = min(np.degrees((depth + CLEARANCE_MARGIN) / r), CLEARANCE_MAX_DEG - total)
             if step <= 0:
                 break
@@ -459,3 +494,47 @@ def clear_arms(b: BustData, V: np.ndarray, code: np.ndarray) -> tuple[np.ndarray
             total += step
         extra[s] = total
     return V, extra
+
+
+#: the deltoids' band for the bideltoid breadth: from this far (m) under the posed shoulder joints ...
+DELTOID_BELOW = 0.12
+#: ... to this far above them
+DELTOID_ABOVE = 0.08
+#: the acromion (skin): the most lateral skin point at least this far (m) above the posed shoulder
+#: joint, within ACROMION_SLAB (m) of the joint front to back. The acromion's lateral edge sits a few
+#: cm above the humeral head's centre; under it the deltoid bulges out (the bideltoid breadth)
+ACROMION_ABOVE = 0.03
+ACROMION_SLAB = 0.02
+#: the chest band: this far (m) above and below the nipples (MakeHuman's breast bones' tails)
+CHEST_BAND = 0.015
+
+
+def measures(b: BustData, V: np.ndarray, J: dict[str, np.ndarray]) -> dict[str, float]:
+    """Anthropometric breadths and depths (mm) of a posed bust ``V`` (rest joints ``J``):
+
+    * ``bideltoid``: the largest breadth side to side between DELTOID_BELOW under and
+      DELTOID_ABOVE over the (posed) shoulder joints: the deltoids, arms hanging (Pheasant's item 17);
+    * ``biacromial``: between the skin acromia (ACROMION_ABOVE; item 18 is measured on the bone,
+      a few mm inside the skin); ``gh_centres``: between the glenohumeral joint centres (the rig's);
+    * ``chest_depth``: from the back's rearmost point (between the chest band and the shoulder
+      joints: the shoulder blades) to the chest's or breasts' foremost point in the chest band
+      (item 20, measured to a wall touching the back);
+    * ``chest_breadth``: the torso's breadth (arm vertices excluded) in the chest band."""
+    a = {s: posed_joint(b, f"{ARM_BONE}.{s}", J) for s, _ in SIDES}
+    az = 0.5 * (a["L"][2] + a["R"][2])
+    x, y, z = V[:, 0], V[:, 1], V[:, 2]
+    d = (z > az - DELTOID_BELOW) & (z < az + DELTOID_ABOVE)
+    out = {"bideltoid": x[d].max() - x[d].min()}
+    acr = []
+    for s, sign in SIDES:
+        m = (z >= a[s][2] + ACROMION_ABOVE) & (np.abs(y - a[s][1]) <= ACROMION_SLAB) & (sign * x > 0)
+        acr.append((sign * x[m]).max())
+    out["biacromial"] = acr[0] + acr[1]
+    out["gh_centres"] = float(np.linalg.norm(a["L"] - a["R"]))
+    nz = 0.5 * (J["nipple.L"][2] + J["nipple.R"][2])  # the breast bones do not move
+    torso = (b.weights[:, 2] + b.weights[:, 4]) < PENETRATION_WEIGHT
+    band = torso & (np.abs(z - nz) <= CHEST_BAND)
+    back = torso & (z > nz - CHEST_BAND) & (z < az)
+    out["chest_depth"] = y[back].max() - y[band].min()
+    out["chest_breadth"] = x[band].max() - x[band].min()
+    return {k: 1000.0 * float(v) for k, v in out.items()}
