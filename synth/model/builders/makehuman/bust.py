@@ -1,0 +1,540 @@
+"""The body under the clothes (prototype, issue 42 item 2): a bust from the same MakeHuman data as
+the default head, posed with its arms hanging, shaped by the head's identity code.
+
+What it is (docs/body-plan.md has the measurements and the plan to integrate it):
+
+* **Mesh.** The hm08 base mesh's ``body`` polygons of the upper body: the torso above
+  :data:`Z_CUT` (base mesh, about the waist) and each upper arm down to :data:`ELBOW_T` of the way
+  from the shoulder joint to the elbow joint, minus the head model's own polygons that hold no
+  shoulder vertex (its head and neck). What remains overlaps the head model on its shoulder
+  polygons (``head_polys``), which the bust replaces: the head model's shoulders are in the A pose
+  and must move with the arms (the deltoids' tops are inside its crop, ``CROP_MAX_ABS_X``).
+* **Pose.** MakeHuman's base mesh stands in an A pose, upper arms about 48 degrees below the
+  horizontal. The arms are lowered by linear blend skinning with the mpfb2 ``standard`` rig's
+  skin weights (``weights.default.json``, the head model's): a rotation at the scapula joint
+  (``shoulder01``, :data:`GIRDLE_SHARE` of the turn: the shoulder girdle drops with the arm) and
+  the rest at the glenohumeral joint (``upperarm01``), both about the same axis, chosen on the
+  template so that the upper arm ends :data:`ARM_HANG_DEG` out from the vertical in the frontal
+  plane and :data:`ARM_FORWARD_DEG` forward. Every other bone stays. The joint centres are the
+  rig's (mean of MakeHuman's joint cubes), so they follow every identity.
+* **Identity.** The rotations are fixed (the template's), and LBS with fixed rotations about
+  joints that are linear in the vertices is a linear map of (vertices, joints): the posed bust is
+  ``template + sum_k code_k * scale_k * basis_k`` like the head. The unposed basis is the
+  regression of the bust's offsets on the head's identity codes over the builder's own samples
+  (the formula of the head model's joint basis); on the vertices the head model also has, it is
+  the head's PCA basis itself. So one identity code evaluates head and bust, and the bust is
+  the best linear prediction, from the head, of what MakeHuman's macros (sex, age, weight,
+  muscle, height, proportions, ethnicity) make of the body. :func:`build_bust` also reports the
+  share of the bust's variance over the samples that the head code explains.
+
+Pure numpy, deterministic up to BLAS rounding (the same as the head model: a shipped file).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from synth.model.builders.makehuman.build import N_SAMPLES, SEED
+from synth.model.builders.makehuman.identity import (identity_pca, macro_targets, modifier_files, modifiers,
+                                                     sample_identity_weights)
+from synth.model.builders.makehuman.mesh import build_mesh, triangulate
+from synth.model.builders.makehuman.skinning import JOINT_NAMES
+from synth.model.builders.makehuman.sources import hm08_mirror, read_base_obj, read_target, vertex_groups
+from synth.model.builders.makehuman.targets import TargetSpace
+
+#: the torso is kept above this height on the base mesh (m): about the waist (spine03's head is at 0.20)
+Z_CUT = 0.22
+#: each upper arm is kept to this fraction of the way from the shoulder joint to the elbow joint
+ELBOW_T = 1.0
+#: a vertex whose skin weights on the upper arm's bones (upperarm01 and everything below it) sum to
+#: at least this is an arm vertex (cut at the elbow), else a torso vertex (cut at Z_CUT)
+ARM_WEIGHT = 0.5
+#: the posed upper arm (shoulder joint to elbow joint) this many degrees out from the vertical ...
+ARM_HANG_DEG = 8.0
+#: ... and this many forward (relaxed arms hang a little in front of the mid-axillary line)
+ARM_FORWARD_DEG = 6.0
+#: the share of the arm's turn made at the scapula joint (the girdle drops with the arm)
+GIRDLE_SHARE = 0.2
+#: bones rotated: the girdle's and the arm's (each side: name + ".L" / ".R")
+GIRDLE_BONE = "shoulder01"
+ARM_BONE = "upperarm01"
+ELBOW_BONE = "lowerarm01"
+SIDES = (("L", 1.0), ("R", -1.0))
+
+
+@dataclass
+class BustData:
+    """The bust (see the module docstring). Rows of the arrays are bust vertices."""
+
+    hm08: np.ndarray  # (Vb,) hm08 index of each bust vertex
+    polys: list[np.ndarray]  # bust-local polygons
+    triangles: np.ndarray  # (T, 3)
+    head_rows: np.ndarray  # (Vb,) the same vertex in the head model (or -1)
+    head_polys: np.ndarray  # (P,) bool: a polygon the head model also has (its shoulders)
+    mirror: np.ndarray  # (Vb,) bust index of each vertex's mirror image
+    rest_template: np.ndarray  # (Vb, 3) the identity mean, unposed (A pose)
+    rest_basis: np.ndarray  # (K, Vb, 3) unposed identity basis (regression on the head codes)
+    template: np.ndarray  # (Vb, 3) posed
+    basis: np.ndarray  # (K, Vb, 3) posed
+    scale: np.ndarray  # (K,) the head model's identity_scale (std of each code)
+    weights: np.ndarray  # (Vb, 5) skin weight classes: still, girdle L, arm L, girdle R, arm R
+    joints: dict[str, np.ndarray]  # name -> (3,) rest joint of the template
+    joint_basis: dict[str, np.ndarray]  # name -> (K, 3) rest joint basis
+    rotations: dict[str, np.ndarray]  # "girdle_L", "arm_L", ... -> (3, 3) world rotations
+    info: dict = field(default_factory=dict)
+    #: with ``build_bust(keep_samples=K)``: the builder's first K identity samples as MakeHuman makes
+    #: them ("rest": (K, Vb, 3) unposed, "joints": name -> (K, 3)), their head codes ("codes"),
+    #: and their macro values ("gender" 0 female .. 1 male, "weight" 0 .. 1, "muscle", "old": the
+    #: share of the 'old' age target, 0 at 25 years .. 1 at 90)
+    samples: dict | None = None
+
+    def rest(self, code: np.ndarray) -> np.ndarray:
+        c = np.asarray(code, np.float64) * self.scale
+        return self.rest_template + np.tensordot(c, self.rest_basis, 1)
+
+    def posed(self, code: np.ndarray) -> np.ndarray:
+        """(Vb, 3) the posed bust of an identity code (the head model's code)."""
+        c = np.asarray(code, np.float64) * self.scale
+        return self.template + np.tensordot(c, self.basis, 1)
+
+    def joint(self, name: str, code: np.ndarray) -> np.ndarray:
+        c = np.asarray(code, np.float64) * self.scale
+        return self.joints[name] + c @ self.joint_basis[name]
+
+    def joints_of(self, code: np.ndarray) -> dict[str, np.ndarray]:
+        """The rest joints of an identity code (name -> (3,))."""
+        return {n: self.joint(n, code) for n in self.joints}
+
+    def evaluate(self, code: np.ndarray) -> np.ndarray:
+        """(Vb, 3) the posed bust of ``code`` with its arms cleared of the torso (:func:`clear_arms`)."""
+        return clear_arms(self, self.posed(code), self.joints_of(code))[0]
+
+
+def _rig(data: Path) -> tuple[dict, dict]:
+    rig = json.loads((data / "mpfb2/rigs/standard/rig.default.json").read_text())
+    wts = json.loads((data / "mpfb2/rigs/standard/weights.default.json").read_text())["weights"]
+    return rig, wts
+
+
+def descendants(rig: dict, bone: str) -> list[str]:
+    """``bone`` and every bone below it in the rig."""
+    out, todo = [], [bone]
+    while todo:
+        b = todo.pop()
+        out.append(b)
+        todo += sorted(k for k, v in rig.items() if v.get("parent") == b)
+    return out
+
+
+def joint_vertices(rig: dict, bone: str, groups: dict[str, np.ndarray], end: str = "head") -> np.ndarray:
+    """hm08 vertices whose mean is the bone's head (or tail): MakeHuman's joint strategies."""
+    h = rig[bone][end]
+    if h["strategy"] == "CUBE":
+        return np.asarray(groups[h["cube_name"]], np.int64)
+    if h["strategy"] == "MEAN":
+        return np.asarray(h["vertex_indices"], np.int64)
+    if h["strategy"] == "VERTEX":
+        return np.array([h["vertex_index"]], np.int64)
+    raise ValueError(f"unknown joint strategy {h['strategy']!r} for {bone}")
+
+
+def weight_classes(rig: dict, wts: dict, n: int) -> np.ndarray:
+    """(n, 5) hm08 skin weights summed into the transform classes: still (every bone not below a
+    rotated one), girdle L (shoulder01.L and its bones not below upperarm01.L), arm L, girdle R,
+    arm R; rows normalised."""
+    cls = {}
+    for s, _ in SIDES:
+        arm = set(descendants(rig, f"{ARM_BONE}.{s}"))
+        for b in descendants(rig, f"{GIRDLE_BONE}.{s}"):
+            cls[b] = (2 if b in arm else 1) + (0 if s == "L" else 2)
+    W = np.zeros((n, 5))
+    for bone, lst in sorted(wts.items()):
+        if not lst:
+            continue
+        a = np.array(lst, float)
+        np.add.at(W[:, cls.get(bone, 0)], a[:, 0].astype(np.int64), a[:, 1])
+    s = W.sum(1)
+    W[s <= 0, 0] = 1.0
+    return W / W.sum(1, keepdims=True)
+
+
+def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation matrix about unit ``axis`` by ``angle`` radians (Rodrigues)."""
+    a = np.asarray(axis, np.float64)
+    a = a / np.linalg.norm(a)
+    K = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * K @ K
+
+
+def hang_rotations(shoulder: np.ndarray, elbow: np.ndarray, side: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """(girdle rotation, arm rotation, total angle in degrees) turning the upper arm from
+    ``shoulder`` -> ``elbow`` to hang :data:`ARM_HANG_DEG` out and :data:`ARM_FORWARD_DEG` forward."""
+    d0 = elbow - shoulder
+    d0 = d0 / np.linalg.norm(d0)
+    out, fwd = np.radians(ARM_HANG_DEG), np.radians(ARM_FORWARD_DEG)
+    d1 = np.array([side * np.sin(out), -np.sin(fwd), -np.cos(out) * np.cos(fwd)])
+    d1 /= np.linalg.norm(d1)
+    axis = np.cross(d0, d1)
+    ang = float(np.arctan2(np.linalg.norm(axis), np.dot(d0, d1)))
+    return rotation(axis, GIRDLE_SHARE * ang), rotation(axis, (1.0 - GIRDLE_SHARE) * ang), float(np.degrees(ang))
+
+
+def pose(V: np.ndarray, joints: dict[str, np.ndarray], W: np.ndarray, rot: dict[str, np.ndarray]) -> np.ndarray:
+    """Linear blend skinning of vertices ``V`` (..., Vb, 3) with weight classes ``W`` (Vb, 5):
+    the girdle turns about its scapula joint, the arm about its shoulder joint after the girdle.
+    Linear and homogeneous in (V, joints): posing an offset with its joint offsets gives the
+    offset of the posed shape (the identity basis is posed this way)."""
+    out = W[:, 0, None] * V
+    for k, (s, _) in enumerate(SIDES):
+        g, a = joints[f"{GIRDLE_BONE}.{s}"], joints[f"{ARM_BONE}.{s}"]
+        R1, R2 = rot[f"girdle_{s}"], rot[f"arm_{s}"]
+        Vg = V @ R1.T + (g - g @ R1.T)[..., None, :]  # R1 (x - g) + g
+        Va = (V @ R2.T + (a - a @ R2.T)[..., None, :]) @ R1.T + (g - g @ R1.T)[..., None, :]
+        out = out + W[:, 1 + 2 * k, None] * Vg + W[:, 2 + 2 * k, None] * Va
+    return out
+
+
+def select(obj, mesh, Wc: np.ndarray, rig: dict, groups: dict) -> tuple[np.ndarray, list[int], np.ndarray]:
+    """(hm08 vertices, base-mesh polygon indices, polygon is the head model's) of the bust."""
+    P = obj.verts
+    keep_v = P[:, 2] > Z_CUT
+    for k, (s, _) in enumerate(SIDES):
+        sh = P[joint_vertices(rig, f"{ARM_BONE}.{s}", groups)].mean(0)
+        el = P[joint_vertices(rig, f"{ELBOW_BONE}.{s}", groups)].mean(0)
+        d = el - sh
+        t = (P - sh) @ d / (d @ d)
+        arm = Wc[:, 2 + 2 * k] >= ARM_WEIGHT
+        keep_v = np.where(arm, t <= ELBOW_T, keep_v)
+    # head model polygons (by their hm08 vertices) and which of them hold a shoulder vertex
+    head_key = {tuple(sorted(mesh.kept[p].tolist())) for p in mesh.polys if np.all(p < len(mesh.kept))}
+    keep, in_head = [], []
+    for i, (p, g) in enumerate(zip(obj.polys, obj.groups)):
+        if g != "body" or not np.all(keep_v[p]):
+            continue
+        keep.append(i)
+        in_head.append(tuple(sorted(p.tolist())) in head_key)
+    return np.unique(np.concatenate([obj.polys[i] for i in keep])), keep, np.array(in_head, bool)
+
+
+def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_samples: int = 0) -> BustData:
+    """Build the bust (module docstring). ``head_model``: the shipped head model
+    (:class:`synth.model.format.HeadModelData`) to check the shared vertices and the basis
+    against (optional)."""
+    from synth.model.builders.makehuman.skinning import skin_weights
+
+    data = Path(data_dir)
+    rng = np.random.default_rng(SEED)
+    obj = read_base_obj(data / "mpfb2/3dobjs/base.obj")
+    P = obj.verts
+    n_hm = len(P)
+    groups = vertex_groups(data)
+    mirror_hm = hm08_mirror(data, n_hm)
+    mesh = build_mesh(obj, groups, mirror_hm)
+    V, Jn = len(mesh.base), len(JOINT_NAMES)
+    space = TargetSpace(mesh, groups, P)
+    rig, wts = _rig(data)
+    Wc_hm = weight_classes(rig, wts, n_hm)
+
+    hm08, poly_ids, in_head_all = select(obj, mesh, Wc_hm, rig, groups)
+    # drop the head model's polygons without a shoulder vertex (family 0 = torso) and without a
+    # vertex that the pose moves (its head and neck): the seam between the head model's remaining
+    # polygons and the bust then does not move with the arms
+    _, family = skin_weights(data, mesh)
+    fam_hm = np.full(n_hm, -1)
+    fam_hm[mesh.kept] = family[: len(mesh.kept)]
+    moves = Wc_hm[:, 0] < 1.0 - 1e-9
+    sel = [(i, h) for i, h in zip(poly_ids, in_head_all)
+           if not h or np.any(fam_hm[obj.polys[i]] == 0) or np.any(moves[obj.polys[i]])]
+    poly_ids = [i for i, _ in sel]
+    head_polys = np.array([h for _, h in sel], bool)
+    hm08 = np.unique(np.concatenate([obj.polys[i] for i in poly_ids]))
+    look = np.full(n_hm, -1, np.int64)
+    look[hm08] = np.arange(len(hm08))
+    if np.any(look[mirror_hm[hm08]] < 0):
+        raise ValueError("the bust selection is not mirror-symmetric")
+    polys = [look[obj.polys[i]] for i in poly_ids]
+    mirror = look[mirror_hm[hm08]]
+    head_rows = mesh.lookup[hm08]
+    Vb = len(hm08)
+
+    # joints: the neck (anchor, as the head's targets) and the rotated bones' heads; the elbow
+    jv = {"neck": groups["joint-neck"]}
+    for s, _ in SIDES:
+        for b in (GIRDLE_BONE, ARM_BONE, ELBOW_BONE):
+            jv[f"{b}.{s}"] = joint_vertices(rig, f"{b}.{s}", groups)
+    jv["nipple.L"] = joint_vertices(rig, "breast.L", groups, "tail")
+    jv["nipple.R"] = joint_vertices(rig, "breast.R", groups, "tail")
+    jnames = list(jv)
+    jmirror = [jnames.index(n[:-1] + {"L": "R", "R": "L"}[n[-1]]) if n[-2:] in (".L", ".R") else jnames.index(n)
+               for n in jnames]
+
+    def joints_of(full):
+        return np.array([full[jv[n]].mean(0) for n in jnames])
+
+    # ---- targets: head rows (for the head PCA, as build.py), bust rows and joints
+    macro = macro_targets(data)
+    mods = modifiers(data)
+    files = [p for p, _ in macro] + modifier_files(mods)
+    nt = len(files)
+    T = np.empty((nt, V * 3))
+    TJ = np.empty((nt, Jn * 3))
+    B = np.empty((nt, Vb, 3))
+    BJ = np.empty((nt, len(jnames), 3))
+    for i, p in enumerate(files):
+        idx, off = read_target(p)
+        full = np.zeros((n_hm, 3))
+        full[idx] = off
+        o, j = space._from_full(full)
+        T[i] = (o - j[0]).ravel()
+        TJ[i] = (j - j[0]).ravel()
+        B[i] = full[hm08] - j[0]
+        BJ[i] = joints_of(full) - j[0]
+    flip = np.array([-1.0, 1.0, 1.0])
+    Tm, TJm = space.mirror(T.reshape(nt, V, 3), TJ.reshape(nt, Jn, 3))
+    Bm = B[:, mirror] * flip
+    BJm = BJ[:, jmirror] * flip
+    W = sample_identity_weights(rng, N_SAMPLES, macro, mods)
+    mean, _, basis, std, _, codes, rank, explained = identity_pca(
+        W, T, TJ, Tm.reshape(nt, -1), TJm.reshape(nt, -1), int(identity_dims))
+
+    # ---- regression of the bust (and its joints) on the head codes, over the same samples
+    n = len(W)
+    W2 = np.zeros((2 * n, 2 * nt))
+    W2[:n, :nt] = W
+    W2[n:, nt:] = W
+    wbar = W2.mean(0)
+    Wc2 = W2 - wbar
+    B2 = np.concatenate([B, Bm]).reshape(2 * nt, -1)
+    J2 = np.concatenate([BJ, BJm]).reshape(2 * nt, -1)
+    XB = Wc2 @ B2  # (2n, 3Vb) centred bust samples
+    XJ = Wc2 @ J2
+    rest_basis = (codes.T @ XB / (2 * n - 1) / std[:, None]).reshape(-1, Vb, 3)
+    jbasis = (codes.T @ XJ / (2 * n - 1) / std[:, None]).reshape(-1, len(jnames), 3)
+    total = float(np.sum(XB * XB) / (2 * n - 1))
+    expl_bust = float(np.sum((rest_basis.reshape(len(std), -1) * std[:, None]) ** 2) / total)
+    rest_template = P[hm08] + (wbar @ B2).reshape(Vb, 3)
+    base_j = np.array([P[jv[nm]].mean(0) for nm in jnames])
+    jrest = base_j + (wbar @ J2).reshape(-1, 3)
+    # exact symmetry (as the head's template)
+    rest_template = 0.5 * (rest_template + rest_template[mirror] * flip)
+    jrest = 0.5 * (jrest + jrest[jmirror] * flip)
+    joints = {nm: jrest[i] for i, nm in enumerate(jnames)}
+    joint_basis = {nm: jbasis[:, i] for i, nm in enumerate(jnames)}
+
+    # ---- pose: rotations chosen on the template, applied to template and basis alike
+    Wcl = Wc_hm[hm08]
+    rot, turn = {}, {}
+    for s, sd in SIDES:
+        R1, R2, ang = hang_rotations(joints[f"{ARM_BONE}.{s}"], joints[f"{ELBOW_BONE}.{s}"], sd)
+        rot[f"girdle_{s}"], rot[f"arm_{s}"], turn[s] = R1, R2, ang
+    template = pose(rest_template, joints, Wcl, rot)
+    jb = {nm: joint_basis[nm] for nm in jnames}
+    basis_posed = pose(rest_basis, jb, Wcl, rot)
+
+    tris, _ = triangulate(P[hm08], polys, polys)
+    info = {"vertices": Vb, "polygons": len(polys), "triangles": int(len(tris)),
+            "head_polygons_replaced": int(head_polys.sum()), "identity_targets": nt,
+            "identity_rank": rank, "head_variance_explained": round(explained, 4),
+            "bust_variance_explained_by_head_code": round(expl_bust, 4),
+            "arm_turn_deg": {s: round(a, 2) for s, a in turn.items()}}
+    shared = head_rows >= 0
+    info["shared_vertices"] = int(shared.sum())
+    # on the head's vertices the regression is the head's PCA basis (a check of the construction)
+    hb = basis.reshape(len(std), V, 3)[:, head_rows[shared]]
+    info["shared_basis_max_diff"] = float(np.abs(hb - rest_basis[:, shared]).max())
+    if head_model is not None:
+        hm_b = np.asarray(head_model.identity_basis, np.float64)[:, head_rows[shared]]
+        k = min(len(hm_b), len(std))
+        info["shipped_basis_max_diff"] = float(np.abs(hm_b[:k] - rest_basis[:k, shared]).max())
+        info["shipped_template_max_diff"] = float(np.abs(np.asarray(head_model.template, np.float64)[
+            head_rows[shared]] - rest_template[shared]).max())
+        info["shipped_scale_max_rel_diff"] = float(np.abs(np.asarray(head_model.identity_scale)[:k] / std[:k] - 1).max())
+    samples = None
+    if keep_samples:
+        K = int(keep_samples)
+        keys = [k for _, k in macro]
+
+        def share(var, val):
+            cols = [i for i, k in enumerate(keys) if len(k) == 4 and (var, val) in k]  # universal targets
+            return W[:K, cols].sum(1)
+
+        ex_j = base_j + (W[:K] @ BJ.reshape(nt, -1)).reshape(K, -1, 3)
+        samples = {"rest": P[hm08] + (W[:K] @ B.reshape(nt, -1)).reshape(K, Vb, 3),
+                   "joints": {nm: ex_j[:, i] for i, nm in enumerate(jnames)}, "codes": codes[:K],
+                   "gender": share("gender", "male"),
+                   "weight": 0.5 + 0.5 * (share("weight", "max") - share("weight", "min")),
+                   "muscle": 0.5 + 0.5 * (share("muscle", "max") - share("muscle", "min")),
+                   "old": share("age", "old")}
+    return BustData(hm08=hm08, polys=polys, triangles=tris, head_rows=head_rows, head_polys=head_polys,
+                    mirror=mirror, rest_template=rest_template, rest_basis=rest_basis, template=template,
+                    basis=basis_posed, scale=std, weights=Wcl, joints=joints, joint_basis=joint_basis,
+                    rotations=rot, info=info, samples=samples)
+
+
+def save_bust(b: BustData, path: Path) -> None:
+    """The bust as an .npz (float32 shapes, as the model file), for the benchmark and the render."""
+    np.savez_compressed(
+        path, hm08=b.hm08.astype(np.int32), triangles=b.triangles.astype(np.int32),
+        poly_offsets=np.concatenate([[0], np.cumsum([len(p) for p in b.polys])]).astype(np.int32),
+        poly_indices=np.concatenate(b.polys).astype(np.int32), head_rows=b.head_rows.astype(np.int32),
+        head_polys=b.head_polys, mirror=b.mirror.astype(np.int32),
+        rest_template=b.rest_template.astype(np.float32), rest_basis=b.rest_basis.astype(np.float32),
+        template=b.template.astype(np.float32), basis=b.basis.astype(np.float32), scale=b.scale.astype(np.float32),
+        weights=b.weights.astype(np.float32),
+        joint_names=np.array(list(b.joints)), joints=np.array(list(b.joints.values()), np.float32),
+        joint_basis=np.stack(list(b.joint_basis.values()), 1).astype(np.float32),
+        rotations=json.dumps({k: v.tolist() for k, v in b.rotations.items()}),
+        info=json.dumps(b.info))
+
+
+def load_bust(path: Path) -> BustData:
+    z = np.load(path, allow_pickle=False)
+    off = z["poly_offsets"]
+    polys = [z["poly_indices"][a:b].astype(np.int64) for a, b in zip(off[:-1], off[1:])]
+    names = [str(x) for x in z["joint_names"]]
+    return BustData(
+        hm08=z["hm08"].astype(np.int64), polys=polys, triangles=z["triangles"].astype(np.int64),
+        head_rows=z["head_rows"].astype(np.int64), head_polys=z["head_polys"], mirror=z["mirror"].astype(np.int64),
+        rest_template=z["rest_template"].astype(np.float64), rest_basis=z["rest_basis"].astype(np.float64),
+        template=z["template"].astype(np.float64), basis=z["basis"].astype(np.float64),
+        scale=z["scale"].astype(np.float64), weights=z["weights"].astype(np.float64),
+        joints={n: z["joints"][i].astype(np.float64) for i, n in enumerate(names)},
+        joint_basis={n: z["joint_basis"][:, i].astype(np.float64) for i, n in enumerate(names)},
+        rotations={k: np.array(v) for k, v in json.loads(str(z["rotations"])).items()},
+        info=json.loads(str(z["info"])))
+
+
+#: for :func:`arm_torso_penetration`: torso triangles have every corner's arm weight under this, arm
+#: vertices at least 1 - this
+PENETRATION_WEIGHT = 0.1
+#: ... and lie this far (m) or more under their side's posed shoulder joint, below the armpit's
+#: fold (the torso's triangles from PENETRATION_BELOW - 0.03 down): in the fold, arm and torso
+#: meet by construction and the sign of a distance to the fold's downward faces means nothing
+PENETRATION_BELOW = 0.13
+
+
+def arm_torso_penetration(b: BustData, V: np.ndarray, J: dict[str, np.ndarray]) -> dict[str, float]:
+    """How deep (m) each posed arm's vertices ``V`` (Vb, 3) of the identity whose rest joints are
+    ``J`` go inside the
+    torso's surface: the largest negative signed distance (vertex-normal sign, robust on the open
+    bust) of arm vertices under the armpit to the torso's triangles beside them; 0 when none is
+    inside. Side "L", "R"."""
+    from synth.geometry.sdf import SignedDistance
+
+    F = b.triangles
+    arm_w = b.weights[:, 2] + b.weights[:, 4]
+    torso = np.all(arm_w[F] < PENETRATION_WEIGHT, axis=1)
+    zc = V[F, 2].mean(1)
+    out = {}
+    for k, (s, _) in enumerate(SIDES):
+        az = float(posed_joint(b, f"{ARM_BONE}.{s}", J)[2])
+        faces = np.nonzero(torso & (zc < az - PENETRATION_BELOW + 0.03))[0]
+        arm = np.nonzero((b.weights[:, 2 + 2 * k] >= 1 - PENETRATION_WEIGHT) & (V[:, 2] < az - PENETRATION_BELOW))[0]
+        if not len(arm) or not len(faces):
+            out[s] = 0.0
+            continue
+        d = SignedDistance(V, F, faces=faces, sign="vertex")(V[arm])
+        out[s] = float(max(0.0, -d.min()))
+    return out
+
+
+#: :func:`clear_arms`: arms whose vertices go deeper than this (m) into the torso are turned out ...
+CLEARANCE_TOL = 0.001
+#: ... until they are this far (m) out of it (at most CLEARANCE_STEPS turns, CLEARANCE_MAX_DEG in all)
+CLEARANCE_MARGIN = 0.002
+CLEARANCE_STEPS = 4
+CLEARANCE_MAX_DEG = 25.0
+
+
+def posed_joint(b: BustData, name: str, J: dict[str, np.ndarray]) -> np.ndarray:
+    """A rest joint of ``J`` (an identity's rest joints, :meth:`BustData.joints_of`) where
+    :func:`pose` takes it: the shoulder joint turns with the girdle, the elbow with the girdle and
+    the arm; other joints stay."""
+    j = np.asarray(J[name], np.float64)
+    bone, s = name.rsplit(".", 1)
+    if bone not in (ARM_BONE, ELBOW_BONE):
+        return j
+    g = np.asarray(J[f"{GIRDLE_BONE}.{s}"], np.float64)
+    R1, R2 = b.rotations[f"girdle_{s}"], b.rotations[f"arm_{s}"]
+    if bone == ELBOW_BONE:
+        a = np.asarray(J[f"{ARM_BONE}.{s}"], np.float64)
+        j = (j - a) @ R2.T + a
+    return (j - g) @ R1.T + g
+
+
+def clear_arms(b: BustData, V: np.ndarray, J: dict[str, np.ndarray]) -> tuple[np.ndarray, dict[str, float]]:
+    """(vertices, extra abduction per side in degrees): the posed bust ``V`` (rest joints ``J``) with each
+    arm turned out about its (posed) shoulder joint, about the front-back axis, until its vertices
+    under the armpit are :data:`CLEARANCE_MARGIN` outside the torso (:func:`arm_torso_penetration`).
+    The linear model poses every identity with the template's rotations; a heavy body's chest
+    then takes the arm's place (up to 3.5 cm deep on 200 planned identities): real arms rest
+    against the chest, pushed out by it."""
+    V = np.array(V, np.float64, copy=True)
+    extra = {}
+    for k, (s, sign) in enumerate(SIDES):
+        a = posed_joint(b, f"{ARM_BONE}.{s}", J)
+        w = b.weights[:, 2 + 2 * k]
+        total = 0.0
+        for _ in range(CLEARANCE_STEPS):
+            depth = arm_torso_penetration(b, V, J)[s]
+            if depth <= CLEARANCE_TOL:
+                break
+            # the arm's length to the deepest region: about the distance to the elbow
+            r = float(np.linalg.norm(posed_joint(b, f"{ELBOW_BONE}.{s}", J) - a))
+            step = min(np.degrees((depth + CLEARANCE_MARGIN) / r), CLEARANCE_MAX_DEG - total)
+            if step <= 0:
+                break
+            # about -y on the left: a point below the joint moves toward +x (out); +y on the right
+            R = rotation(np.array([0.0, -sign, 0.0]), np.radians(step))
+            V = V + w[:, None] * ((V - a) @ (R - np.eye(3)).T)
+            total += step
+        extra[s] = total
+    return V, extra
+
+
+#: the deltoids' band for the bideltoid breadth: from this far (m) under the posed shoulder joints ...
+DELTOID_BELOW = 0.12
+#: ... to this far above them
+DELTOID_ABOVE = 0.08
+#: the acromion (skin): the most lateral skin point at least this far (m) above the posed shoulder
+#: joint, within ACROMION_SLAB (m) of the joint front to back. The acromion's lateral edge sits a few
+#: cm above the humeral head's centre; under it the deltoid bulges out (the bideltoid breadth)
+ACROMION_ABOVE = 0.03
+ACROMION_SLAB = 0.02
+#: the chest band: this far (m) above and below the nipples (MakeHuman's breast bones' tails)
+CHEST_BAND = 0.015
+
+
+def measures(b: BustData, V: np.ndarray, J: dict[str, np.ndarray]) -> dict[str, float]:
+    """Anthropometric breadths and depths (mm) of a posed bust ``V`` (rest joints ``J``):
+
+    * ``bideltoid``: the largest breadth side to side between DELTOID_BELOW under and
+      DELTOID_ABOVE over the (posed) shoulder joints: the deltoids, arms hanging (Pheasant's item 17);
+    * ``biacromial``: between the skin acromia (ACROMION_ABOVE; item 18 is measured on the bone,
+      a few mm inside the skin); ``gh_centres``: between the glenohumeral joint centres (the rig's);
+    * ``chest_depth``: from the back's rearmost point (between the chest band and the shoulder
+      joints: the shoulder blades) to the chest's or breasts' foremost point in the chest band
+      (item 20, measured to a wall touching the back);
+    * ``chest_breadth``: the torso's breadth (arm vertices excluded) in the chest band."""
+    a = {s: posed_joint(b, f"{ARM_BONE}.{s}", J) for s, _ in SIDES}
+    az = 0.5 * (a["L"][2] + a["R"][2])
+    x, y, z = V[:, 0], V[:, 1], V[:, 2]
+    d = (z > az - DELTOID_BELOW) & (z < az + DELTOID_ABOVE)
+    out = {"bideltoid": x[d].max() - x[d].min()}
+    acr = []
+    for s, sign in SIDES:
+        m = (z >= a[s][2] + ACROMION_ABOVE) & (np.abs(y - a[s][1]) <= ACROMION_SLAB) & (sign * x > 0)
+        acr.append((sign * x[m]).max())
+    out["biacromial"] = acr[0] + acr[1]
+    out["gh_centres"] = float(np.linalg.norm(a["L"] - a["R"]))
+    nz = 0.5 * (J["nipple.L"][2] + J["nipple.R"][2])  # the breast bones do not move
+    torso = (b.weights[:, 2] + b.weights[:, 4]) < PENETRATION_WEIGHT
+    band = torso & (np.abs(z - nz) <= CHEST_BAND)
+    back = torso & (z > nz - CHEST_BAND) & (z < az)
+    out["chest_depth"] = y[back].max() - y[band].min()
+    out["chest_breadth"] = x[band].max() - x[band].min()
+    return {k: 1000.0 * float(v) for k, v in out.items()}

