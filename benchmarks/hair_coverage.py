@@ -60,9 +60,11 @@ def picks_per_style(seed: int, n: int, limit: int = 20000) -> dict[str, list[dic
 
 
 def radii(styling, n_points: int) -> np.ndarray:
-    """(P,) strand radius from root to tip: the root radius tapering linearly to 0 at the tip (an
-    approximation of the rig's "Set Hair Curve Profile" taper)."""
-    return styling.root_radius * (1.0 - np.linspace(0.0, 1.0, n_points))
+    """(P,) strand radius from root to tip as the rig sets it (``synth.assets.fit.groom.profile``:
+    Blender's "Set Hair Curve Profile" with ``Styling.tip_shape``, 0 at the tip)."""
+    from synth.assets.fit.groom import profile
+
+    return styling.root_radius * profile(np.linspace(0.0, 1.0, n_points), styling.tip_shape)
 
 
 def _basis(view: np.ndarray) -> np.ndarray:
@@ -179,13 +181,15 @@ def main(argv=None) -> int:
     ap.add_argument("--resolution", type=int, default=512, help="the frame size the strand counts are for")
     ap.add_argument("--seed", type=int, default=0, help="the plan seed the picks are drawn with")
     ap.add_argument("--samples", type=int, default=20000, help="scalp sample points")
+    ap.add_argument("--styles", nargs="+", choices=STYLES, default=list(STYLES), help="the styles to measure")
     a = ap.parse_args(argv)
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
     from tests.support import asset_scene
 
     ctx = asset_scene.head_arrays(HeadModel(load_default_model()), "neutral", a.resolution, 0, a.seed)
-    res = measure(ctx, picks_per_style(a.seed, a.picks), a.samples)
+    picks = picks_per_style(a.seed, a.picks)
+    res = measure(ctx, {s: picks[s] for s in STYLES if s in a.styles}, a.samples)
     print(f"default head, neutral; strand counts for {a.resolution}^2; {a.picks} planner picks per style (seed "
           f"{a.seed}); {a.samples} scalp samples\n")
     print("| style | strands | root radius (mm) | scalp covered from above | from the front | volume: median "

@@ -44,5 +44,6 @@ def test_strands_behind_the_scalp_or_a_scalp_facing_away_count_nothing():
 def test_the_taper_ends_at_the_tip():
     class St:
         root_radius = 1e-4
+        tip_shape = 0.4
     r = hc.radii(St, 5)
     assert r[0] == 1e-4 and r[-1] == 0.0 and np.all(np.diff(r) < 0)

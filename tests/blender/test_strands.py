@@ -200,3 +200,27 @@ def test_render_shows_strand_classes(tmp_path):
         seen |= set(np.unique(r["segmentation"]).tolist())
     for cls in ("hair", "beard", "eyebrows", "eyelashes"):
         assert CLASSES[cls] in seen, (cls, sorted(seen))
+
+
+# --------------------------------------------------------------------------- the taper
+
+@pytest.mark.parametrize("shape", [0.0, 0.2, 0.4, 0.8, -0.2])
+def test_the_profile_formula_is_the_node_groups_taper(shape):
+    """synth.assets.fit.groom.profile (what benchmarks/hair_coverage.py measures with) is the radius
+    Blender's "Set Hair Curve Profile" gives along an evenly spaced strand."""
+    from blender_scripts.assets.strands import add_node_modifier
+    from synth.assets.fit.groom import profile
+
+    cv = bpy.data.hair_curves.new("profile")
+    cv.add_curves([21])
+    p = np.zeros((21, 3))
+    p[:, 2] = np.linspace(0.0, 0.1, 21)
+    cv.position_data.foreach_set("vector", p.astype(np.float32).ravel())
+    ob = bpy.data.objects.new("profile", cv)
+    bpy.context.scene.collection.objects.link(ob)
+    add_node_modifier(ob, "Set Hair Curve Profile", {"Replace Radius": True, "Radius": 2e-4, "Shape": shape,
+                                                     "Factor Min": 0.0, "Factor Max": 1.0})
+    ev = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    r = np.array([a.value for a in ev.attributes["radius"].data])
+    assert np.allclose(r, 2e-4 * profile(np.linspace(0.0, 1.0, 21), shape), atol=2e-7)
+    bpy.data.objects.remove(ob)

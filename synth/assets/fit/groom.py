@@ -42,6 +42,22 @@ class Styling:
     seed: int = 0
 
 
+def profile(t, shape: float) -> np.ndarray:
+    """A strand's radius over its root radius at spline parameter ``t`` (0 root, 1 tip) as
+    Blender's bundled "Set Hair Curve Profile" sets it with Factor Min 0, Max 1 and ``shape``
+    (``Styling.tip_shape``): ``(1 - t)^(-log2(1 - shape))`` for shape in [0, 0.5] (a full strand
+    that thins toward the tip: 0 none, 0.5 linear), ``1 - t^(-log2 shape)`` for shape in
+    [0.5, 1) (thin from near the root), mirrored (``t`` -> ``1 - t``) for negative shapes.
+    Checked against the node group in tests/blender/test_strands.py."""
+    t = np.asarray(t, np.float64)
+    s = float(shape)
+    if s < 0.0:
+        return profile(1.0 - t, -s)
+    if s <= 0.5:
+        return (1.0 - t) ** (-np.log2(1.0 - s))
+    return 1.0 - t ** (-np.log2(s))
+
+
 def head_frame(ctx) -> dict:
     """Head-centric reference points from the scalp and landmarks (current vertices)."""
     V = np.asarray(ctx.vertices, np.float64)
