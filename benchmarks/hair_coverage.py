@@ -11,7 +11,7 @@ until each style has its picks).
 
 - **Covered scalp** (from above: looking down the head's vertical axis; from the front: looking
   along the face's axis): points sampled uniformly by area over the scalp where the groom plants
-  roots (``hair_grows``: the scalp region less the receding hairline), facing the view; a point
+  roots (``hair_grows``: the scalp region less the pick's receding hairline), facing the view; a point
   is covered when a strand segment in front of it passes over it, that is within the strand's
   radius (``Styling.root_radius`` tapered to the tip as the rig tapers it) of the point's line of
   sight. Hair is treated as opaque, so the covered fraction is the share of the scalp's pixels a
@@ -76,11 +76,13 @@ def _basis(view: np.ndarray) -> np.ndarray:
 
 
 def covered(samples: np.ndarray, normals: np.ndarray, pts: np.ndarray, rad: np.ndarray, view: np.ndarray,
-            cell: float = 0.002) -> tuple[int, int]:
-    """(scalp samples facing the view, how many of them a strand segment in front covers)."""
-    S = samples[normals @ view < 0.0]
+            cell: float = 0.002, where: bool = False):
+    """(scalp samples facing the view, how many of them a strand segment in front covers); with
+    ``where`` also the (samples,) mask of the covered ones (False where not facing the view)."""
+    facing = normals @ view < 0.0
+    S = samples[facing]
     if len(S) == 0 or pts.size == 0:
-        return int(len(S)), 0
+        return (int(len(S)), 0, np.zeros(len(samples), bool)) if where else (int(len(S)), 0)
     B = _basis(view)
     s2, sd = S @ B.T, S @ view  # image-plane position; depth (larger: farther from the viewer)
     a, b = pts[:, :-1].reshape(-1, 3), pts[:, 1:].reshape(-1, 3)
@@ -121,6 +123,10 @@ def covered(samples: np.ndarray, normals: np.ndarray, pts: np.ndarray, rad: np.n
                 depth = ad[sg] + t * (bd[sg] - ad[sg])
                 ok = (dist <= r[sg]) & (depth < sd[who] - 1e-4)
                 hit[who[ok]] = True
+    if where:
+        out = np.zeros(len(samples), bool)
+        out[facing] = hit
+        return int(len(S)), int(hit.sum()), out
     return int(len(S)), int(hit.sum())
 
 
@@ -149,9 +155,12 @@ def scalp_samples(ctx, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 def measure(ctx, picks: dict[str, list[dict]], n_samples: int) -> dict[str, dict]:
     from scipy.spatial import cKDTree
 
+    from synth.assets.fit.groom import head_frame
     from synth.assets.fit.hair import groom
+    from synth.assets.fit.masks import hair_grows
 
     samples, normals = scalp_samples(ctx, n_samples, 0)
+    hf = head_frame(ctx)
     tree = cKDTree(samples)
     out = {}
     for style, entries in picks.items():
@@ -163,14 +172,18 @@ def measure(ctx, picks: dict[str, list[dict]], n_samples: int) -> dict[str, dict
             pts = np.asarray(g.pts, np.float64)
             rad = radii(g.styling, pts.shape[1])
             cov = {}
+            # the scalp this pick plants roots on (a receded hairline is bare skin, not scalp
+            # between strands)
+            grows = hair_grows(samples, hf, float(e["params"].get("hairline_recession", 0.0)))
             for name, view in VIEWS.items():
-                total, hit = covered(samples, normals, pts, rad, view)
+                total, hit = covered(samples[grows], normals[grows], pts, rad, view)
                 cov[name] = hit / max(total, 1)
             d = tree.query(pts[:, 1:].reshape(-1, 3))[0] * 1000.0
             rows.append({"strands": int(pts.shape[0]), "above": cov["above"], "front": cov["front"],
                          "volume_mm": float(np.median(d)), "volume_p90_mm": float(np.percentile(d, 90)),
                          "root_radius_mm": 1000.0 * g.styling.root_radius, "groom_s": dt,
-                         "params": {k: e["params"][k] for k in ("length_m", "density", "parting") if k in e["params"]}})
+                         "params": {k: e["params"][k] for k in ("length_m", "density", "parting", "hairline_recession")
+                                    if k in e["params"]}})
         out[style] = rows
     return out
 
