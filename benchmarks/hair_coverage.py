@@ -11,7 +11,8 @@ until each style has its picks).
 
 - **Covered scalp** (from above: looking down the head's vertical axis; from the front: looking
   along the face's axis): points sampled uniformly by area over the scalp where the groom plants
-  roots (``hair_grows``: the scalp region less the pick's receding hairline), facing the view; a point
+  roots (``hair_grows``: the scalp region less the pick's receding hairline), facing the view and
+  not hidden behind the head itself (the ears, the neck: :func:`unhidden`); a point
   is covered when a strand segment in front of it passes over it, that is within the strand's
   radius (``Styling.root_radius`` tapered to the tip as the rig tapers it) of the point's line of
   sight. Hair is treated as opaque, so the covered fraction is the share of the scalp's pixels a
@@ -152,6 +153,18 @@ def scalp_samples(ctx, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return p[:n], nrm[:n]
 
 
+def unhidden(ctx, samples: np.ndarray, view: np.ndarray, eps: float = 1e-3) -> np.ndarray:
+    """(samples,) True where no head triangle lies between the sample and a viewer looking along
+    ``view`` (an orthographic ray toward the viewer crosses none of the head's exterior triangles
+    more than ``eps`` in front of it): scalp behind the ears or the neck is not seen."""
+    from synth.assets.fit.strands import Surface
+    from synth.geometry.raycast import RayGrid
+
+    surface = Surface(ctx)
+    t = RayGrid(surface.V, surface.T[surface.ext_tris], view).hits(samples)
+    return ~np.any(t < -eps, axis=1)
+
+
 def measure(ctx, picks: dict[str, list[dict]], n_samples: int) -> dict[str, dict]:
     from scipy.spatial import cKDTree
 
@@ -161,6 +174,7 @@ def measure(ctx, picks: dict[str, list[dict]], n_samples: int) -> dict[str, dict
 
     samples, normals = scalp_samples(ctx, n_samples, 0)
     hf = head_frame(ctx)
+    seen = {name: unhidden(ctx, samples, view) for name, view in VIEWS.items()}
     tree = cKDTree(samples)
     out = {}
     for style, entries in picks.items():
@@ -176,7 +190,8 @@ def measure(ctx, picks: dict[str, list[dict]], n_samples: int) -> dict[str, dict
             # between strands)
             grows = hair_grows(samples, hf, float(e["params"].get("hairline_recession", 0.0)))
             for name, view in VIEWS.items():
-                total, hit = covered(samples[grows], normals[grows], pts, rad, view)
+                s = grows & seen[name]
+                total, hit = covered(samples[s], normals[s], pts, rad, view)
                 cov[name] = hit / max(total, 1)
             d = tree.query(pts[:, 1:].reshape(-1, 3))[0] * 1000.0
             rows.append({"strands": int(pts.shape[0]), "above": cov["above"], "front": cov["front"],

@@ -47,3 +47,18 @@ def test_the_taper_ends_at_the_tip():
         tip_shape = 0.4
     r = hc.radii(St, 5)
     assert r[0] == 1e-4 and r[-1] == 0.0 and np.all(np.diff(r) < 0)
+
+
+def test_scalp_behind_the_head_is_not_seen(default_head):
+    """From the front, the back of the head is hidden by the head itself; the forehead is not."""
+    from synth.assets.fit.groom import head_frame
+    from tests.support import asset_scene
+
+    ctx = asset_scene.head_arrays(default_head, "neutral", 64)
+    S, N = hc.scalp_samples(ctx, 4000, 0)
+    c = head_frame(ctx)["centre"]
+    front, back = hc.VIEWS["front"], S[:, 1] > c[1] + 0.05
+    seen = hc.unhidden(ctx, S, front)
+    forehead = (S[:, 1] < c[1] - 0.05) & (N @ front < -0.5)
+    assert back.any() and forehead.any()
+    assert not seen[back].any() and seen[forehead].all()
