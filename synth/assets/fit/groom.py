@@ -133,6 +133,10 @@ class Groom:
     exact: bool = False  # exact (per-triangle) push-out on update (small strand sets)
     keep_out: tuple[str, ...] = ()  # closed-mesh regions the strands pivot out of (lashes: eyeballs)
     keep_skin: bool = False  # the skin near the roots joins the keep-out; strands bend out of it (lashes)
+    #: the shader's per-strand variation beyond the BSDF's own (blender_scripts.assets.strands.hair_material):
+    #: the share of the melanin gone at the tip, and the +- range of the Melanin Redness per strand
+    tip_lightening: float = 0.0
+    redness_jitter: float = 0.0
 
 
 @dataclass

@@ -140,8 +140,18 @@ def groom(ctx, entry) -> Groom:
         clr = np.minimum(np.asarray(clr)[kept].max(axis=1, keepdims=True), 0.6 * arc_length(pts))
         info["under_headwear"] = {"roots_left_out": int(roots_under), "strands_left_out": int((~kept).sum()),
                                   "margin_m": HAT_MARGIN_M}
-    return Groom("hair", f"hair_{sid}", surface, pts, c_tri, c_bary, clr, styling, info, pg, roughness=0.28)
+    tip = float(min(TIP_LIGHTENING_MAX, TIP_LIGHTENING_PER_M * np.median(arc_length(pts)[:, -1]))) if len(pts) else 0.0
+    return Groom("hair", f"hair_{sid}", surface, pts, c_tri, c_bary, clr, styling, info, pg, roughness=0.28,
+                 tip_lightening=tip, redness_jitter=REDNESS_JITTER)
 
+
+#: the shader (blender_scripts.assets.strands.hair_material): the share of the melanin concentration
+#: gone at a strand's tip, per metre of the groom's median strand length (the ends of long hair are
+#: older, weathered and bleached: 16 % at 26 cm), at most TIP_LIGHTENING_MAX; and the +- range of
+#: the Melanin Redness (the pheomelanin share) per strand, beside the BSDF's own +-12 % melanin
+TIP_LIGHTENING_PER_M = 0.6
+TIP_LIGHTENING_MAX = 0.25
+REDNESS_JITTER = 0.08
 
 #: hair under headwear ends this far short of the headwear's cut plane (under its rim tube,
 #: 2.5-5 mm in radius: synth.assets.fit.headwear)
