@@ -11,7 +11,8 @@ until each style has its picks).
 
 - **Covered scalp** (from above: looking down the head's vertical axis; from the front: looking
   along the face's axis): points sampled uniformly by area over the scalp where the groom plants
-  roots (``hair_grows``: the scalp region less the receding hairline), facing the view; a point
+  roots (``hair_grows``: the scalp region less the pick's receding hairline), facing the view and
+  not hidden behind the head itself (the ears, the neck: :func:`unhidden`); a point
   is covered when a strand segment in front of it passes over it, that is within the strand's
   radius (``Styling.root_radius`` tapered to the tip as the rig tapers it) of the point's line of
   sight. Hair is treated as opaque, so the covered fraction is the share of the scalp's pixels a
@@ -60,9 +61,11 @@ def picks_per_style(seed: int, n: int, limit: int = 20000) -> dict[str, list[dic
 
 
 def radii(styling, n_points: int) -> np.ndarray:
-    """(P,) strand radius from root to tip: the root radius tapering linearly to 0 at the tip (an
-    approximation of the rig's "Set Hair Curve Profile" taper)."""
-    return styling.root_radius * (1.0 - np.linspace(0.0, 1.0, n_points))
+    """(P,) strand radius from root to tip as the rig sets it (``synth.assets.fit.groom.profile``:
+    Blender's "Set Hair Curve Profile" with ``Styling.tip_shape``, 0 at the tip)."""
+    from synth.assets.fit.groom import profile
+
+    return styling.root_radius * profile(np.linspace(0.0, 1.0, n_points), styling.tip_shape)
 
 
 def _basis(view: np.ndarray) -> np.ndarray:
@@ -74,11 +77,13 @@ def _basis(view: np.ndarray) -> np.ndarray:
 
 
 def covered(samples: np.ndarray, normals: np.ndarray, pts: np.ndarray, rad: np.ndarray, view: np.ndarray,
-            cell: float = 0.002) -> tuple[int, int]:
-    """(scalp samples facing the view, how many of them a strand segment in front covers)."""
-    S = samples[normals @ view < 0.0]
+            cell: float = 0.002, where: bool = False):
+    """(scalp samples facing the view, how many of them a strand segment in front covers); with
+    ``where`` also the (samples,) mask of the covered ones (False where not facing the view)."""
+    facing = normals @ view < 0.0
+    S = samples[facing]
     if len(S) == 0 or pts.size == 0:
-        return int(len(S)), 0
+        return (int(len(S)), 0, np.zeros(len(samples), bool)) if where else (int(len(S)), 0)
     B = _basis(view)
     s2, sd = S @ B.T, S @ view  # image-plane position; depth (larger: farther from the viewer)
     a, b = pts[:, :-1].reshape(-1, 3), pts[:, 1:].reshape(-1, 3)
@@ -119,6 +124,10 @@ def covered(samples: np.ndarray, normals: np.ndarray, pts: np.ndarray, rad: np.n
                 depth = ad[sg] + t * (bd[sg] - ad[sg])
                 ok = (dist <= r[sg]) & (depth < sd[who] - 1e-4)
                 hit[who[ok]] = True
+    if where:
+        out = np.zeros(len(samples), bool)
+        out[facing] = hit
+        return int(len(S)), int(hit.sum()), out
     return int(len(S)), int(hit.sum())
 
 
@@ -144,12 +153,28 @@ def scalp_samples(ctx, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return p[:n], nrm[:n]
 
 
+def unhidden(ctx, samples: np.ndarray, view: np.ndarray, eps: float = 1e-3) -> np.ndarray:
+    """(samples,) True where no head triangle lies between the sample and a viewer looking along
+    ``view`` (an orthographic ray toward the viewer crosses none of the head's exterior triangles
+    more than ``eps`` in front of it): scalp behind the ears or the neck is not seen."""
+    from synth.assets.fit.strands import Surface
+    from synth.geometry.raycast import RayGrid
+
+    surface = Surface(ctx)
+    t = RayGrid(surface.V, surface.T[surface.ext_tris], view).hits(samples)
+    return ~np.any(t < -eps, axis=1)
+
+
 def measure(ctx, picks: dict[str, list[dict]], n_samples: int) -> dict[str, dict]:
     from scipy.spatial import cKDTree
 
+    from synth.assets.fit.groom import head_frame
     from synth.assets.fit.hair import groom
+    from synth.assets.fit.masks import hair_grows
 
     samples, normals = scalp_samples(ctx, n_samples, 0)
+    hf = head_frame(ctx)
+    seen = {name: unhidden(ctx, samples, view) for name, view in VIEWS.items()}
     tree = cKDTree(samples)
     out = {}
     for style, entries in picks.items():
@@ -161,14 +186,19 @@ def measure(ctx, picks: dict[str, list[dict]], n_samples: int) -> dict[str, dict
             pts = np.asarray(g.pts, np.float64)
             rad = radii(g.styling, pts.shape[1])
             cov = {}
+            # the scalp this pick plants roots on (a receded hairline is bare skin, not scalp
+            # between strands)
+            grows = hair_grows(samples, hf, float(e["params"].get("hairline_recession", 0.0)))
             for name, view in VIEWS.items():
-                total, hit = covered(samples, normals, pts, rad, view)
+                s = grows & seen[name]
+                total, hit = covered(samples[s], normals[s], pts, rad, view)
                 cov[name] = hit / max(total, 1)
             d = tree.query(pts[:, 1:].reshape(-1, 3))[0] * 1000.0
             rows.append({"strands": int(pts.shape[0]), "above": cov["above"], "front": cov["front"],
                          "volume_mm": float(np.median(d)), "volume_p90_mm": float(np.percentile(d, 90)),
                          "root_radius_mm": 1000.0 * g.styling.root_radius, "groom_s": dt,
-                         "params": {k: e["params"][k] for k in ("length_m", "density", "parting") if k in e["params"]}})
+                         "params": {k: e["params"][k] for k in ("length_m", "density", "parting", "hairline_recession")
+                                    if k in e["params"]}})
         out[style] = rows
     return out
 
@@ -179,13 +209,15 @@ def main(argv=None) -> int:
     ap.add_argument("--resolution", type=int, default=512, help="the frame size the strand counts are for")
     ap.add_argument("--seed", type=int, default=0, help="the plan seed the picks are drawn with")
     ap.add_argument("--samples", type=int, default=20000, help="scalp sample points")
+    ap.add_argument("--styles", nargs="+", choices=STYLES, default=list(STYLES), help="the styles to measure")
     a = ap.parse_args(argv)
     from synth.model.default import load_default_model
     from synth.model.head import HeadModel
     from tests.support import asset_scene
 
     ctx = asset_scene.head_arrays(HeadModel(load_default_model()), "neutral", a.resolution, 0, a.seed)
-    res = measure(ctx, picks_per_style(a.seed, a.picks), a.samples)
+    picks = picks_per_style(a.seed, a.picks)
+    res = measure(ctx, {s: picks[s] for s in STYLES if s in a.styles}, a.samples)
     print(f"default head, neutral; strand counts for {a.resolution}^2; {a.picks} planner picks per style (seed "
           f"{a.seed}); {a.samples} scalp samples\n")
     print("| style | strands | root radius (mm) | scalp covered from above | from the front | volume: median "

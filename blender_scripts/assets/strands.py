@@ -62,9 +62,18 @@ def add_node_modifier(ob, group_name: str, values: dict):
 
 
 def hair_material(name: str, cls: str, pg: "pig.HairPigment", roughness: float = 0.3,
-                  random_color: float = 0.12, coat: float = 0.0):
+                  random_color: float = 0.12, coat: float = 0.0, tip_lightening: float = 0.0,
+                  redness_jitter: float = 0.0):
     """Principled Hair BSDF (Chiang model, melanin parametrisation) with the pigment; grey and
-    white hair mix in unpigmented fibres per strand (Hair Info > Random < white_fraction)."""
+    white hair mix in unpigmented fibres per strand (Hair Info > Random < white_fraction).
+
+    Per strand, the BSDF's Random Color varies the melanin by +-``random_color`` and Random
+    Roughness the roughness by +-10 % (both from Hair Info > Random). ``redness_jitter`` adds
+    +-that much to the Melanin Redness per strand (the pheomelanin share; a white noise of
+    Hair Info > Random, so not tied to the melanin's draw), clamped to [0, 1]. ``tip_lightening``
+    takes that fraction of the melanin concentration away along the strand, linearly from none
+    at the root to all of it at the tip (Hair Info > Intercept; weathered, sun-bleached ends):
+    Melanin = 1 - exp(-c (1 - tip_lightening x intercept)), c = eumelanin + pheomelanin."""
     mat = bpy.data.materials.new(name)
     mat.use_nodes = True
     mat.pass_index = CLASSES[cls].segmentation_id
@@ -72,8 +81,26 @@ def hair_material(name: str, cls: str, pg: "pig.HairPigment", roughness: float =
     for n in list(nt.nodes):
         nt.nodes.remove(n)
     out = nt.nodes.new("ShaderNodeOutputMaterial")
+    info = None
 
-    def bsdf(eu, ph):
+    def hair_info():
+        nonlocal info
+        if info is None:
+            info = nt.nodes.new("ShaderNodeHairInfo")
+        return info
+
+    def math(op, *inputs, clamp=False):
+        node = nt.nodes.new("ShaderNodeMath")
+        node.operation = op
+        node.use_clamp = clamp
+        for i, v in enumerate(inputs):
+            if isinstance(v, (int, float)):
+                node.inputs[i].default_value = float(v)
+            else:
+                nt.links.new(v, node.inputs[i])
+        return node.outputs[0]
+
+    def bsdf(eu, ph, varied=False):
         b = nt.nodes.new("ShaderNodeBsdfHairPrincipled")
         b.model = "CHIANG"
         b.parametrization = "MELANIN"
@@ -87,16 +114,26 @@ def hair_material(name: str, cls: str, pg: "pig.HairPigment", roughness: float =
         b.inputs["IOR"].default_value = 1.55
         b.inputs["Random Color"].default_value = float(random_color)
         b.inputs["Random Roughness"].default_value = 0.1
+        if varied and tip_lightening > 0.0:
+            c = float(eu + ph)
+            x = math("MULTIPLY_ADD", hair_info().outputs["Intercept"], float(tip_lightening) * c, -c)
+            nt.links.new(math("SUBTRACT", 1.0, math("EXPONENT", x)), b.inputs["Melanin"])
+        if varied and redness_jitter > 0.0:
+            noise = nt.nodes.new("ShaderNodeTexWhiteNoise")
+            noise.noise_dimensions = "1D"
+            nt.links.new(hair_info().outputs["Random"], noise.inputs["W"])
+            j = float(redness_jitter)
+            nt.links.new(math("MULTIPLY_ADD", noise.outputs["Value"], 2.0 * j, float(r) - j, clamp=True),
+                         b.inputs["Melanin Redness"])
         return b
 
-    main = bsdf(pg.eumelanin, pg.pheomelanin)
+    main = bsdf(pg.eumelanin, pg.pheomelanin, varied=True)
     if pg.white_fraction > 0.0:
         white = bsdf(*pig.WHITE_FIBRE)
-        info = nt.nodes.new("ShaderNodeHairInfo")
         lt = nt.nodes.new("ShaderNodeMath")
         lt.operation = "LESS_THAN"
         lt.inputs[1].default_value = float(pg.white_fraction)
-        nt.links.new(info.outputs["Random"], lt.inputs[0])
+        nt.links.new(hair_info().outputs["Random"], lt.inputs[0])
         mix = nt.nodes.new("ShaderNodeMixShader")
         nt.links.new(lt.outputs[0], mix.inputs["Fac"])
         nt.links.new(main.outputs[0], mix.inputs[1])
@@ -105,6 +142,8 @@ def hair_material(name: str, cls: str, pg: "pig.HairPigment", roughness: float =
     else:
         nt.links.new(main.outputs[0], out.inputs["Surface"])
     mat["pigment"] = {k: v for k, v in pg.as_dict().items() if k != "approx_rgb"}
+    mat["shader"] = {"random_color": float(random_color), "random_roughness": 0.1,
+                     "redness_jitter": float(redness_jitter), "tip_lightening": float(tip_lightening)}
     return mat
 
 
@@ -178,7 +217,8 @@ class StrandRig(Rig):
 
     @classmethod
     def build(cls_, ctx, g: Groom) -> "StrandRig":
-        mat = hair_material(g.name, g.cls, g.pigment, roughness=g.roughness, coat=g.coat)
+        mat = hair_material(g.name, g.cls, g.pigment, roughness=g.roughness, coat=g.coat,
+                            tip_lightening=g.tip_lightening, redness_jitter=g.redness_jitter)
         _, attachment = attach(g)
         # the strands where their attachment puts them on this head, as every update does: an
         # expression change moves them only as the head moves (the groomed points, taken as they
@@ -189,7 +229,7 @@ class StrandRig(Rig):
         info = dict(g.info)
         info.update({"strands": int(pts.shape[0]), "points_per_strand": int(pts.shape[1]),
                      "attachment": "root_triangle_barycentric", "geometry_nodes": mods,
-                     "root_radius_m": float(g.styling.root_radius)})
+                     "root_radius_m": float(g.styling.root_radius), "shader": mat["shader"].to_dict()})
         return cls_(g.cls, ob, attachment, info)
 
     def keep_out_of(self, arms, ctx) -> None:

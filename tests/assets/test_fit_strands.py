@@ -348,3 +348,56 @@ def test_long_beard_narrows_below_the_jaw(default_head, case, monkeypatch):
         m.setattr(B, "LONG_GATHER", 0.0)
         before = spread()
     assert now < 0.95 and now < before - 0.08, (now, before)
+
+
+# --------------------------------------------------------------------------- scalp hair: strand width, roots
+
+def test_exit_directions_leave_the_surface_at_the_angle_toward_the_field():
+    from synth.assets.fit.strands import exit_directions
+
+    n = np.tile([0.0, 0.0, 1.0], (4, 1))
+    field = np.array([[1.0, 0.0, -3.0], [0.0, 2.0, 0.5], [0.0, 0.0, 1.0], [1e-9, 0.0, -1.0]])
+    e = exit_directions(n, field, np.radians(20.0))
+    assert np.allclose(np.linalg.norm(e, axis=1), 1.0)
+    assert np.degrees(np.arcsin(e[:2, 2])) == pytest.approx([20.0, 20.0])  # above the plane, whatever the field's sign
+    assert np.allclose(normalize(e[:2, :2]), [[1.0, 0.0], [0.0, 1.0]])  # toward the field's tangential part
+    # a field along the normal: steeply up (no tangential part to follow), and continuously so
+    assert e[2, 2] > 0.99 and e[3, 2] > 0.99
+
+
+def _buzz(hm, resolution=128, density=1.0):
+    ctx = asset_scene.head_arrays(hm, "neutral", resolution, 0, 0)
+    from synth.assets.fit.hair import groom
+
+    return groom(ctx, {"id": "buzz_cut", "params": {"length_m": 0.008, "density": density, "hairline_recession": 0.0,
+                                                     "colour": "black"}})
+
+
+def test_buzz_cut_roots_slant_the_way_they_are_combed(default_head, monkeypatch):
+    """A buzz cut's strands (3 segments) leave the scalp slanted along its field, not with their
+    first segment straight up (BUZZ_ROOT_ANGLE_DEG; the fast push-out lifts them above it)."""
+    from synth.assets.fit import hair
+
+    def first_angle(g):
+        d = normalize(g.pts[:, 1] - g.pts[:, 0])
+        return np.degrees(np.arcsin(np.clip((d * g.surface.normals(g.tri, g.bary)).sum(1), -1.0, 1.0)))
+
+    slanted = first_angle(_buzz(default_head))
+    monkeypatch.setattr(hair, "BUZZ_ROOT_ANGLE_DEG", 90.0)
+    upright = first_angle(_buzz(default_head))
+    assert np.median(upright) > 85.0 and np.median(slanted) < 65.0, (np.median(upright), np.median(slanted))
+    assert np.percentile(slanted, 25) < 50.0
+
+
+@pytest.mark.parametrize("resolution", [512, 1024])
+def test_scalp_strands_together_are_as_wide_as_a_heads_hairs(default_head, resolution):
+    """A groom's strands at density 1, root radius times count, sum to a real head's hairs
+    (HEAD_HAIRS x HAIR_RADIUS_M); a denser pick has more strands of the same width."""
+    from synth.assets.fit.hair import HAIR_RADIUS_M, HEAD_HAIRS, counts, root_radius
+
+    n = counts(resolution)[0]
+    assert root_radius(n) * n == pytest.approx(HEAD_HAIRS * HAIR_RADIUS_M, rel=1e-9)
+    if resolution == 512:
+        sparse, dense = _buzz(default_head, 512, 0.8), _buzz(default_head, 512, 1.2)
+        assert sparse.styling.root_radius == dense.styling.root_radius == root_radius(n)
+        assert len(dense.pts) > 1.4 * len(sparse.pts)

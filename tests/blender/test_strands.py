@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from synth.appearance import pigment as pig
 from synth.assets.params import AssetPick
 from synth.plan.records import RenderSettings
 
@@ -200,3 +201,95 @@ def test_render_shows_strand_classes(tmp_path):
         seen |= set(np.unique(r["segmentation"]).tolist())
     for cls in ("hair", "beard", "eyebrows", "eyelashes"):
         assert CLASSES[cls] in seen, (cls, sorted(seen))
+
+
+# --------------------------------------------------------------------------- the taper
+
+@pytest.mark.parametrize("shape", [0.0, 0.2, 0.4, 0.8, -0.2])
+def test_the_profile_formula_is_the_node_groups_taper(shape):
+    """synth.assets.fit.groom.profile (what benchmarks/hair_coverage.py measures with) is the radius
+    Blender's "Set Hair Curve Profile" gives along an evenly spaced strand."""
+    from blender_scripts.assets.strands import add_node_modifier
+    from synth.assets.fit.groom import profile
+
+    cv = bpy.data.hair_curves.new("profile")
+    cv.add_curves([21])
+    p = np.zeros((21, 3))
+    p[:, 2] = np.linspace(0.0, 0.1, 21)
+    cv.position_data.foreach_set("vector", p.astype(np.float32).ravel())
+    ob = bpy.data.objects.new("profile", cv)
+    bpy.context.scene.collection.objects.link(ob)
+    add_node_modifier(ob, "Set Hair Curve Profile", {"Replace Radius": True, "Radius": 2e-4, "Shape": shape,
+                                                     "Factor Min": 0.0, "Factor Max": 1.0})
+    ev = ob.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+    r = np.array([a.value for a in ev.attributes["radius"].data])
+    assert np.allclose(r, 2e-4 * profile(np.linspace(0.0, 1.0, 21), shape), atol=2e-7)
+    bpy.data.objects.remove(ob)
+
+
+# --------------------------------------------------------------------------- the hair shader
+
+def _strand_card(material, n=120, length=0.1, radius=3e-4):
+    """n straight strands along +x (root at x = -length/2), stacked in z in the plane y = 0."""
+    from blender_scripts.assets.strands import add_node_modifier
+
+    cv = bpy.data.hair_curves.new("card")
+    cv.add_curves([12] * n)
+    x = np.linspace(-0.5 * length, 0.5 * length, 12)
+    z = np.linspace(-0.025, 0.025, n)
+    p = np.stack(np.broadcast_arrays(x[None, :], 0.0 * z[:, None], z[:, None]), -1)
+    cv.position_data.foreach_set("vector", p.astype(np.float32).ravel())
+    cv.materials.append(material)
+    ob = bpy.data.objects.new("card", cv)
+    bpy.context.scene.collection.objects.link(ob)
+    add_node_modifier(ob, "Set Hair Curve Profile", {"Replace Radius": True, "Radius": radius, "Shape": 0.0,
+                                                     "Factor Min": 0.0, "Factor Max": 1.0})
+    return ob
+
+
+def _render_card(tmp_path, material):
+    """The card of :func:`_strand_card` with ``material()`` (made after the scene's reset) seen
+    face on, filling the frame, at 64 px and 16 samples: its RGBA."""
+    from blender_scripts import camera, passes, scene
+    from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world
+
+    W = H = 64
+    scene.reset()
+    scene.configure_render(RenderSettings(samples=16, denoise=False, device="cpu"), W, H)
+    scene.uniform_environment(1.0)
+    ob = _strand_card(material())
+    cam = camera.make_camera()
+    w2c = invert_rigid(orbit_camera_to_world(0.0, 0.0, 0.16, np.zeros(3)))  # image x is world +x
+    camera.set_camera(cam, intrinsics(W, H, 35.0, (0.0, 0.0)), w2c, W, H, 0.02, 10.0)
+    r = passes.render_view(tmp_path, 5)
+    bpy.data.objects.remove(ob)
+    return r["rgba"]
+
+
+def test_hair_shader_lightens_toward_the_tip_and_varies_redness_per_strand(tmp_path):
+    """hair_material: with tip_lightening the strands get lighter from root (image left) to tip
+    (right), by the ratio to the same card without it, which is 1 at the root; the redness jitter
+    and the gradient are wired to Hair Info (Random through a white noise, Intercept)."""
+    from blender_scripts.assets.strands import hair_material
+
+    pg = pig.COLOURS["brown"]
+    plain = _render_card(tmp_path, lambda: hair_material("plain", "hair", pg))
+    light = _render_card(tmp_path, lambda: hair_material("light", "hair", pg, tip_lightening=0.8))
+    card = plain[..., 3] > 0.9
+    cols = np.flatnonzero(card.any(0))
+    assert len(cols) > 30
+    lum = lambda im: (im[..., :3].mean(-1) * card).sum(0)[cols] / card.sum(0)[cols]  # noqa: E731
+    ratio = lum(light) / lum(plain)
+    q = len(cols) // 4
+    root, tip = ratio[:q].mean(), ratio[-q:].mean()
+    assert 0.85 < root < 1.3 and tip > 1.5 * root, ratio.round(2)
+
+    mat = hair_material("varied", "hair", pg, tip_lightening=0.2, redness_jitter=0.1)
+    nodes = {n.bl_idname for n in mat.node_tree.nodes}
+    assert {"ShaderNodeHairInfo", "ShaderNodeTexWhiteNoise"} <= nodes
+    b = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfHairPrincipled")
+    assert b.inputs["Melanin"].is_linked and b.inputs["Melanin Redness"].is_linked
+    assert b.inputs["Random Color"].default_value > 0 and b.inputs["Random Roughness"].default_value > 0
+    assert dict(mat["shader"]) == pytest.approx({"random_color": 0.12, "random_roughness": 0.1, "redness_jitter": 0.1,
+                                                 "tip_lightening": 0.2})
+    assert not hair_material("bare", "hair", pg).node_tree.nodes[1].inputs["Melanin"].is_linked

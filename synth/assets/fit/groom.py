@@ -42,6 +42,22 @@ class Styling:
     seed: int = 0
 
 
+def profile(t, shape: float) -> np.ndarray:
+    """A strand's radius over its root radius at spline parameter ``t`` (0 root, 1 tip) as
+    Blender's bundled "Set Hair Curve Profile" sets it with Factor Min 0, Max 1 and ``shape``
+    (``Styling.tip_shape``): ``(1 - t)^(-log2(1 - shape))`` for shape in [0, 0.5] (a full strand
+    that thins toward the tip: 0 none, 0.5 linear), ``1 - t^(-log2 shape)`` for shape in
+    [0.5, 1) (thin from near the root), mirrored (``t`` -> ``1 - t``) for negative shapes.
+    Checked against the node group in tests/blender/test_strands.py."""
+    t = np.asarray(t, np.float64)
+    s = float(shape)
+    if s < 0.0:
+        return profile(1.0 - t, -s)
+    if s <= 0.5:
+        return (1.0 - t) ** (-np.log2(1.0 - s))
+    return 1.0 - t ** (-np.log2(s))
+
+
 def head_frame(ctx) -> dict:
     """Head-centric reference points from the scalp and landmarks (current vertices)."""
     V = np.asarray(ctx.vertices, np.float64)
@@ -117,6 +133,10 @@ class Groom:
     exact: bool = False  # exact (per-triangle) push-out on update (small strand sets)
     keep_out: tuple[str, ...] = ()  # closed-mesh regions the strands pivot out of (lashes: eyeballs)
     keep_skin: bool = False  # the skin near the roots joins the keep-out; strands bend out of it (lashes)
+    #: the shader's per-strand variation beyond the BSDF's own (blender_scripts.assets.strands.hair_material):
+    #: the share of the melanin gone at the tip, and the +- range of the Melanin Redness per strand
+    tip_lightening: float = 0.0
+    redness_jitter: float = 0.0
 
 
 @dataclass

@@ -31,6 +31,22 @@ def counts(resolution: int, density: float = 1.0) -> tuple[int, int]:
     return max(n, 200), min(g, max(n, 200))
 
 
+#: the strands' taper ("Set Hair Curve Profile" shape, synth.assets.fit.groom.profile): full for
+#: most of the length and thinning over the last third (cut hair ends bluntly); the mean radius is
+#: 0.76 of the root's (0.4, near linear: 0.58)
+TIP_SHAPE = 0.2
+#: a real head's scalp hairs and their radius (about 100,000 hairs of 0.05-0.09 mm diameter)
+HEAD_HAIRS, HAIR_RADIUS_M = 100000, 3.5e-5
+
+
+def root_radius(n: int) -> float:
+    """The root radius of a groom of ``n`` strands at density 1: a render carries fewer strands than a head has
+    hairs, each as much thicker as it stands for more hairs (the strands' summed width is a real
+    head's, as a groom's level of detail keeps its coverage), within 0.05-0.5 mm (a pixel is about
+    0.8 mm of head at 512 px, 1.6 mm at 256 px: the strands are not resolved one by one)."""
+    return float(np.clip(HAIR_RADIUS_M * HEAD_HAIRS / max(int(n), 1), 5e-5, 5e-4))
+
+
 def _tie_point(surface, hf, direction):
     V = surface.V
     sc = V[surface.data.regions["scalp"]]
@@ -81,7 +97,9 @@ def groom(ctx, entry) -> Groom:
 
     c_tri, c_bary = roots(n)
     n = len(c_tri)
-    styling = Styling(root_radius=float(np.clip(4e-5 * np.sqrt(100000.0 / n), 5e-5, 3.5e-4)), tip_shape=0.4,
+    # the radius a strand needs to stand for its share of a head's hairs at density 1: a denser
+    # style (its density, the afro's) has more strands of that width, not thinner ones
+    styling = Styling(root_radius=root_radius(counts(ctx.resolution)[0]), tip_shape=TIP_SHAPE,
                         frizz=0.0008, frizz_shape=0.6, seed=int(rng.integers(0, 2 ** 31)))
     info = {"style": sid, "colour": colour, "pigment": pg.as_dict()}
 
@@ -114,6 +132,7 @@ def groom(ctx, entry) -> Groom:
             styling.clump_distance = 0.006
         if sid == "buzz_cut":
             styling.frizz = 0.0
+            styling.tip_shape = BUZZ_TIP_SHAPE
     if hat is not None:
         roots_under = n - len(c_tri)
         pts, kept = trim_at_plane(pts, *hat)
@@ -121,8 +140,18 @@ def groom(ctx, entry) -> Groom:
         clr = np.minimum(np.asarray(clr)[kept].max(axis=1, keepdims=True), 0.6 * arc_length(pts))
         info["under_headwear"] = {"roots_left_out": int(roots_under), "strands_left_out": int((~kept).sum()),
                                   "margin_m": HAT_MARGIN_M}
-    return Groom("hair", f"hair_{sid}", surface, pts, c_tri, c_bary, clr, styling, info, pg, roughness=0.28)
+    tip = float(min(TIP_LIGHTENING_MAX, TIP_LIGHTENING_PER_M * np.median(arc_length(pts)[:, -1]))) if len(pts) else 0.0
+    return Groom("hair", f"hair_{sid}", surface, pts, c_tri, c_bary, clr, styling, info, pg, roughness=0.28,
+                 tip_lightening=tip, redness_jitter=REDNESS_JITTER)
 
+
+#: the shader (blender_scripts.assets.strands.hair_material): the share of the melanin concentration
+#: gone at a strand's tip, per metre of the groom's median strand length (the ends of long hair are
+#: older, weathered and bleached: 16 % at 26 cm), at most TIP_LIGHTENING_MAX; and the +- range of
+#: the Melanin Redness (the pheomelanin share) per strand, beside the BSDF's own +-12 % melanin
+TIP_LIGHTENING_PER_M = 0.6
+TIP_LIGHTENING_MAX = 0.25
+REDNESS_JITTER = 0.08
 
 #: hair under headwear ends this far short of the headwear's cut plane (under its rim tube,
 #: 2.5-5 mm in radius: synth.assets.fit.headwear)
@@ -135,6 +164,15 @@ HAT_MARGIN_M = 0.003
 #: count relative to the other styles (a volume, not a layer over the scalp)
 AFRO_WRAP_M = 0.03
 AFRO_DENSITY = 2.0
+
+#: the buzz cut's strands leave the scalp at this angle above it (degrees), toward the tangential
+#: part of its field there: 3-12 mm long in 3 segments, grown from the root normal they stood their
+#: first segment straight up (a dot seen from above). The longer styles keep the normal: their roots
+#: rise to the hair's layer before the field lays them over, and slanted roots left more of the
+#: scalp uncovered (benchmarks/hair_coverage.py: 93 % against 95 % from above for medium_wavy)
+BUZZ_ROOT_ANGLE_DEG = 20.0
+#: a buzz cut is clipped to one length: its strands end bluntly (mean radius 0.93 of the root's)
+BUZZ_TIP_SHAPE = 0.05
 
 #: loose styles (short, medium, bob, long): the sideways part of the style's sweep (away from the
 #: parting) acts above this height over the head's centre and fades over the 5 cm below it, and
@@ -266,7 +304,9 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
             return afro(p, sw + grav * DOWN[None] + vol) + fg
         return sw + grav * DOWN[None] + vol + fg
 
-    guides = grow(surface, gr, gn, L, P, field, lift, layer, bend=bend)
+    # a buzz cut's strands leave the scalp slanted the way they are combed (the others along the normal)
+    guides = grow(surface, gr, gn, L, P, field, lift, layer, bend=bend,
+                  root_angle=np.radians(BUZZ_ROOT_ANGLE_DEG) if sid == "buzz_cut" else None)
 
     # curls / waves on guides (children inherit them: coherent locks)
     if sid in ("short_curly", "long_curly", "afro"):

@@ -176,13 +176,26 @@ def _push_along(P: np.ndarray, clearance, query, iterations: int) -> np.ndarray:
 # --------------------------------------------------------------------------- strand shapes
 
 
+def exit_directions(normals: np.ndarray, field: np.ndarray, angle: float, floor: float = 0.05) -> np.ndarray:
+    """Unit directions leaving the surface at ``angle`` (radians) above its tangent plane, toward
+    the tangential part of ``field`` (N, 3): how a hair leaves its follicle, slanted in the
+    direction it is combed. Where the field is nearly along the normal (tangential part below
+    ``floor`` of its length) the direction turns continuously toward the normal (no tie to break)."""
+    f = normalize(field)
+    tan = f - np.einsum("nd,nd->n", f, normals)[:, None] * normals
+    tn = np.linalg.norm(tan, axis=1, keepdims=True)
+    return normalize(tan + np.tan(angle) * np.maximum(tn, floor) * normals)
+
+
 def grow(surface: Surface, roots: np.ndarray, normals: np.ndarray, lengths: np.ndarray, n_points: int,
          direction, lift: np.ndarray | float, clearance: np.ndarray | float, bend: float = 1.0,
-         collide: bool = True) -> np.ndarray:
-    """Grow strands step by step: each segment blends the root normal (weight decaying over
+         collide: bool = True, root_angle: float | None = None) -> np.ndarray:
+    """Grow strands step by step: each segment blends the root direction (weight decaying over
     ``lift`` metres of arc length) with the style direction field ``direction(P, s, k)``
     ((N,3) points, (N,) arc length, step) -> (N,3), and points are pushed out of the head to
-    their ``clearance`` (capped near the root so strands can leave the skin at an angle)."""
+    their ``clearance`` (capped near the root so strands can leave the skin at an angle). The
+    root direction is the normal, or with ``root_angle`` (radians) the :func:`exit_directions`
+    toward the field at the roots (a strand slanted the way it is combed from its root on)."""
     N = len(roots)
     L = np.broadcast_to(np.asarray(lengths, np.float64), (N,))
     seg = L / (n_points - 1)
@@ -191,11 +204,12 @@ def grow(surface: Surface, roots: np.ndarray, normals: np.ndarray, lengths: np.n
     out = np.empty((N, n_points, 3))
     out[:, 0] = roots
     prev = normals.copy()
+    start = normals if root_angle is None else exit_directions(normals, direction(roots, np.zeros(N), 0), root_angle)
     for k in range(1, n_points):
         s = seg * (k - 1)
         a = np.exp(-s / np.maximum(lift, 1e-6))[:, None]
         tgt = normalize(direction(out[:, k - 1], s, k))
-        d = normalize(a * normals + (1.0 - a) * tgt)
+        d = normalize(a * start + (1.0 - a) * tgt)
         d = normalize((1.0 - bend) * prev + bend * d) if bend < 1.0 else d
         p = out[:, k - 1] + seg[:, None] * d
         if collide:
