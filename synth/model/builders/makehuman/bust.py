@@ -91,6 +91,9 @@ class BustData:
     #: and their macro values ("gender" 0 female .. 1 male, "weight" 0 .. 1, "muscle", "old": the
     #: share of the 'old' age target, 0 at 25 years .. 1 at 90)
     samples: dict | None = None
+    #: with :func:`bake_clearance`: (K + 1,) the left arm's turn out of the torso (radians), intercept
+    #: first, linear in the code (the right arm's: the mirrored code's); already in template and basis
+    turn: np.ndarray | None = None
 
     def rest(self, code: np.ndarray) -> np.ndarray:
         c = np.asarray(code, np.float64) * self.scale
@@ -110,7 +113,10 @@ class BustData:
         return {n: self.joint(n, code) for n in self.joints}
 
     def evaluate(self, code: np.ndarray) -> np.ndarray:
-        """(Vb, 3) the posed bust of ``code`` with its arms cleared of the torso (:func:`clear_arms`)."""
+        """(Vb, 3) the posed bust of ``code`` with its arms cleared of the torso: the linear model
+        itself once the clearance is baked (:func:`bake_clearance`), else :func:`clear_arms`."""
+        if self.turn is not None:
+            return self.posed(code)
         return clear_arms(self, self.posed(code), self.joints_of(code))[0]
 
 
@@ -388,7 +394,7 @@ def save_bust(b: BustData, path: Path) -> None:
         joint_names=np.array(list(b.joints)), joints=np.array(list(b.joints.values()), np.float32),
         joint_basis=np.stack(list(b.joint_basis.values()), 1).astype(np.float32),
         rotations=json.dumps({k: v.tolist() for k, v in b.rotations.items()}),
-        info=json.dumps(b.info))
+        info=json.dumps(b.info), **({} if b.turn is None else {"turn": b.turn}))
 
 
 def load_bust(path: Path) -> BustData:
@@ -405,7 +411,7 @@ def load_bust(path: Path) -> BustData:
         joints={n: z["joints"][i].astype(np.float64) for i, n in enumerate(names)},
         joint_basis={n: z["joint_basis"][:, i].astype(np.float64) for i, n in enumerate(names)},
         rotations={k: np.array(v) for k, v in json.loads(str(z["rotations"])).items()},
-        info=json.loads(str(z["info"])))
+        info=json.loads(str(z["info"])), turn=z["turn"].astype(np.float64) if "turn" in z else None)
 
 
 #: for :func:`arm_torso_penetration`: torso triangles have every corner's arm weight under this, arm
@@ -423,6 +429,13 @@ def arm_torso_penetration(b: BustData, V: np.ndarray, J: dict[str, np.ndarray]) 
     torso's surface: the largest negative signed distance (vertex-normal sign, robust on the open
     bust) of arm vertices under the armpit to the torso's triangles beside them; 0 when none is
     inside. Side "L", "R"."""
+    return {s: max(0.0, -g) for s, g in arm_torso_gap(b, V, J).items()}
+
+
+def arm_torso_gap(b: BustData, V: np.ndarray, J: dict[str, np.ndarray]) -> dict[str, float]:
+    """The smallest signed distance (m) of each arm's vertices under the armpit to the torso's
+    triangles beside them (:func:`arm_torso_penetration`'s query, unclipped): negative inside the
+    torso, positive the arm's gap to the chest. Side "L", "R" (+inf where nothing is checked)."""
     from synth.geometry.sdf import SignedDistance
 
     F = b.triangles
@@ -435,10 +448,10 @@ def arm_torso_penetration(b: BustData, V: np.ndarray, J: dict[str, np.ndarray]) 
         faces = np.nonzero(torso & (zc < az - PENETRATION_BELOW + 0.03))[0]
         arm = np.nonzero((b.weights[:, 2 + 2 * k] >= 1 - PENETRATION_WEIGHT) & (V[:, 2] < az - PENETRATION_BELOW))[0]
         if not len(arm) or not len(faces):
-            out[s] = 0.0
+            out[s] = float("inf")
             continue
         d = SignedDistance(V, F, faces=faces, sign="vertex")(V[arm])
-        out[s] = float(max(0.0, -d.min()))
+        out[s] = float(d.min())
     return out
 
 
@@ -538,3 +551,198 @@ def measures(b: BustData, V: np.ndarray, J: dict[str, np.ndarray]) -> dict[str, 
     out["chest_depth"] = y[back].max() - y[band].min()
     out["chest_breadth"] = x[band].max() - x[band].min()
     return {k: 1000.0 * float(v) for k, v in out.items()}
+
+
+# ---- the arm clearance baked into the linear model ------------------------------------------------
+#: :func:`bake_clearance`: prior draws the turn is fitted on (fixed seed: a deterministic build) ...
+BAKE_DRAWS = 600
+BAKE_SEED = 20261204
+#: ... plus the codes at +-BAKE_AXIS_SD along every identity direction
+BAKE_AXIS_SD = 3.5
+#: the fitted turn leaves every fit code's arm this far (m) out of the torso (the bake's linear fit of
+#: the turned arm then costs a little of it on the extremes)
+BAKE_MARGIN = 0.003
+#: then BAKE_ROUNDS times: BAKE_CHECK more prior draws (another seed) and the axes' codes are
+#: evaluated on the baked model, and those whose arm is under BAKE_TARGET (m) out of the torso join
+#: the fit (cutting planes)
+BAKE_CHECK = 1500
+#: ... and the BAKE_HEAVY of BAKE_MANY more draws whose fitted turn is largest
+BAKE_MANY = 20000
+BAKE_HEAVY = 200
+#: the fit's target turn: the needed one, but no further in than this (degrees; 0: the clearance
+#: step's, which only turns arms out; -inf: every arm rests BAKE_MARGIN off the chest)
+BAKE_FLOOR_DEG = 0.0
+BAKE_ROUNDS = 4
+BAKE_TARGET = 0.001
+#: the central differences' step (code units)
+BAKE_EPS = 1e-3
+
+
+def code_mirror_signs(b: BustData) -> np.ndarray:
+    """(K,) +1 for each identity direction whose posed bust is mirror-symmetric, -1 antisymmetric:
+    the mirror image of the identity with code c has code ``c * signs``."""
+    flip = np.array([-1.0, 1.0, 1.0])
+    out = np.empty(len(b.basis))
+    for k, bk in enumerate(b.basis):
+        m = bk[b.mirror] * flip
+        out[k] = 1.0 if np.abs(m - bk).max() <= np.abs(m + bk).max() else -1.0
+    return out
+
+
+def turn_arm(b: BustData, V: np.ndarray, J: dict[str, np.ndarray], side: str, angle: float) -> np.ndarray:
+    """``V`` with arm ``side`` turned out by ``angle`` radians (negative: in) about its posed
+    shoulder joint, about the front-back axis, weighted by the arm's skin weight (:func:`clear_arms`'s turn)."""
+    k, sign = [(i, sg) for i, (s, sg) in enumerate(SIDES) if s == side][0]
+    a = posed_joint(b, f"{ARM_BONE}.{side}", J)
+    R = rotation(np.array([0.0, -sign, 0.0]), angle)
+    return V + b.weights[:, 2 + 2 * k, None] * ((V - a) @ (R - np.eye(3)).T)
+
+
+def needed_turn(b: BustData, code: np.ndarray, margin: float = BAKE_MARGIN, iters: int = 4) -> dict[str, float]:
+    """Side -> the turn (radians; negative: in) of the linear model's posed arm of ``code`` that puts
+    its vertices under the armpit ``margin`` out of the torso (secant steps on :func:`arm_torso_gap`)."""
+    J = b.joints_of(code)
+    V0 = b.posed(code)
+    out = {}
+    for s, _ in SIDES:
+        r = float(np.linalg.norm(posed_joint(b, f"{ELBOW_BONE}.{s}", J) - posed_joint(b, f"{ARM_BONE}.{s}", J)))
+        th, g = 0.0, arm_torso_gap(b, V0, J)[s]
+        th_prev, g_prev = None, None
+        for _ in range(iters):
+            if abs(g - margin) < 2e-4:
+                break
+            if th_prev is None or abs(g - g_prev) < 1e-6:
+                step = (margin - g) / r
+            else:
+                step = (margin - g) * (th - th_prev) / (g - g_prev)
+            th_prev, g_prev = th, g
+            th = th + float(np.clip(step, -0.3, 0.3))
+            g = arm_torso_gap(b, turn_arm(b, V0, J, s, th), J)[s]
+        out[s] = th
+    return out
+
+
+def _fit_turn(X: np.ndarray, need: np.ndarray, floor: float = 0.0) -> np.ndarray:
+    """(K + 1,) coefficients (intercept first) of the linear turn t(c) = w0 + w . c that is at least
+    ``need`` on every row of ``X`` (codes) and otherwise as close as possible (L1) to max(0, need):
+    the clearance step's turn, where it turns, and no turn where the arm has room. A linear program."""
+    from scipy.optimize import linprog
+
+    n, K = X.shape
+    A = np.hstack([np.ones((n, 1)), X])
+    tgt = np.maximum(need, floor)
+    # variables: w (K+1, free), slack e (n, >= 0); min sum e; A w >= need; |A w - tgt| <= e
+    c = np.concatenate([np.zeros(K + 1), np.ones(n)])
+    I = np.eye(n)
+    A_ub = np.vstack([np.hstack([-A, np.zeros((n, n))]), np.hstack([A, -I]), np.hstack([-A, -I])])
+    b_ub = np.concatenate([-need, tgt, -tgt])
+    res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=[(None, None)] * (K + 1) + [(0, None)] * n, method="highs")
+    if not res.success:
+        raise RuntimeError(f"the arm turn's linear program failed: {res.message}")
+    return res.x[: K + 1]
+
+
+def bake_codes(prior, radius: float | None, dims: int, seed: int = BAKE_SEED, draws: int = BAKE_DRAWS) -> np.ndarray:
+    """The codes :func:`bake_clearance` fits on: BAKE_DRAWS truncated prior draws and the codes at
+    +-BAKE_AXIS_SD on every axis."""
+    rng = np.random.default_rng(seed)
+    d = prior.sample(rng, draws, radius)
+    ax = np.concatenate([np.eye(dims), -np.eye(dims)]) * BAKE_AXIS_SD
+    return np.concatenate([d, ax])
+
+
+def bake_clearance(b: BustData, prior, radius: float | None, seed: int = BAKE_SEED, draws: int = BAKE_DRAWS,
+                   rounds: int = BAKE_ROUNDS, check: int = BAKE_CHECK, heavy: int = BAKE_HEAVY) -> BustData:
+    """The bust with :func:`clear_arms` baked into its linear model (no evaluation-time step): each
+    posed arm turned out (or in) about its posed shoulder joint by a turn *linear in the identity
+    code*, t(c) = w0 + w . c, fitted by a linear program (:func:`_fit_turn`) so that every fit code's
+    arm clears the torso by BAKE_MARGIN (:func:`needed_turn`) and is otherwise as close as it can be
+    to the clearance step's turn. The turned bust is then linearised about the mean code (the
+    template turned exactly, the basis by the turn's derivative), so the result is again
+    ``template + sum_k code_k * scale_k * basis_k``, mirror-symmetric like the unbaked one (the right
+    arm is the left arm's mirror image; its turn is the left's of the mirrored code). Cutting planes:
+    ``rounds`` times, ``check`` more prior draws, the axes' codes and the ``heavy`` draws (of
+    BAKE_MANY) with the largest turn are evaluated on the baked model, and every arm under
+    BAKE_TARGET out of the torso joins the fit with a secant step's turn.
+
+    A linear turn cannot follow the clearance step's hinge (no turn, then a turn growing with the
+    body): it lies above it, so the average arm is turned out a few degrees (``info["clearance"]``).
+    ``prior``: the head model's identity prior (:class:`synth.model.identity_gmm.GaussianMixture`),
+    ``radius``: its truncation (:func:`synth.plan.identities.truncation_radius`)."""
+    K = len(b.basis)
+    signs = code_mirror_signs(b)
+    C = bake_codes(prior, radius, K, seed, draws)
+
+    def needs(codes):
+        rows = [needed_turn(b, c) for c in codes]
+        # left arm of c and (mirrored) right arm of c, both as a left arm of a code
+        return np.concatenate([codes, codes * signs]), np.array([r["L"] for r in rows] + [r["R"] for r in rows])
+
+    X, need = needs(C)
+    flip = np.array([-1.0, 1.0, 1.0])
+    rows = np.nonzero(b.weights[:, 2] > 0)[0]  # the left arm's
+    checks = prior.sample(np.random.default_rng(seed + 1), check, radius)
+    checks = np.concatenate([checks, np.concatenate([np.eye(K), -np.eye(K)]) * BAKE_AXIS_SD])
+    many = prior.sample(np.random.default_rng(seed + 2), BAKE_MANY, radius)
+    added = 0
+    for rnd in range(rounds + 1):
+        w = _fit_turn(X, need, np.radians(BAKE_FLOOR_DEG))
+        # the turned bust, linearised about the mean code (its template: the exact turn of the
+        # template; its basis: the derivative, by central differences): a turn's tangent moves the
+        # arm a little further out than the turn itself (safe), and the arm grows by 1 / cos of the
+        # turn's departure from the mean's (6 % at 20 degrees). The left arm's rows from the left
+        # turn, the right arm's as the mirror image (exact symmetry)
+        def turned(c):
+            J = b.joints_of(c)
+            V = b.posed(c)
+            return (turn_arm(b, V, J, "L", float(w[0] + w[1:] @ c)) - V)[rows]
+
+        coef = np.empty((K + 1, len(rows), 3))
+        coef[0] = turned(np.zeros(K))
+        for k in range(K):
+            e = np.zeros(K)
+            e[k] = BAKE_EPS
+            coef[1 + k] = (turned(e) - turned(-e)) / (2 * BAKE_EPS)
+        A = np.hstack([np.ones((len(X), 1)), X])
+        dT = np.zeros_like(b.template)
+        dB = np.zeros_like(b.basis)
+        dT[rows] = coef[0]
+        dB[:, rows] = coef[1:] / b.scale[:, None, None]
+        # the right arm: the mirror image of the left (the mirror rows of the left arm are the right arm's)
+        dT = dT + dT[b.mirror] * flip
+        dB = dB + dB[:, b.mirror] * flip * signs[:, None, None]
+        if rnd == rounds:
+            break
+        # cutting planes: the check codes whose baked arm is under BAKE_TARGET out of the torso join
+        # the fit with the turn that a secant step on the baked model asks for
+        newX, newn = [], []
+        T1, B1 = b.template + dT, b.basis + dB
+        # ... and the many draws' BAKE_HEAVY whose fitted turn is largest: the heavy bodies' extremes
+        t = np.maximum(many @ w[1:], (many * signs) @ w[1:])
+        for c in np.concatenate([checks, many[np.argsort(-t, kind="stable")[:heavy]]]):
+            cs = c * b.scale
+            V = T1 + np.tensordot(cs, B1, 1)
+            J = b.joints_of(c)
+            g = arm_torso_gap(b, V, J)
+            for s, cc in (("L", c), ("R", c * signs)):
+                if g[s] < BAKE_TARGET:
+                    r = float(np.linalg.norm(posed_joint(b, f"{ELBOW_BONE}.{s}", J) - posed_joint(b, f"{ARM_BONE}.{s}", J)))
+                    newX.append(cc)
+                    newn.append(float(w[0] + w[1:] @ cc) + (BAKE_MARGIN - g[s]) / r)
+        if not newX:
+            break
+        added += len(newX)
+        X, need = np.concatenate([X, np.array(newX)]), np.concatenate([need, np.array(newn)])
+    info = dict(b.info)
+    info["clearance"] = {"baked": True, "fit_codes": int(len(C)), "cutting_planes": added, "margin_m": BAKE_MARGIN,
+                         "turn_at_mean_deg": round(float(np.degrees(w[0])), 3),
+                         "turn_fit_deg": {"p50": round(float(np.degrees(np.median(A @ w))), 2),
+                                          "max": round(float(np.degrees((A @ w).max())), 2),
+                                          "min": round(float(np.degrees((A @ w).min())), 2)},
+                         }
+    out = BustData(**{f.name: getattr(b, f.name) for f in b.__dataclass_fields__.values()})
+    out.template = b.template + dT
+    out.basis = b.basis + dB
+    out.info = info
+    out.turn = w
+    return out
