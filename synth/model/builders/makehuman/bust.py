@@ -94,6 +94,10 @@ class BustData:
     #: with :func:`bake_clearance`: (K + 1,) the left arm's turn out of the torso (radians), intercept
     #: first, linear in the code (the right arm's: the mirrored code's); already in template and basis
     turn: np.ndarray | None = None
+    #: the bust's open bottom edge (bust rows round the waist loop, in order) and each elbow's loop,
+    #: closed by the last polygons of ``polys`` (side -> bust rows)
+    bottom_loop: np.ndarray | None = None
+    elbow_loops: dict[str, np.ndarray] | None = None
 
     def rest(self, code: np.ndarray) -> np.ndarray:
         c = np.asarray(code, np.float64) * self.scale
@@ -204,26 +208,105 @@ def pose(V: np.ndarray, joints: dict[str, np.ndarray], W: np.ndarray, rot: dict[
     return out
 
 
-def select(obj, mesh, Wc: np.ndarray, rig: dict, groups: dict) -> tuple[np.ndarray, list[int], np.ndarray]:
-    """(hm08 vertices, base-mesh polygon indices, polygon is the head model's) of the bust."""
+def _edge_loop(nbr: dict, edge_faces: dict, v0: int, v1: int, limit: int = 400) -> list[int] | None:
+    """The quad mesh's edge loop through edge (v0, v1): at each valence-4 vertex the edge that shares
+    no face with the incoming one. None if it meets a pole or does not close within ``limit``."""
+    loop = [v0, v1]
+    for _ in range(limit):
+        a, b = loop[-2], loop[-1]
+        if len(nbr[b]) != 4:
+            return None
+        fa = set(edge_faces[(min(a, b), max(a, b))])
+        nxt = [c for c in sorted(nbr[b]) if c != a and not set(edge_faces[(min(b, c), max(b, c))]) & fa]
+        if len(nxt) != 1:
+            return None
+        if nxt[0] == loop[0]:
+            return loop
+        loop.append(nxt[0])
+    return None
+
+
+@dataclass
+class Cut:
+    """The bust's cuts on hm08: the waist loop (:data:`Z_CUT`) and each elbow's (:data:`ELBOW_T`),
+    hm08 vertex indices in order round the loop."""
+
+    waist: list[int]
+    elbow: dict[str, list[int]]
+
+
+def select(obj, mesh, Wc: np.ndarray, rig: dict, groups: dict,
+           mirror_hm: np.ndarray) -> tuple[np.ndarray, list[int], np.ndarray, Cut]:
+    """(hm08 vertices, base-mesh polygon indices, polygon is the head model's, the cuts) of the bust:
+    the hm08 ``body`` quads above the edge loop nearest :data:`Z_CUT` (round the waist) and each
+    upper arm's above its edge loop nearest :data:`ELBOW_T` (round the elbow): clean, nearly planar
+    cuts along one vertex loop each."""
+    from collections import defaultdict
+
     P = obj.verts
-    keep_v = P[:, 2] > Z_CUT
-    for k, (s, _) in enumerate(SIDES):
-        sh = P[joint_vertices(rig, f"{ARM_BONE}.{s}", groups)].mean(0)
-        el = P[joint_vertices(rig, f"{ELBOW_BONE}.{s}", groups)].mean(0)
-        d = el - sh
-        t = (P - sh) @ d / (d @ d)
-        arm = Wc[:, 2 + 2 * k] >= ARM_WEIGHT
-        keep_v = np.where(arm, t <= ELBOW_T, keep_v)
-    # head model polygons (by their hm08 vertices) and which of them hold a shoulder vertex
+    body = [i for i, g in enumerate(obj.groups) if g == "body"]
+    edge_faces, nbr = defaultdict(list), defaultdict(set)
+    for i in body:
+        p = obj.polys[i]
+        for a, b in zip(p.tolist(), np.roll(p, -1).tolist()):
+            edge_faces[(min(a, b), max(a, b))].append(i)
+            nbr[a].add(b)
+            nbr[b].add(a)
+    bv = np.array(sorted(nbr))
+
+    def best_loop(starts, dir_ok, score):
+        best = None
+        for v0 in starts.tolist():
+            for v1 in sorted(nbr[v0]):
+                if not dir_ok(v0, v1):
+                    continue
+                loop = _edge_loop(nbr, edge_faces, v0, v1)
+                if loop is not None and (best is None or score(loop) < score(best)):
+                    best = loop
+        if best is None:
+            raise ValueError("no closed edge loop for the bust's cut")
+        return best
+
+    # the waist: loops through the front midline's vertices near Z_CUT, running sideways
+    mid = bv[(np.abs(P[bv, 0]) < 1e-4) & (P[bv, 1] < 0) & (np.abs(P[bv, 2] - Z_CUT) < 0.03)]
+    waist = best_loop(mid, lambda a, b: P[b, 0] - P[a, 0] > 0.5 * np.linalg.norm(P[b] - P[a]),
+                      lambda lp: abs(P[lp, 2].mean() - Z_CUT))
+    # the left elbow: loops round the arm near ELBOW_T; the right one is its mirror image
+    sh = P[joint_vertices(rig, f"{ARM_BONE}.L", groups)].mean(0)
+    el = P[joint_vertices(rig, f"{ELBOW_BONE}.L", groups)].mean(0)
+    d = el - sh
+    t = (P - sh) @ d / (d @ d)
+    dn = d / np.linalg.norm(d)
+    near = bv[(Wc[bv, 2] >= 0.9) & (np.abs(t[bv] - ELBOW_T) < 0.05)]
+    elbow_l = best_loop(near, lambda a, b: abs((P[b] - P[a]) @ dn) < 0.5 * np.linalg.norm(P[b] - P[a]),
+                        lambda lp: abs(t[lp].mean() - ELBOW_T))
+    cut = Cut(waist=waist, elbow={"L": elbow_l, "R": [int(mirror_hm[v]) for v in elbow_l]})
+    cut_edges = set()
+    for lp in (waist, cut.elbow["L"], cut.elbow["R"]):
+        for a, b in zip(lp, lp[1:] + lp[:1]):
+            cut_edges.add((min(a, b), max(a, b)))
+    # flood the body's quads from the chest's front, not across the cuts
+    seed_v = int(bv[np.argmin(np.linalg.norm(P[bv] - np.array([0.0, -0.1, Z_CUT + 0.2]), axis=1))])
+    seen = {edge_faces[(min(seed_v, c), max(seed_v, c))][0] for c in sorted(nbr[seed_v])[:1]}
+    todo = list(seen)
+    while todo:
+        f = todo.pop()
+        p = obj.polys[f].tolist()
+        for a, b in zip(p, p[1:] + p[:1]):
+            e = (min(a, b), max(a, b))
+            if e in cut_edges:
+                continue
+            for g in edge_faces[e]:
+                if g not in seen:
+                    seen.add(g)
+                    todo.append(g)
+    keep = sorted(seen)
+    if P[np.concatenate([obj.polys[i] for i in keep]), 2].min() < Z_CUT - 0.03:
+        raise ValueError("the bust's cuts do not close: the flood leaked below the waist")
+    # head model polygons (by their hm08 vertices)
     head_key = {tuple(sorted(mesh.kept[p].tolist())) for p in mesh.polys if np.all(p < len(mesh.kept))}
-    keep, in_head = [], []
-    for i, (p, g) in enumerate(zip(obj.polys, obj.groups)):
-        if g != "body" or not np.all(keep_v[p]):
-            continue
-        keep.append(i)
-        in_head.append(tuple(sorted(p.tolist())) in head_key)
-    return np.unique(np.concatenate([obj.polys[i] for i in keep])), keep, np.array(in_head, bool)
+    in_head = [tuple(sorted(obj.polys[i].tolist())) in head_key for i in keep]
+    return np.unique(np.concatenate([obj.polys[i] for i in keep])), keep, np.array(in_head, bool), cut
 
 
 def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_samples: int = 0) -> BustData:
@@ -245,7 +328,7 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
     rig, wts = _rig(data)
     Wc_hm = weight_classes(rig, wts, n_hm)
 
-    hm08, poly_ids, in_head_all = select(obj, mesh, Wc_hm, rig, groups)
+    hm08, poly_ids, in_head_all, cut = select(obj, mesh, Wc_hm, rig, groups, mirror_hm)
     # drop the head model's polygons without a shoulder vertex (family 0 = torso) and without a
     # vertex that the pose moves (its head and neck): the seam between the head model's remaining
     # polygons and the bust then does not move with the arms
@@ -263,6 +346,19 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
     if np.any(look[mirror_hm[hm08]] < 0):
         raise ValueError("the bust selection is not mirror-symmetric")
     polys = [look[obj.polys[i]] for i in poly_ids]
+    # the elbows closed by one polygon each (facing down the arm), so that no hole shows
+    caps = {}
+    for s, _ in SIDES:
+        lp = np.array(cut.elbow[s], np.int64)
+        sh = P[joint_vertices(rig, f"{ARM_BONE}.{s}", groups)].mean(0)
+        el = P[joint_vertices(rig, f"{ELBOW_BONE}.{s}", groups)].mean(0)
+        q = P[lp]
+        nrm = np.cross(q - q.mean(0), np.roll(q, -1, axis=0) - q.mean(0)).sum(0)
+        if nrm @ (el - sh) < 0:
+            lp = lp[::-1]
+        caps[s] = look[lp]
+        polys.append(look[lp])
+    head_polys = np.concatenate([head_polys, np.zeros(len(SIDES), bool)])
     mirror = look[mirror_hm[hm08]]
     head_rows = mesh.lookup[hm08]
     Vb = len(hm08)
@@ -378,7 +474,8 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
     return BustData(hm08=hm08, polys=polys, triangles=tris, head_rows=head_rows, head_polys=head_polys,
                     mirror=mirror, rest_template=rest_template, rest_basis=rest_basis, template=template,
                     basis=basis_posed, scale=std, weights=Wcl, joints=joints, joint_basis=joint_basis,
-                    rotations=rot, info=info, samples=samples)
+                    rotations=rot, info=info, samples=samples, bottom_loop=look[np.array(cut.waist)],
+                    elbow_loops=caps)
 
 
 def save_bust(b: BustData, path: Path) -> None:
@@ -394,7 +491,10 @@ def save_bust(b: BustData, path: Path) -> None:
         joint_names=np.array(list(b.joints)), joints=np.array(list(b.joints.values()), np.float32),
         joint_basis=np.stack(list(b.joint_basis.values()), 1).astype(np.float32),
         rotations=json.dumps({k: v.tolist() for k, v in b.rotations.items()}),
-        info=json.dumps(b.info), **({} if b.turn is None else {"turn": b.turn}))
+        info=json.dumps(b.info), **({} if b.turn is None else {"turn": b.turn}),
+        **({} if b.bottom_loop is None else {"bottom_loop": b.bottom_loop.astype(np.int32),
+                                              "elbow_L": b.elbow_loops["L"].astype(np.int32),
+                                              "elbow_R": b.elbow_loops["R"].astype(np.int32)}))
 
 
 def load_bust(path: Path) -> BustData:
@@ -411,7 +511,9 @@ def load_bust(path: Path) -> BustData:
         joints={n: z["joints"][i].astype(np.float64) for i, n in enumerate(names)},
         joint_basis={n: z["joint_basis"][:, i].astype(np.float64) for i, n in enumerate(names)},
         rotations={k: np.array(v) for k, v in json.loads(str(z["rotations"])).items()},
-        info=json.loads(str(z["info"])), turn=z["turn"].astype(np.float64) if "turn" in z else None)
+        info=json.loads(str(z["info"])), turn=z["turn"].astype(np.float64) if "turn" in z else None,
+        bottom_loop=z["bottom_loop"].astype(np.int64) if "bottom_loop" in z else None,
+        elbow_loops={s: z[f"elbow_{s}"].astype(np.int64) for s in "LR"} if "elbow_L" in z else None)
 
 
 #: for :func:`arm_torso_penetration`: torso triangles have every corner's arm weight under this, arm
