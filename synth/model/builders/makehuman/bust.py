@@ -98,6 +98,10 @@ class BustData:
     #: closed by the last polygons of ``polys`` (side -> bust rows)
     bottom_loop: np.ndarray | None = None
     elbow_loops: dict[str, np.ndarray] | None = None
+    #: hm08's texture coordinates of the bust's polygons (the elbow caps': one loop vertex's)
+    uvs: np.ndarray | None = None  # (Ub, 2)
+    poly_uvs: list[np.ndarray] | None = None  # indices into uvs, parallel to polys
+    tri_uv: np.ndarray | None = None  # (T, 3), parallel to triangles
 
     def rest(self, code: np.ndarray) -> np.ndarray:
         c = np.asarray(code, np.float64) * self.scale
@@ -346,6 +350,10 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
     if np.any(look[mirror_hm[hm08]] < 0):
         raise ValueError("the bust selection is not mirror-symmetric")
     polys = [look[obj.polys[i]] for i in poly_ids]
+    uv_used = np.unique(np.concatenate([obj.poly_uvs[i] for i in poly_ids]))
+    uv_look = np.full(len(obj.uvs), -1, np.int64)
+    uv_look[uv_used] = np.arange(len(uv_used))
+    puvs = [uv_look[obj.poly_uvs[i]] for i in poly_ids]
     # the elbows closed by one polygon each (facing down the arm), so that no hole shows
     caps = {}
     for s, _ in SIDES:
@@ -358,6 +366,10 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
             lp = lp[::-1]
         caps[s] = look[lp]
         polys.append(look[lp])
+        # the cap's corners take the uv of one loop vertex (skin colour; under a sleeve)
+        first = next(j for j in poly_ids if lp[0] in obj.polys[j])
+        u0 = uv_look[obj.poly_uvs[first][list(obj.polys[first]).index(lp[0])]]
+        puvs.append(np.full(len(lp), u0, np.int64))
     head_polys = np.concatenate([head_polys, np.zeros(len(SIDES), bool)])
     mirror = look[mirror_hm[hm08]]
     head_rows = mesh.lookup[hm08]
@@ -437,7 +449,7 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
     jb = {nm: joint_basis[nm] for nm in jnames}
     basis_posed = pose(rest_basis, jb, Wcl, rot)
 
-    tris, _ = triangulate(P[hm08], polys, polys)
+    tris, tri_uv = triangulate(P[hm08], polys, puvs)
     info = {"vertices": Vb, "polygons": len(polys), "triangles": int(len(tris)),
             "head_polygons_replaced": int(head_polys.sum()), "identity_targets": nt,
             "identity_rank": rank, "head_variance_explained": round(explained, 4),
@@ -475,7 +487,7 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
                     mirror=mirror, rest_template=rest_template, rest_basis=rest_basis, template=template,
                     basis=basis_posed, scale=std, weights=Wcl, joints=joints, joint_basis=joint_basis,
                     rotations=rot, info=info, samples=samples, bottom_loop=look[np.array(cut.waist)],
-                    elbow_loops=caps)
+                    elbow_loops=caps, uvs=np.asarray(obj.uvs)[uv_used], poly_uvs=puvs, tri_uv=tri_uv)
 
 
 def save_bust(b: BustData, path: Path) -> None:
@@ -492,6 +504,8 @@ def save_bust(b: BustData, path: Path) -> None:
         joint_basis=np.stack(list(b.joint_basis.values()), 1).astype(np.float32),
         rotations=json.dumps({k: v.tolist() for k, v in b.rotations.items()}),
         info=json.dumps(b.info), **({} if b.turn is None else {"turn": b.turn}),
+        **({} if b.uvs is None else {"uvs": b.uvs.astype(np.float32), "tri_uv": b.tri_uv.astype(np.int32),
+                                      "poly_uv_indices": np.concatenate(b.poly_uvs).astype(np.int32)}),
         **({} if b.bottom_loop is None else {"bottom_loop": b.bottom_loop.astype(np.int32),
                                               "elbow_L": b.elbow_loops["L"].astype(np.int32),
                                               "elbow_R": b.elbow_loops["R"].astype(np.int32)}))
@@ -513,7 +527,11 @@ def load_bust(path: Path) -> BustData:
         rotations={k: np.array(v) for k, v in json.loads(str(z["rotations"])).items()},
         info=json.loads(str(z["info"])), turn=z["turn"].astype(np.float64) if "turn" in z else None,
         bottom_loop=z["bottom_loop"].astype(np.int64) if "bottom_loop" in z else None,
-        elbow_loops={s: z[f"elbow_{s}"].astype(np.int64) for s in "LR"} if "elbow_L" in z else None)
+        elbow_loops={s: z[f"elbow_{s}"].astype(np.int64) for s in "LR"} if "elbow_L" in z else None,
+        uvs=z["uvs"].astype(np.float64) if "uvs" in z else None,
+        tri_uv=z["tri_uv"].astype(np.int64) if "tri_uv" in z else None,
+        poly_uvs=[z["poly_uv_indices"][a:b].astype(np.int64) for a, b in zip(off[:-1], off[1:])]
+        if "poly_uv_indices" in z else None)
 
 
 #: for :func:`arm_torso_penetration`: torso triangles have every corner's arm weight under this, arm
@@ -847,4 +865,117 @@ def bake_clearance(b: BustData, prior, radius: float | None, seed: int = BAKE_SE
     out.basis = b.basis + dB
     out.info = info
     out.turn = w
+    return out
+
+
+# ---- the head model with the bust appended (a builder option, not the default model) --------------
+def append_bust(m, b: BustData):
+    """A copy of the head model ``m`` (:class:`synth.model.format.HeadModelData`, built from the same
+    MakeHuman data) with the bust ``b`` (posed, its clearance baked: :func:`bake_clearance`) in its
+    mesh:
+
+    * the bust's vertices the head lacks are appended after the head's, so every existing vertex
+      index, region, landmark set, eyelid list and ``mirror`` entry stays valid; the shared vertices
+      the pose moves (the shoulders') take the bust's posed template and basis, the others keep
+      the head's bits;
+    * the head's polygons that the bust replaces (its shoulders, ``b.head_polys``) and their
+      triangles are removed, the bust's appended after the rest (landmark triangles renumbered);
+    * new rows: the bust's identity basis, zero expression rows, skin weight 1 on the root joint
+      (``neck``: the plans rotate only jaw and eyes), hm08's uvs;
+    * regions ``bust`` (every bust vertex), ``torso``, ``arm_l``, ``arm_r`` (arm weight >= 0.5),
+      ``bust_bottom`` (the open waist loop); ``shoulders`` and ``skin`` grow by the new vertices."""
+    import copy
+
+    if b.turn is None:
+        raise ValueError("append_bust wants a bust whose arm clearance is baked (bake_clearance)")
+    out = copy.deepcopy(m)
+    V0 = m.num_vertices
+    new = np.nonzero(b.head_rows < 0)[0]
+    idx = b.head_rows.copy()
+    idx[new] = V0 + np.arange(len(new))
+    moved = (b.head_rows >= 0) & (b.weights[:, 0] < 1.0 - 1e-9)
+    K = m.identity_dims
+    if len(b.basis) < K:
+        raise ValueError(f"the bust has {len(b.basis)} identity components, the model {K}")
+    bb = b.basis[:K]
+    Vn = V0 + len(new)
+    tpl = np.zeros((Vn, 3), np.float32)
+    tpl[:V0] = m.template
+    tpl[idx[new]] = b.template[new]
+    tpl[idx[moved]] = b.template[moved]
+    ib = np.zeros((K, Vn, 3), np.float32)
+    ib[:, :V0] = m.identity_basis
+    ib[:, idx[new]] = bb[:, new]
+    ib[:, idx[moved]] = bb[:, moved]
+    eb = np.zeros((m.expression_dims, Vn, 3), np.float32)
+    eb[:, :V0] = m.expression_basis
+    sw = np.zeros((Vn, len(m.joint_names)), np.float32)
+    sw[:V0] = m.skin_weights
+    sw[V0:, m.joint_names.index("neck")] = 1.0
+    # polygons: the head's minus the replaced ones, then the bust's
+    off = np.asarray(m.poly_offsets)
+    npol = len(off) - 1
+    replaced = {tuple(sorted(b.head_rows[p].tolist())) for p, h in zip(b.polys, b.head_polys) if h}
+    drop = np.array([tuple(sorted(m.poly_indices[off[i]:off[i + 1]].tolist())) in replaced for i in range(npol)])
+    if drop.sum() != b.head_polys.sum():
+        raise ValueError(f"{drop.sum()} of the model's polygons match the bust's {b.head_polys.sum()} shoulder polygons")
+    keep_p = np.nonzero(~drop)[0]
+    tri_poly = np.repeat(np.arange(npol), np.diff(off) - 2)
+    if len(tri_poly) != len(m.triangles):
+        raise ValueError("the model's triangles are not its polygons' fans in order")
+    keep_t = ~drop[tri_poly]
+    tri_new = np.full(len(m.triangles), -1, np.int64)
+    tri_new[keep_t] = np.arange(int(keep_t.sum()))
+    # every bust polygon (its copies of the head's shoulder polygons are the replacements)
+    bust_polys, bust_puv = b.polys, b.poly_uvs
+    U0 = len(m.uvs)
+    pi = [m.poly_indices[off[i]:off[i + 1]] for i in keep_p] + [idx[p] for p in bust_polys]
+    pu = [m.poly_uv[off[i]:off[i + 1]] for i in keep_p] + [U0 + u for u in bust_puv]
+    out.template = tpl
+    out.identity_basis = ib
+    out.expression_basis = eb
+    out.skin_weights = sw
+    out.triangles = np.concatenate([np.asarray(m.triangles)[keep_t], idx[b.triangles]]).astype(np.int32)
+    out.tri_uv = np.concatenate([np.asarray(m.tri_uv)[keep_t], U0 + b.tri_uv]).astype(np.int32)
+    out.poly_offsets = np.concatenate([[0], np.cumsum([len(p) for p in pi])]).astype(np.int32)
+    out.poly_indices = np.concatenate(pi).astype(np.int32)
+    out.poly_uv = np.concatenate(pu).astype(np.int32)
+    out.uvs = np.concatenate([m.uvs, b.uvs]).astype(np.float32)
+    lm = {}
+    for k, (t, bary) in m.landmarks.items():
+        t2 = tri_new[np.asarray(t)]
+        if np.any(t2 < 0):
+            raise ValueError(f"landmark set {k} lies on a replaced shoulder polygon")
+        lm[k] = (t2.astype(np.int32), bary)
+    out.landmarks = lm
+    arm = (b.weights[:, 2] + b.weights[:, 4]) >= ARM_WEIGHT
+    reg = dict(m.regions)
+    reg["bust"] = np.sort(idx).astype(np.int32)
+    reg["torso"] = np.sort(idx[~arm]).astype(np.int32)
+    reg["arm_l"] = np.sort(idx[b.weights[:, 2] >= ARM_WEIGHT]).astype(np.int32)
+    reg["arm_r"] = np.sort(idx[b.weights[:, 4] >= ARM_WEIGHT]).astype(np.int32)
+    reg["bust_bottom"] = idx[b.bottom_loop].astype(np.int32)
+    for k in ("shoulders", "skin"):
+        if k in reg:
+            reg[k] = np.concatenate([np.asarray(reg[k]), idx[new]]).astype(np.int32)
+    out.regions = reg
+    extra = dict(m.extra)
+    if "mirror" in extra:
+        mir = np.concatenate([np.asarray(extra["mirror"]), np.zeros(len(new), np.int64)])
+        mir[idx[new]] = idx[b.mirror[new]]
+        extra["mirror"] = mir.astype(int).tolist()
+    extra["bust"] = {"vertices": int(len(new)), "first_vertex": V0, "polygons_replaced": int(drop.sum()),
+                     "polygons_added": len(bust_polys), "clearance": b.info.get("clearance"),
+                     "arm_turn_deg": b.info.get("arm_turn_deg"),
+                     "turn": [float(x) for x in b.turn]}
+    out.extra = extra
+    prov = dict(m.provenance)
+    prov["bust"] = ("MakeHuman hm08 upper body (waist and elbow edge loops), arms lowered by LBS with the mpfb2 "
+                    "standard rig's weights, identity basis regressed on the head codes, arm clearance baked "
+                    "(synth.model.builders.makehuman.bust)")
+    prov["vertices"] = Vn
+    prov["triangles"] = int(len(out.triangles))
+    prov["polygons"] = int(len(pi))
+    out.provenance = prov
+    out.name = m.name + "+bust"
     return out
