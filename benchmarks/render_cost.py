@@ -31,7 +31,9 @@ score: against the references: PSNR (sRGB, alpha > 0.5) and LPIPS (the project's
   colour composited over black) of the whole frame and of each crop, and the fringe RMSE.
 
 Every stage keeps what it made under W (renders as ``W/renders/<variant>/<frame>.npz``) and skips it
-when rerun, so a long study is run in pieces. Times are Cycles' render call (scene sync, sampling,
+when rerun, so a long study is run in pieces. All of a study's renders must come from one commit:
+the first rendering stage records it in ``W/code.json`` and later ones refuse another commit or a
+changed tree (run a long study from a worktree pinned at its commit). Times are Cycles' render call (scene sync, sampling,
 denoising), the frames of one identity rendered in one scene, each variant after a dropped render
 cache (benchmarks/render.py ``settings``' protocol).
 """
@@ -78,6 +80,40 @@ def _id(assets: dict, cls: str):
 
 def _frames_file(work: Path) -> Path:
     return work / "frames.json"
+
+
+def code_version() -> dict:
+    """The commit of this checkout and whether its tracked files differ from it (``git``; None
+    outside a git checkout)."""
+    import subprocess
+
+    def git(*a: str) -> str | None:
+        try:
+            return subprocess.run(["git", *a], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
+        except (OSError, subprocess.CalledProcessError):
+            return None
+
+    status = git("status", "--porcelain", "--untracked-files=no")
+    return {"commit": git("rev-parse", "HEAD"), "dirty": None if status is None else bool(status)}
+
+
+def check_code(work: Path, force: bool = False) -> None:
+    """Every render of a study must come from one version of the renderer: the first rendering
+    stage records it (``W/code.json``), later ones refuse another commit or a changed tree
+    (``--force`` takes the risk: references and variants from different code do not compare)."""
+    f = work / "code.json"
+    now = code_version()
+    if not f.is_file():
+        if now["dirty"]:
+            raise SystemExit(f"render_cost: the checkout at {ROOT} has uncommitted changes to tracked files; commit "
+                             "them (a study's renders must come from one known commit) or pass --force")
+        atomic_write_json(f, now)
+        return
+    was = json.loads(f.read_text())
+    if (was.get("commit") != now["commit"] or now["dirty"]) and not force:
+        raise SystemExit(f"render_cost: {work} was rendered by commit {was.get('commit')}, this checkout is "
+                         f"{now['commit']}{' with changes' if now['dirty'] else ''}: run the study from a worktree "
+                         f"at that commit (git worktree add DIR {was.get('commit')}), or start a new work folder")
 
 
 def load_frames(work: Path) -> dict:
@@ -260,6 +296,7 @@ def reference(args) -> None:
     from blender_scripts import scene as bscene
 
     work = Path(args.work)
+    check_code(work, args.force)
     with tempfile.TemporaryDirectory(prefix="synth-cost-") as d:
         for todo, sc in _scenes(work, args.cases, args.expressions_only):
             for f, e, fr in todo:
@@ -306,6 +343,7 @@ def variants(args, variant_list: list[str]) -> None:
     from blender_scripts import scene as bscene
 
     work = Path(args.work)
+    check_code(work, args.force)
     defaults, undo = None, []
     with tempfile.TemporaryDirectory(prefix="synth-cost-") as d:
         for n, (todo, sc) in enumerate(_scenes(work, args.cases, args.expressions_only)):
@@ -338,6 +376,7 @@ def persistent(args) -> None:
     from blender_scripts import scene as bscene
 
     work = Path(args.work)
+    check_code(work, args.force)
     out_file = work / "persistent.json"
     res = json.loads(out_file.read_text()) if out_file.is_file() else {}
     undo: list = []
@@ -519,6 +558,7 @@ def main() -> None:
     ap.add_argument("--only", dest="expressions_only", nargs="+", choices=("neutral", "open"), default=None,
                     help="only the frames of these expressions (the study's first stage: --only open)")
     ap.add_argument("--plot", default=None)
+    ap.add_argument("--force", action="store_true", help="render into a study made by another commit (they do not compare)")
     args = ap.parse_args()
     if args.what == "pick":
         pick(args)

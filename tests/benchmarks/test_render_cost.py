@@ -93,3 +93,30 @@ def test_a_variant_is_within_only_if_every_measure_is():
     assert not rows["blurry"]["within"] and not rows["eyes"]["within"]
     assert rows["partial"]["frames"] == 1 and rows["partial"]["cpu_ratio"] == 0.5  # paired on its frame only
     assert [r["variant"] for r in rc.compare_to_base(by_v)][0] == "blurry"  # cheapest first
+
+
+def test_a_study_refuses_renders_from_another_commit(tmp_path, monkeypatch):
+    versions = iter([{"commit": "a" * 40, "dirty": False}, {"commit": "a" * 40, "dirty": False},
+                     {"commit": "b" * 40, "dirty": False}, {"commit": "a" * 40, "dirty": True},
+                     {"commit": "b" * 40, "dirty": False}])
+    monkeypatch.setattr(rc, "code_version", lambda: next(versions))
+    rc.check_code(tmp_path)  # the first stage records the commit
+    assert json.loads((tmp_path / "code.json").read_text())["commit"] == "a" * 40
+    rc.check_code(tmp_path)  # the same commit: fine
+    for _ in range(2):  # another commit, or the same one with changes
+        try:
+            rc.check_code(tmp_path)
+        except SystemExit as e:
+            assert "worktree" in str(e)
+        else:
+            raise AssertionError("renders from other code were let in")
+    rc.check_code(tmp_path, force=True)  # taken at the user's risk
+    dirty = tmp_path / "new"
+    dirty.mkdir()
+    monkeypatch.setattr(rc, "code_version", lambda: {"commit": "c" * 40, "dirty": True})
+    try:
+        rc.check_code(dirty)
+    except SystemExit as e:
+        assert "uncommitted" in str(e) and not (dirty / "code.json").exists()
+    else:
+        raise AssertionError("a study was started from a changed tree")
