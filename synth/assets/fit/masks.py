@@ -214,7 +214,7 @@ def under_eye_area(V: np.ndarray, lm: np.ndarray) -> np.ndarray:
     """(V,) the darker skin under each eye, 0 .. 1 (before :func:`skin_only`): an ellipse in
     the x-z plane below the lower lid (ibug68 41/40 and 47/46 its middle, the corners 36/39 and
     42/45 the eye's width), shifted a fifth of the eye's width toward the nose (the tear trough
-    is deepest medially), and nothing above the lower lid's line."""
+    is deepest medially), and nothing above the lower lid's line; every edge of it a smooth fade."""
     V = np.asarray(V, np.float64)
     out = np.zeros(len(V))
     for lower, (c0, c1) in (((40, 41), (36, 39)), ((46, 47), (42, 45))):
@@ -223,7 +223,9 @@ def under_eye_area(V: np.ndarray, lm: np.ndarray) -> np.ndarray:
         medial = np.sign(float(lm[27][0] - lid[0])) * 0.2 * width  # toward the nose bridge
         cx, cz = lid[0] + medial, lid[2] - UNDER_EYE_DROP_M
         d = np.hypot((V[:, 0] - cx) / (UNDER_EYE_HALF_WIDTH * width), (V[:, 2] - cz) / UNDER_EYE_HALF_HEIGHT_M)
-        front = V[:, 1] < lid[1] + 0.02  # the face's side of the head (the face looks along -y)
+        # the face's side of the head (the face looks along -y): full to 2 cm behind the lid, none
+        # past 4 cm (the ellipse is a cylinder along y: it would reach the back of the scalp)
+        front = np.clip((lid[1] + 0.04 - V[:, 1]) / 0.02, 0.0, 1.0)
         below = np.clip((lid[2] - V[:, 2]) / 0.002, 0.0, 1.0)  # faded in over 2 mm under the lid line
         out = np.maximum(out, feather(d, 0.5, UNDER_EYE_OUTER) * below * front)
     return out
@@ -232,9 +234,9 @@ def under_eye_area(V: np.ndarray, lm: np.ndarray) -> np.ndarray:
 def skin_tint_mask(data, V, lm) -> np.ndarray:
     """The skin-detail rig's second attribute (V, 3): X the under-eye area (:func:`under_eye_area`),
     Y the ears (the ``ears`` region where the model has one, feathered 4 mm into the skin around
-    it), Z 0; zero off the skin."""
+    it), Z 0; zero off the skin and in the eye sockets' hidden lining."""
     n = len(V)
-    skin = skin_only(data, n).astype(float)
+    skin = (skin_only(data, n) & ~region_mask(data.regions, ("eye_socket",), n)).astype(float)
     ears = region_mask(data.regions, ("ears", "ear_l", "ear_r"), n)
     ear = soft_region(V, ears, 0.004) if ears.any() else np.zeros(n)
     m = np.stack([under_eye_area(V, lm), ear, np.zeros(n)], 1) * skin[:, None]
