@@ -77,7 +77,16 @@ def configure_render(settings: RenderSettings, width: int, height: int) -> dict[
     if c.use_denoising:
         c.denoiser = "OPENIMAGEDENOISE" if device == "cpu" else str(settings.gpu_denoiser).upper()
         c.denoising_input_passes = "RGB_ALBEDO_NORMAL"
+        c.denoising_prefilter = str(settings.denoise_prefilter).upper()
+        c.denoising_quality = str(settings.denoise_quality).upper()
     c.max_bounces = int(settings.max_bounces)
+    c.diffuse_bounces = int(settings.diffuse_bounces)
+    c.glossy_bounces = int(settings.glossy_bounces)
+    c.transmission_bounces = int(settings.transmission_bounces)
+    c.transparent_max_bounces = int(settings.transparent_bounces)
+    c.use_light_tree = bool(settings.light_tree)
+    c.caustics_reflective = c.caustics_refractive = bool(settings.caustics)
+    scene.cycles_curves.shape = str(settings.hair_shape).upper()
     c.use_animated_seed = False
     c.seed = 0
     c.sample_clamp_indirect = float(settings.clamp_indirect)
@@ -104,9 +113,19 @@ def configure_render(settings: RenderSettings, width: int, height: int) -> dict[
         "denoise": c.use_denoising,
         "denoiser": c.denoiser if c.use_denoising else None,
         "max_bounces": c.max_bounces,
+        "diffuse_bounces": c.diffuse_bounces,
+        "glossy_bounces": c.glossy_bounces,
+        "transmission_bounces": c.transmission_bounces,
+        "transparent_bounces": c.transparent_max_bounces,
+        "hair_shape": scene.cycles_curves.shape.lower(),
+        "light_tree": c.use_light_tree,
+        "caustics": c.caustics_reflective,
         "filter_width": c.pixel_filter_width,
         "alpha_denoised": c.use_denoising,
     }
+    if c.use_denoising and c.denoiser == "OPENIMAGEDENOISE":
+        settings_out["denoise_prefilter"] = c.denoising_prefilter.lower()
+        settings_out["denoise_quality"] = c.denoising_quality.lower()
     if c.use_adaptive_sampling:
         settings_out["adaptive_threshold"] = c.adaptive_threshold
     img = scene.render.image_settings

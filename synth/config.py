@@ -242,6 +242,26 @@ class RenderConfig:
     """adaptive sampling noise threshold (unset = preset)"""
     device: Annotated[str, Choices("auto", "cpu", "gpu")] = "auto"
     """render device"""
+    diffuse_bounces: Annotated[int | None, Bounds(0, 1024)] = None
+    """diffuse bounces of a light path (unset = preset; Cycles' 4 where the preset leaves it)"""
+    glossy_bounces: Annotated[int | None, Bounds(0, 1024)] = None
+    """glossy bounces of a light path (unset = preset; Cycles' 4 where the preset leaves it)"""
+    transmission_bounces: Annotated[int | None, Bounds(0, 1024)] = None
+    """transmission bounces: glasses' lenses, the eyes' cornea (unset = preset; Cycles' 12 where the preset leaves it)"""
+    transparent_bounces: Annotated[int | None, Bounds(0, 1024)] = None
+    """transparent bounces: strands and lashes seen through each other (unset = preset; Cycles' 8 where the preset
+    leaves it)"""
+    hair_shape: Annotated[str | None, Choices("ribbons", "thick")] = None
+    """hair, beard, brow and lash curves as flat camera-facing ribbons or round 3D curves (unset = preset; ribbons
+    where the preset leaves it)"""
+    light_tree: bool | None = None
+    """Cycles' light tree for many lights (unset = preset; on where the preset leaves it)"""
+    caustics: bool | None = None
+    """reflective and refractive caustics (unset = preset; on where the preset leaves it)"""
+    denoise_prefilter: Annotated[str | None, Choices("accurate", "fast", "none")] = None
+    """prefilter of the denoiser's albedo and normal guides (unset = preset; accurate where the preset leaves it)"""
+    denoise_quality: Annotated[str | None, Choices("high", "balanced", "fast")] = None
+    """OpenImageDenoise quality (unset = preset; high where the preset leaves it)"""
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,26 @@ def test_render_presets_resolve_and_can_be_overridden():
     assert set(RENDER_PRESETS) == {"ci", "preview", "production"}
 
 
+def test_light_path_settings_are_recorded_only_when_set():
+    """A plan header leaves the light-path and denoiser settings out while they are unset (plans made
+    before they existed keep their hash and render with Cycles' own values); set, they are recorded."""
+    from synth.plan.planner import header_config
+    from synth.plan.records import RenderSettings
+
+    plain = header_config(load_config(overrides=["render.preset=production"]).resolved())["render"]
+    assert not {"diffuse_bounces", "hair_shape", "light_tree", "denoise_quality"} & set(plain)
+    assert RenderSettings.from_json(plain).transparent_bounces == 8
+    cfg = load_config(overrides=["render.preset=production", "render.diffuse_bounces=2", "render.hair_shape=thick",
+                                 "render.light_tree=false", "render.denoise_prefilter=fast"])
+    rec = header_config(cfg.resolved())["render"]
+    assert (rec["diffuse_bounces"], rec["hair_shape"], rec["light_tree"], rec["denoise_prefilter"]) == (
+        2, "thick", False, "fast")
+    s = RenderSettings.from_json(rec)
+    assert (s.diffuse_bounces, s.glossy_bounces, s.hair_shape, s.light_tree) == (2, 4, "thick", False)
+    with pytest.raises(SynthError, match="render.hair_shape"):
+        load_config(overrides=["render.hair_shape=cubes"])
+
+
 def test_toml_then_overrides(tmp_path):
     f = tmp_path / "c.toml"
     f.write_text('[camera]\nfov_deg = 30\nazimuth_deg = [-90, 90]\n[dataset]\nviews_per_expression = 12\n')

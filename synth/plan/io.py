@@ -49,7 +49,12 @@ LATER_KEYS = {("dataset", "environments_per_expression"): 1,
               ("identity", "head_shape"): "none", ("identity", "head_breadth_mm"): [131.0, 180.0],
               ("identity", "head_length_mm"): [168.0, 225.0], ("identity", "face_height_mm"): [91.0, 156.0],
               ("identity", "face_width_mm"): [116.0, 174.0], ("identity", "cephalic_index"): [70.0, 90.0],
-              ("identity", "facial_index"): [65.0, 100.0], ("identity", "head_shape_attempts"): 32}
+              ("identity", "facial_index"): [65.0, 100.0], ("identity", "head_shape_attempts"): 32,
+              # the light-path and denoiser settings a preset may set (unset: Cycles' own, as plans before them
+              # rendered; synth.plan.records.RenderSettings holds those values)
+              **{("render", k): None for k in ("diffuse_bounces", "glossy_bounces", "transmission_bounces",
+                                               "transparent_bounces", "hair_shape", "light_tree", "caustics",
+                                               "denoise_prefilter", "denoise_quality")}}
 
 
 def planned(config: dict, section: str, key: str):

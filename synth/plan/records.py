@@ -340,6 +340,16 @@ class RenderSettings:
     max_bounces: int = 8
     clamp_indirect: float = 10.0
     filter_width: float = 1.5
+    # Cycles' own values: what a plan that does not set them (every plan made before they were settings) renders with
+    diffuse_bounces: int = 4
+    glossy_bounces: int = 4
+    transmission_bounces: int = 12
+    transparent_bounces: int = 8
+    hair_shape: str = "ribbons"
+    light_tree: bool = True
+    caustics: bool = True
+    denoise_prefilter: str = "accurate"
+    denoise_quality: str = "high"
 
     @classmethod
     def from_json(cls, d: Any, where: str = "plan.json config.render") -> RenderSettings:
@@ -356,4 +366,4 @@ class RenderSettings:
         if d.get("resolution") is not None:
             d["resolution"] = tuple(_vec(d, "resolution", where, 2))
         d["adaptive_threshold"] = float(d.get("adaptive_threshold") or 0.01)
-        return cls(**d)
+        return cls(**{k: v for k, v in d.items() if v is not None or k in ("preset", "resolution")})

@@ -25,7 +25,8 @@ def test_a_plan_keeps_its_presets_settings_after_the_preset_changes(tmp_path, mo
     run_plan(cfg, 1, tmp_path / "plan", seed=3)
     before = load_plan(tmp_path / "plan").render_settings()
     changed = copy.deepcopy(config.RENDER_PRESETS)
-    changed["ci"].update(samples=99, denoise=True, adaptive_sampling=True, adaptive_threshold=0.05)
+    changed["ci"].update(samples=99, denoise=True, adaptive_sampling=True, adaptive_threshold=0.05,
+                         diffuse_bounces=1, transparent_bounces=2, hair_shape="thick", light_tree=False)
     monkeypatch.setattr(config, "RENDER_PRESETS", changed)  # the preset as a later release defines it
     plan = load_plan(tmp_path / "plan")
     assert plan.render_settings() == before and before["samples"] == 4 and before["denoise"] is False
@@ -42,6 +43,41 @@ def test_a_plan_keeps_its_presets_settings_after_the_preset_changes(tmp_path, mo
         bscene.reset()
     r = fj["render"]  # what the frame JSON says rendered it: the plan's settings
     assert r["preset"] == "ci" and r["samples"] == 4 and r["denoise"] is False and r["adaptive"] is False
+    # ... and Cycles' own light paths, as before the preset could set them
+    assert (r["diffuse_bounces"], r["transparent_bounces"], r["hair_shape"], r["light_tree"]) == (4, 8, "ribbons", True)
     # a plan made now takes the changed preset
     run_plan(load_config(None, ['render.preset="ci"']), 1, tmp_path / "plan2", seed=3)
-    assert load_plan(tmp_path / "plan2").render_settings()["samples"] == 99
+    new = load_plan(tmp_path / "plan2").render_settings()
+    assert new["samples"] == 99 and new["diffuse_bounces"] == 1 and new["hair_shape"] == "thick"
+    s = RenderSettings.from_json(new)
+    assert (s.diffuse_bounces, s.transparent_bounces, s.hair_shape, s.light_tree) == (1, 2, "thick", False)
+
+
+def test_unset_light_paths_are_cycles_own_and_set_ones_reach_the_engine():
+    """RenderSettings' defaults are what a fresh Cycles scene has (a plan without them renders as
+    plans did before they were settings); set ones are applied and recorded."""
+    import bpy
+
+    from blender_scripts import scene as bscene
+    from synth.plan.records import RenderSettings
+
+    bscene.reset()
+    c, scene = bpy.context.scene.cycles, bpy.context.scene
+    factory = (c.diffuse_bounces, c.glossy_bounces, c.transmission_bounces, c.transparent_max_bounces,
+               c.use_light_tree, c.caustics_reflective, c.caustics_refractive, scene.cycles_curves.shape,
+               c.denoising_prefilter, c.denoising_quality)
+    eff = bscene.configure_render(RenderSettings(samples=4, denoise=True, device="cpu"), 16, 16)
+    assert (c.diffuse_bounces, c.glossy_bounces, c.transmission_bounces, c.transparent_max_bounces,
+            c.use_light_tree, c.caustics_reflective, c.caustics_refractive, scene.cycles_curves.shape,
+            c.denoising_prefilter, c.denoising_quality) == factory
+    assert eff["denoise_prefilter"] == "accurate" and eff["hair_shape"] == "ribbons"
+    eff = bscene.configure_render(RenderSettings(samples=4, denoise=True, device="cpu", diffuse_bounces=2,
+                                                 glossy_bounces=1, transmission_bounces=6, transparent_bounces=3,
+                                                 hair_shape="thick", light_tree=False, caustics=False,
+                                                 denoise_prefilter="fast", denoise_quality="balanced"), 16, 16)
+    assert (c.diffuse_bounces, c.glossy_bounces, c.transmission_bounces, c.transparent_max_bounces) == (2, 1, 6, 3)
+    assert not c.use_light_tree and not c.caustics_reflective and not c.caustics_refractive
+    assert scene.cycles_curves.shape == "THICK" and (c.denoising_prefilter, c.denoising_quality) == ("FAST", "BALANCED")
+    assert (eff["diffuse_bounces"], eff["transparent_bounces"], eff["hair_shape"], eff["caustics"],
+            eff["denoise_quality"]) == (2, 3, "thick", False, "balanced")
+    bscene.reset()
