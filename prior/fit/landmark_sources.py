@@ -23,13 +23,14 @@ The foreground mask is the selfie segmentation's, restricted to the fitted face'
 for the weights): dlib's HOG face detector (the photo as it is and upsampled once, twice if neither
 finds a face; detector scores from 0) and its 68-point shape predictor, whose points are iBUG's 68
 (the ``ibug68`` landmark set of the head model): no correspondence is needed. The face to fit is
-chosen by :func:`choose_face`'s rule (the largest; another of similar size is ambiguous only when
-its score is at least :data:`DLIB_MIN_SCORE`; at least :data:`DLIB_MIN_FACE_PX`). The predictor was
-trained on iBUG 300-W, whose images are licensed for research only: prefer ``mediapipe`` where that
-matters (docs/fitting.md). Each point's sigma is :data:`DLIB_SIGMA_FACE` of the face's size (its
-points' bounding box), twice that on the jaw (iBUG's jaw is the face's outline, which the model's
-fixed jaw points follow only near the front), at least ``min_sigma_px``. The foreground mask is
-mediapipe's (as above) when the fit extra is installed, else none.
+chosen by :func:`choose_face`'s rule with the detector's confidence (score at least
+:data:`DLIB_MIN_SCORE`): the largest face, unless it is not a confident one and a confident face of
+similar size exists; only confident faces make a photo ambiguous; at least :data:`DLIB_MIN_FACE_PX`.
+The predictor was trained on iBUG 300-W, whose images are licensed for research only: prefer
+``mediapipe`` where that matters (docs/fitting.md). Each point's sigma is :data:`DLIB_SIGMA_FACE` of
+the face's size (its points' bounding box), twice that on the jaw (iBUG's jaw is the face's outline,
+which the model's fixed jaw points follow only near the front), at least ``min_sigma_px``. The
+foreground mask is mediapipe's (as above) when the fit extra is installed, else none.
 """
 
 from __future__ import annotations
@@ -211,14 +212,18 @@ def choose_face(faces: list[np.ndarray], where: str, *, min_px: float = MIN_FACE
                 confident: list[bool] | None = None) -> tuple[int, list[float]]:
     """Index of the face to fit among detected point sets (each (K, 2) pixels) and every face's
     size (longer side of its bounding box), or one SynthError line (module docstring). With
-    ``confident`` only the faces marked there can make the photo ambiguous."""
+    ``confident`` (per face: the detector is sure of it), a face the detector is not sure of gives
+    way to a sure one of similar size, and never makes the photo ambiguous."""
     fix = "use photos with one clearly visible face"
     if not faces:
         raise SynthError("no face found", where, fix)
     sizes = [float(np.max(f.max(0) - f.min(0))) for f in faces]
     order = sorted(range(len(faces)), key=lambda i: (-sizes[i], i))
     best = order[0]
-    rivals = [i for i in order[1:] if confident is None or confident[i]]
+    if confident is not None and not confident[best]:
+        sure = [i for i in order if confident[i] and sizes[i] >= SIMILAR_FACE_RATIO * sizes[best]]
+        best = sure[0] if sure else best
+    rivals = [i for i in order if i != best and (confident is None or confident[i])]
     if rivals and sizes[rivals[0]] >= SIMILAR_FACE_RATIO * sizes[best]:
         raise SynthError(f"{len(faces)} faces of similar size ({sizes[best]:.0f} and {sizes[rivals[0]]:.0f} px)",
                          where, "crop the photo to the face to fit (the largest face is fitted when it is clearly "

@@ -238,8 +238,12 @@ def test_choose_face():
         choose_face([], "p")
     # dlib: a weak detection of similar size (the astronaut's mission patch) does not make it ambiguous
     assert choose_face([_face(0, 0, 100), _face(200, 0, 90)], "p", confident=[True, False])[0] == 0
+    # the largest detection is a weak one (the mission patch's points span 95 px, the face's 92): the
+    # sure face of similar size is fitted; a weak largest face without a sure rival is kept (einstein)
+    assert choose_face([_face(0, 0, 92), _face(200, 0, 95)], "p", confident=[True, False])[0] == 0
+    assert choose_face([_face(0, 0, 53), _face(200, 0, 87)], "p", confident=[True, False])[0] == 1
     with pytest.raises(SynthError, match="similar size"):
-        choose_face([_face(0, 0, 90), _face(200, 0, 100)], "p", confident=[True, False])  # the largest is weak
+        choose_face([_face(0, 0, 92), _face(200, 0, 95), _face(400, 0, 90)], "p", confident=[True, False, True])
     assert choose_face([_face(0, 0, 50)], "p", min_px=48)[0] == 0
 
 
@@ -386,7 +390,8 @@ def test_dlib_landmarks_on_a_real_photo(astronaut, tmp_path, default_model):
     inputs = read_inputs([path], 1024)
     obs = observations(inputs, "dlib", default_model)
     assert obs.landmark_set == "ibug68" and obs.mean.shape == (1, 68, 2) and np.isfinite(obs.sigma).all()
-    assert inputs[0].detection["faces"] == 1 and inputs[0].mask_source == "segmentation"
+    # the mission patch is found too (upsampled, score 0.12: not a confident face), the face is fitted
+    assert inputs[0].detection["faces"] in (1, 2) and inputs[0].mask_source == "segmentation"
     assert obs.sigma[0, :17].min() > obs.sigma[0, 17:].max()  # the outline is trusted less
     mp_in = read_inputs([path], 1024)
     mp = observations(mp_in, "mediapipe", default_model)
