@@ -1,0 +1,158 @@
+"""benchmarks/identity_factors.py: the what-if identities, their plans, and the analysis on synthetic embeddings."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from benchmarks import identity_factors as idf
+
+FLAGS = ["--set", "dataset.identities_per_shard=1", "--set", "dataset.expressions_per_identity=1",
+         "--set", "dataset.views_per_expression=2", "--set", "camera.azimuth_deg=[-20,20]",
+         "--set", "camera.elevation_deg=[-10,15]", "--set", "camera.min_separation_deg=10",
+         "--set", "expression.neutral_weight=1.0", "--set", "expression.preset_weight=0.0",
+         "--set", "expression.random_weight=0.0"]
+
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory):
+    from synth.cli.main import main
+
+    out = tmp_path_factory.mktemp("idf") / "base"
+    assert main(["plan", "-j", "1", "-n", "4", "-o", str(out), "-q", *FLAGS]) == 0
+    return out
+
+
+def test_one_factor_swaps_only_its_part(base):
+    ids = idf.base_identities(base)
+    a, b = ids[0], ids[1]
+    frozen = json.dumps(a)
+    shape = idf.with_factor(a, b, "shape")
+    assert shape["identity_code"] == b["identity_code"] and shape["assets"] == a["assets"]
+    assert shape["expressions"] == a["expressions"] and shape["identity_index"] == 0
+    tone = idf.with_factor(a, b, "skin_tone")
+    detail = idf.with_factor(a, b, "skin_detail")
+    for k, v in tone["skin"].items():
+        assert v == (b if k in idf.SKIN_TONE else a)["skin"][k]
+        assert detail["skin"][k] == (a if k in idf.SKIN_TONE else b)["skin"][k]
+    assert tone["skin"] == tone["assets"]["skin"]["params"]  # the copy the records check
+    outfit = idf.with_factor(a, b, "outfit")
+    for cls in ("garment", "glasses", "headwear"):
+        assert outfit["assets"][cls] == b["assets"][cls]
+    assert outfit["assets"]["hair"] == a["assets"]["hair"]
+    every = idf.with_factor(a, b, "all")
+    assert every["identity_code"] == b["identity_code"] and every["assets"] == b["assets"]
+    assert every["skin"] == b["skin"] and every["expressions"] == a["expressions"]
+    assert json.dumps(a) == frozen  # a is never edited
+    with pytest.raises(KeyError):
+        idf.with_factor(a, b, "lighting")
+
+
+def test_a_swap_of_two_absent_picks_is_no_variant(base):
+    ids = idf.base_identities(base)
+    a, b = ids[0], json.loads(json.dumps(ids[1]))
+    b["assets"]["beard"] = a["assets"]["beard"]
+    assert idf.variant_identity("beard", a, b) is None
+    v = idf.variant_identity("iris", a, b)
+    assert [len(e["frames"]) for e in v["expressions"]] == [1]  # view 0 only
+
+
+def test_b_at_a_view_and_reseed_keep_what_they_should(base):
+    ids = idf.base_identities(base)
+    a, b = ids[0], ids[1]
+    bv = idf.at_view_of(b, a)
+    fa, fb = a["expressions"][0]["frames"], bv["expressions"][0]["frames"]
+    assert bv["identity_index"] == 1 and bv["identity_code"] == b["identity_code"] and bv["assets"] == b["assets"]
+    assert [f["camera"] for f in fb] == [f["camera"] for f in fa]
+    assert [f["frame_id"] for f in fb] == ["id000001_ex00_v00", "id000001_ex00_v01"]
+    assert all(f["identity_index"] == 1 for f in fb)
+    assert bv["expressions"][0]["pose"] == a["expressions"][0]["pose"]
+    rs = idf.reseeded(a)["expressions"][0]["frames"]
+    assert [f["seed"] for f in rs] == [(f["seed"] + idf.RESEED_STEP) % 2**31 for f in fa]
+    assert [f["camera"] for f in rs] == [f["camera"] for f in fa]
+
+
+def test_whatif_plans_pass_the_plan_checks_and_are_kept_on_a_rerun(base, tmp_path):
+    from synth.errors import SynthError
+    from synth.plan.io import Plan
+
+    plans = idf.make_plans(base, tmp_path, ["shape", "b_view", "beard"])
+    assert plans["shape"]["pairs"] == [(0, 1), (1, 2), (2, 3), (3, 0)]
+    p = Plan(tmp_path / "plans" / "shape")
+    p.verify()  # every shard's sha256 as listed, the model the plan's
+    assert p.header["views_per_expression"] == 1 and p.header["num_frames"] == 4
+    assert p.expected() == {f"shard_{i:06d}": [f"id{i:06d}_ex00_v00"] for i in range(4)}
+    spec = p.shard("shard_000002")["identities"][0]
+    assert spec["identity_code"] == idf.base_identities(base)[3]["identity_code"]
+    again = idf.make_plans(base, tmp_path, ["shape", "b_view", "beard"])
+    assert again["shape"]["plan_hash"] == plans["shape"]["plan_hash"]
+    # a changed shard is refused by the renderer's check, as in any plan
+    f = tmp_path / "plans" / "shape" / "shards" / "shard_000001.json"
+    f.write_bytes(f.read_bytes().replace(b'"identity_index":1', b'"identity_index":1 '))
+    with pytest.raises(SynthError):
+        Plan(tmp_path / "plans" / "shape").verify()
+
+
+def test_rule_conflicts_name_a_cap_over_a_bun():
+    from synth.assets.catalogue import load_catalogue
+
+    cat = load_catalogue()
+    pick = lambda i: {"id": i, "generator": "x", "params": {}}  # noqa: E731
+    assert idf.rule_conflicts({"hair": pick("bun"), "headwear": pick("beanie")}, cat) == \
+        ["headwear:headwear with hair:updo"]
+    assert idf.rule_conflicts({"hair": pick("buzz_cut"), "headwear": pick("beanie")}, cat) == []
+
+
+def test_analysis_of_additive_synthetic_factors():
+    """Each factor moves A along its own orthogonal direction by a known length; B at A's view is
+    A plus all of them. The analysis gives back each length, the shares, exact additivity."""
+    rng = np.random.default_rng(1)
+    F = list(idf.FACTORS)
+    basis = np.linalg.qr(rng.normal(size=(128, 128)))[0].T  # orthonormal rows
+    size = {f: 0.07 * (k + 1) for k, f in enumerate(F)}  # outfit (the last) 0.63
+    size["beard"] = 0.0
+    pairs = [(0, 1), (1, 2), (2, 0)]
+    base = {i: np.stack([basis[100 + i] * 3.0, basis[100 + i] * 3.0 + 0.2 * basis[120]]) for i in range(3)}
+    variants = {f: {} for f in (*F, "all", "b_view", "reseed")}
+    for a, b in pairs:
+        ea = base[a][0]
+        for f in F:
+            if f != "beard":
+                variants[f][a] = ea + size[f] * basis[F.index(f)]
+        total = sum(size[f] * basis[F.index(f)] for f in F)
+        variants["all"][a] = ea + total
+        variants["b_view"][b] = ea + total + 0.01 * basis[127]
+        variants["reseed"][a] = ea + 0.02 * basis[126]
+    res = idf.analyse(base, variants, pairs, {"beard": {0, 1, 2}})
+    D = np.sqrt(sum(s * s for s in size.values()) + 0.01 ** 2)
+    for f in F:
+        s = res["factors"][f]
+        assert s["n"] == 3 and s["median"] == pytest.approx(size[f])
+        assert s["share_median"] == pytest.approx(size[f] / D)
+    assert res["factors"]["outfit"]["largest_in"] == 3 and res["factors"]["outfit"]["alone_over_threshold"] == 3
+    assert res["factors"]["iris"]["alone_over_threshold"] == 0
+    assert res["quadrature_over_all"]["median"] == pytest.approx(1.0)
+    assert res["embedding_sum_residual"]["median"] == pytest.approx(0.0, abs=1e-12)
+    assert res["rig_and_noise"]["median"] == pytest.approx(0.01)
+    assert res["render_noise"]["median"] == pytest.approx(0.02)
+    assert res["same_identity_views"]["median"] == pytest.approx(0.2)
+    # a face not found leaves that pair out of that factor only
+    del variants["hair"][1]
+    assert idf.analyse(base, variants, pairs, {"beard": {0, 1, 2}})["factors"]["hair"]["n"] == 2
+
+
+def test_real_vs_render_sees_a_shared_offset():
+    rng = np.random.default_rng(2)
+    shift = np.zeros(128)
+    shift[0] = 1.0
+    real = rng.normal(scale=0.06, size=(6, 128))
+    renders = shift + rng.normal(scale=0.03, size=(10, 128))
+    rv = idf.real_vs_render(renders, real)
+    assert rv["render_render"]["n"] == 45 and rv["real_real"]["n"] == 15 and rv["render_real"]["n"] == 60
+    assert rv["centroid_distance"] == pytest.approx(np.linalg.norm(renders.mean(0) - real.mean(0)))
+    assert rv["centroid_distance"] == pytest.approx(1.0, abs=0.1)  # the shift, and the real centroid's noise
+    assert rv["render_real"]["median"] > rv["real_real"]["median"] > rv["render_render"]["median"]
+    assert rv["render_real"]["under"] == 0.0 and rv["render_render"]["under"] == 1.0
+    assert rv["render_spread"] < rv["real_spread"] < rv["real_to_render_centroid"]
