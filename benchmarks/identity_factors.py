@@ -28,7 +28,11 @@ age spots, wrinkles, subsurface radius, detail variant), ``eyebrows``, ``iris``,
 takes every one of them from B. References: ``b_view`` is B itself (its own index, so its own
 rig randomness) rendered with A's expression record (gaze, camera, render seed): d(A, b_view)
 is the pair's distance at one view (D), the quantity the factors are to explain; ``reseed`` is A
-with another render seed (the renderer's noise floor). The lighting is not a factor: every
+with another render seed (the renderer's noise floor). At ``preview`` that floor is about a third
+of the threshold (the judge moves about 0.2 between two renders of one face with two seeds), so
+every variant is also rendered with the second seed (``V+reseed``) and the tables give, beside
+the one-seed distance, a noise-corrected one (:func:`corrected_sq`: cross-seed squared distances
+less within-condition ones). The lighting is not a factor: every
 identity of the default config has the same studio (``lighting.studio_rotation_deg`` = [0, 0]);
 a swap that would break a catalogue rule (a cap over a bun) is rendered and flagged.
 
@@ -68,7 +72,10 @@ FACTORS = {
 SKIN_TONE = ("haemoglobin", "ita_deg", "melanin")  #: skin parameters of the tone factor
 #: variants rendered besides the factors: every factor from B; B at A's view; A re-seeded
 REFERENCES = ("all", "b_view", "reseed")
-VARIANTS = (*FACTORS, *REFERENCES)
+#: the same what-if identities with another render seed (A's own second seed is ``reseed``): for
+#: the noise-corrected distances of :func:`corrected_sq`
+SECOND_SEED = tuple(f"{v}+reseed" for v in (*FACTORS, "all", "b_view"))
+VARIANTS = (*FACTORS, *REFERENCES, *SECOND_SEED)
 RESEED_STEP = 7919  #: ``reseed`` adds this to each frame seed (mod 2**31)
 
 
@@ -154,7 +161,11 @@ def cycle_pairs(n: int) -> list[tuple[int, int]]:
 
 def variant_identity(variant: str, a: dict, b: dict) -> dict | None:
     """The what-if identity of a pair for ``variant`` (view 0 only), or None where the variant
-    would render A unchanged (both lack the class, or carry the same pick)."""
+    would render A unchanged (both lack the class, or carry the same pick). ``V+reseed``: variant
+    V's identity with :func:`reseeded` frames."""
+    if variant.endswith("+reseed"):
+        w = variant_identity(variant[:-len("+reseed")], a, b)
+        return None if w is None else reseeded(w)
     if variant == "b_view":
         return first_view(at_view_of(b, a))
     if variant == "reseed":
@@ -329,6 +340,22 @@ def _stats(v) -> dict:
             "max": float(v.max())}
 
 
+def corrected_sq(a0, a1, f0, f1) -> float:
+    """An estimate of the squared distance between two conditions A and F without the render noise,
+    from each rendered with two seeds (0, 1): the mean squared distance across conditions at
+    different seeds, less the mean squared distance within a condition across its seeds. With
+    independent zero-mean noise per render this is unbiased (each cross term carries the noise of
+    two renders, as each within term does); it can come out negative where the true distance is
+    below the noise."""
+    cross = 0.5 * (_d(a0, f1) ** 2 + _d(a1, f0) ** 2)
+    within = 0.5 * (_d(a0, a1) ** 2 + _d(f0, f1) ** 2)
+    return float(cross - within)
+
+
+def _signed_sqrt(x: float) -> float:
+    return float(np.sign(x) * np.sqrt(abs(x)))
+
+
 def analyse(base: dict[int, np.ndarray], variants: dict[str, dict[int, np.ndarray]],
             pairs: list[tuple[int, int]], unchanged: dict[str, set] | None = None) -> dict:
     """The figures from embeddings. ``base``: identity -> (V, 128) (its views); ``variants``:
@@ -341,8 +368,25 @@ def analyse(base: dict[int, np.ndarray], variants: dict[str, dict[int, np.ndarra
     median of d_f / D, how often d_f alone reaches the threshold, and in how many pairs it is the
     largest. Additivity: d(A, all) / D; sqrt(sum d_f^2) / d(A, all) (1 when the factors move A in
     orthogonal directions); the embedding sum e_A + sum_f (e_f - e_A) against e_all (relative
-    residual |pred - e_all| / |e_all - e_A|)."""
+    residual |pred - e_all| / |e_all - e_A|).
+
+    Noise-corrected (``corrected``, where the second seeds were rendered: ``reseed`` for A and
+    ``V+reseed`` for variant V): per pair the signed square root of :func:`corrected_sq` for each
+    factor, for ``all`` and for D; their medians and IQRs, the share of D (of the pairs with a
+    positive D estimate) and sqrt(sum of the factors' positive squared estimates) / all."""
     v0 = {i: e[0] for i, e in base.items()}
+    a1s = variants.get("reseed", {})
+
+    def csq(v: str, a: int, key: int) -> float | None:
+        """Noise-corrected squared distance of A to variant v (its embedding under ``key``)."""
+        f0, f1 = variants.get(v, {}).get(key), variants.get(f"{v}+reseed", {}).get(key)
+        if a not in a1s or f0 is None or f1 is None:
+            return None
+        return corrected_sq(v0[a], a1s[a], f0, f1)
+
+    c_rows = {f: [] for f in FACTORS}
+    c_ratio = {f: [] for f in FACTORS}
+    c_D, c_all, c_quad = [], [], []
     rows = {f: [] for f in FACTORS}
     ratio = {f: [] for f in FACTORS}
     largest = {f: 0 for f in FACTORS}
@@ -354,6 +398,24 @@ def analyse(base: dict[int, np.ndarray], variants: dict[str, dict[int, np.ndarra
         Dab = _d(v0[a], variants["b_view"][b]) if b in variants.get("b_view", {}) else None
         if Dab is not None:
             D.append(Dab)
+        cD = csq("b_view", a, b)
+        if cD is not None:
+            c_D.append(_signed_sqrt(cD))
+        c_per = {}
+        for f in FACTORS:
+            if a in (unchanged or {}).get(f, ()):
+                c_per[f] = 0.0
+            elif (c := csq(f, a, a)) is not None:
+                c_per[f] = c
+            else:
+                continue
+            c_rows[f].append(_signed_sqrt(c_per[f]))
+            if cD is not None and cD > 0:
+                c_ratio[f].append(_signed_sqrt(c_per[f]) / np.sqrt(cD))
+        if (ca := csq("all", a, a)) is not None:
+            c_all.append(_signed_sqrt(ca))
+            if len(c_per) == len(FACTORS) and ca > 0:
+                c_quad.append(float(np.sqrt(sum(max(x, 0.0) for x in c_per.values()) / ca)))
         per = {}
         for f in FACTORS:
             got = variants.get(f, {})
@@ -389,7 +451,12 @@ def analyse(base: dict[int, np.ndarray], variants: dict[str, dict[int, np.ndarra
         "pair_distance_same_view": _stats(D), "pair_distance_set_views": _stats(D_set),
         "all_swapped": _stats(d_all), "all_over_pair": _stats(all_over_D), "rig_and_noise": _stats(rig),
         "quadrature_over_all": _stats(quad), "embedding_sum_residual": _stats(resid),
-        "same_identity_views": _stats(same_view), "render_noise": _stats(noise)}
+        "same_identity_views": _stats(same_view), "render_noise": _stats(noise),
+        "corrected": {"factors": {f: {**_stats(c_rows[f]), "share_median": _stats(c_ratio[f]).get("median"),
+                                      "share_q1": _stats(c_ratio[f]).get("q1"),
+                                      "share_q3": _stats(c_ratio[f]).get("q3")} for f in FACTORS},
+                      "pair_distance_same_view": _stats(c_D), "all_swapped": _stats(c_all),
+                      "quadrature_over_all": _stats(c_quad)}}
 
 
 def real_vs_render(render_emb: np.ndarray, real_emb: np.ndarray) -> dict:
@@ -427,19 +494,33 @@ def _r(x, fmt=".3f") -> str:
     return "-" if x is None else format(x, fmt)
 
 
+def _iqr(s: dict, key: str = "") -> str:
+    return f"{_r(s.get(key + 'q1'), '.3f' if not key else '.0%')}-{_r(s.get(key + 'q3'), '.3f' if not key else '.0%')}"
+
+
 def print_report(res: dict, plans: dict) -> None:
-    print("\n| factor taken from B | pairs where it differs | d(A, A with it): median (IQR) | max | "
-          "share of D: median (IQR) | alone >= 0.6 | largest factor in |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
-    order = sorted(FACTORS, key=lambda f: -(res["factors"][f].get("median") or 0))
-    for f in order:
-        s = res["factors"][f]
+    cor = res.get("corrected", {}).get("factors", {})
+    print("\n| factor taken from B | pairs where it differs | d(A, A with it), one seed: median (IQR) | max | "
+          "share of D | noise-corrected: median (IQR) | share of corrected D | alone >= 0.6 | largest in |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    key = (lambda f: -(cor[f].get("median") or 0)) if any(c.get("n") for c in cor.values()) \
+        else (lambda f: -(res["factors"][f].get("median") or 0))
+    for f in sorted(FACTORS, key=key):
+        s, c = res["factors"][f], cor.get(f, {"n": 0})
         if not s["n"]:
             continue
+        corr = f"{c['median']:.3f} ({_iqr(c)})" if c["n"] else "-"
+        cshare = f"{_r(c['share_median'], '.0%')} ({_iqr(c, 'share_')})" if c["n"] else "-"
         print(f"| {f} ({FACTORS[f][0]}) | {len(plans[f]['pairs'])} / {s['n']} | {s['median']:.3f} "
-              f"({s['q1']:.3f}-{s['q3']:.3f}) | {s['max']:.3f} | {_r(s['share_median'], '.0%')} "
-              f"({_r(s['share_q1'], '.0%')}-{_r(s['share_q3'], '.0%')}) | {s['alone_over_threshold']} | "
-              f"{s['largest_in']} |")
+              f"({_iqr(s)}) | {s['max']:.3f} | {_r(s['share_median'], '.0%')} ({_iqr(s, 'share_')}) | {corr} | "
+              f"{cshare} | {s['alone_over_threshold']} | {s['largest_in']} |")
+    cr = res.get("corrected", {})
+    for k, label in (("pair_distance_same_view", "D"), ("all_swapped", "d(A, all)"),
+                     ("quadrature_over_all", "sqrt(sum of the factors' d^2) / d(A, all)")):
+        if cr.get(k, {}).get("n"):
+            s = cr[k]
+            print(f"\nnoise-corrected {label}: median {s['median']:.3f} (IQR {_iqr(s)}, n {s['n']})", end="")
+    print()
     print("\n| reference | n | median | IQR | min-max |")
     print("|---|---:|---:|---:|---:|")
     names = {"pair_distance_same_view": "D = d(A, B at A's view)",

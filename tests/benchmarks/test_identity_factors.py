@@ -156,3 +156,62 @@ def test_real_vs_render_sees_a_shared_offset():
     assert rv["render_real"]["median"] > rv["real_real"]["median"] > rv["render_render"]["median"]
     assert rv["render_real"]["under"] == 0.0 and rv["render_render"]["under"] == 1.0
     assert rv["render_spread"] < rv["real_spread"] < rv["real_to_render_centroid"]
+
+
+def test_corrected_distance_removes_independent_render_noise():
+    """Two conditions 0.15 apart, each rendered twice with noise whose own distance between two
+    renders is about 0.2 (the judge's jitter at `preview`): the raw cross-seed distance reads
+    about 0.25, the corrected estimate gives back 0.15 on average."""
+    rng = np.random.default_rng(4)
+    a, f = np.zeros(128), np.zeros(128)
+    f[0] = 0.15
+    sigma = 0.2 / np.sqrt(2 * 128)
+    est, raw = [], []
+    for _ in range(4000):
+        a0, a1, f0, f1 = (x + sigma * rng.normal(size=128) for x in (a, a, f, f))
+        est.append(idf.corrected_sq(a0, a1, f0, f1))
+        raw.append(np.linalg.norm(a0 - f1))
+    assert np.mean(raw) == pytest.approx(0.25, abs=0.01)
+    assert np.sqrt(np.mean(est)) == pytest.approx(0.15, abs=0.01)
+    # noise-free: exactly the distance
+    assert idf.corrected_sq(a, a, f, f) == pytest.approx(0.15 ** 2)
+
+
+def test_analysis_with_second_seeds_reports_corrected_figures():
+    rng = np.random.default_rng(5)
+    F = list(idf.FACTORS)
+    basis = np.linalg.qr(rng.normal(size=(128, 128)))[0].T
+    size = {f: 0.03 * (k + 1) for k, f in enumerate(F)}
+    pairs = [(0, 1), (1, 0)]
+    base = {i: np.stack([3.0 * basis[100 + i], 3.0 * basis[100 + i] + 0.1 * basis[120]]) for i in range(2)}
+    variants = {}
+    for a, b in pairs:
+        ea = base[a][0]
+        for f in F:
+            variants.setdefault(f, {})[a] = ea + size[f] * basis[F.index(f)]
+        variants.setdefault("all", {})[a] = ea + sum(size[f] * basis[F.index(f)] for f in F)
+        variants.setdefault("b_view", {})[b] = variants["all"][a]
+        variants.setdefault("reseed", {})[a] = ea  # noise-free: the second seed renders the same
+    for v in (*F, "all", "b_view"):
+        variants[f"{v}+reseed"] = dict(variants[v])
+    res = idf.analyse(base, variants, pairs)["corrected"]
+    D = np.sqrt(sum(s * s for s in size.values()))
+    for f in F:
+        assert res["factors"][f]["median"] == pytest.approx(size[f])
+        assert res["factors"][f]["share_median"] == pytest.approx(size[f] / D)
+    assert res["pair_distance_same_view"]["median"] == pytest.approx(D)
+    assert res["quadrature_over_all"]["median"] == pytest.approx(1.0)
+    # without the second seeds there is nothing to correct with
+    plain = {k: v for k, v in variants.items() if not k.endswith("+reseed")}
+    assert idf.analyse(base, plain, pairs)["corrected"]["factors"]["shape"]["n"] == 0
+
+
+def test_second_seed_variant_is_the_variant_reseeded(base):
+    ids = idf.base_identities(base)
+    a, b = ids[0], ids[1]
+    two = idf.variant_identity("eyebrows+reseed", a, b)
+    one = idf.variant_identity("eyebrows", a, b)
+    assert two == idf.reseeded(one)
+    bb = json.loads(json.dumps(b))
+    bb["assets"]["beard"] = a["assets"]["beard"]
+    assert idf.variant_identity("beard+reseed", a, bb) is None
