@@ -215,3 +215,22 @@ def test_second_seed_variant_is_the_variant_reseeded(base):
     bb = json.loads(json.dumps(b))
     bb["assets"]["beard"] = a["assets"]["beard"]
     assert idf.variant_identity("beard+reseed", a, bb) is None
+
+
+def test_natural_eyebrows_span_no_more_than_the_other_styles_render():
+    """The natural style's thickness, density and arch were widened (issue 42 part 0) to at most
+    the span the catalogue's other eyebrow styles already cover (or the rig's default where a style
+    leaves a parameter out), so the rig sees no new extreme; and they are wider than before."""
+    from synth.assets.catalogue import load_catalogue
+    from synth.assets.params import EyebrowParams
+
+    assets = {a["id"]: a for a in load_catalogue().classes["eyebrows"]["assets"]}
+    natural = assets.pop("natural")["parameters"]
+    for name, before in (("thickness", (0.6, 1.2)), ("density", (0.6, 1.2)), ("arch", (0.1, 0.5))):
+        others = []
+        for aid, a in assets.items():
+            spec = a.get("parameters", {}).get(name)
+            others += spec["range"] if spec and "range" in spec else \
+                [EyebrowParams.asset_defaults(aid).get(name, getattr(EyebrowParams, name))]
+        lo, hi = natural[name]["range"]
+        assert min(others) <= lo < before[0] and before[1] < hi <= max(others), name
