@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.identity_diversity import THRESHOLD, pair_distances, run_judge, summarise
+from benchmarks.identity_diversity import THRESHOLD, pair_distances, run_judge, same_pairs
 
 #: factor -> (what it is, asset classes it takes whole from B; skin factors take skin parameters)
 FACTORS = {
@@ -573,6 +573,56 @@ def measure(base_dir: Path, work: Path, plans: dict, python: str) -> tuple[dict,
     return analyse(base, variants, pairs, unchanged), {"base": base, **variants}
 
 
+def judged_set(path: Path) -> dict[str, tuple[int, int, np.ndarray]]:
+    """A dataset's faces from the judge's JSON that ``identity_diversity measure --keep`` wrote:
+    frame key -> (identity, expression, embedding of its largest face); frames without a face left out."""
+    det = json.loads(Path(path).read_text())["images"]
+    return {k[:-4]: (int(k[2:8]), int(k[11:13]), np.asarray(v["faces"][0]["embedding"]))
+            for k, v in sorted(det.items()) if v["faces"]}
+
+
+def _median(x) -> float:
+    return float(np.median(x)) if len(x) else float("nan")
+
+
+def compare_sets(before: dict, after: dict, noise: float, trials: int = 400, seed: int = 0) -> dict:
+    """Two renders of one set that differ in some identities (``judged_set`` of each): the
+    different-identity fraction under the threshold of each, paired over the frames both found;
+    which identities changed (any frame whose embedding differs); per different-identity pair
+    that involves a changed identity, the distance's change (median) and the pairs crossing the
+    threshold either way. The null: the fraction change that re-rendering the changed
+    identities' frames with other seeds alone would give, simulated by moving each of those
+    embeddings by an isotropic Gaussian whose two draws differ by ``noise`` on average (the
+    measured reseed distance), ``trials`` times."""
+    keys = sorted(set(before) & set(after))
+    ident = np.array([before[k][0] for k in keys])
+    eb = np.stack([before[k][2] for k in keys])
+    ea = np.stack([after[k][2] for k in keys])
+    moved = np.any(eb != ea, axis=1)
+    changed = sorted({int(i) for i in ident[moved]})
+    diff = ~same_pairs(ident)
+    db, da = pair_distances(eb), pair_distances(ea)
+    i, j = np.triu_indices(len(keys), 1)
+    touch = diff & (np.isin(ident[i], changed) | np.isin(ident[j], changed))
+    fb, fa = float((db[diff] < THRESHOLD).mean()), float((da[diff] < THRESHOLD).mean())
+    rng = np.random.default_rng(seed)
+    step = noise / np.sqrt(eb.shape[1])  # per dimension: a new noise draw less the old one, |.| ~ noise
+    null = []
+    for _ in range(trials):
+        en = eb + moved[:, None] * rng.normal(0.0, step, eb.shape)
+        dn = pair_distances(en)
+        null.append(float((dn[diff] < THRESHOLD).mean()) - fb)
+    null = np.asarray(null)
+    return {"frames": len(keys), "changed_identities": changed, "changed_frames": int(moved.sum()),
+            "fraction_before": fb, "fraction_after": fa, "change": fa - fb,
+            "pairs_touched": int(touch.sum()), "median_change_touched": _median(da[touch] - db[touch]),
+            "median_before_touched": _median(db[touch]), "median_after_touched": _median(da[touch]),
+            "crossed_up": int(((db < THRESHOLD) & (da >= THRESHOLD) & diff).sum()),
+            "crossed_down": int(((db >= THRESHOLD) & (da < THRESHOLD) & diff).sum()),
+            "null_mean": float(null.mean()), "null_2_5": float(np.percentile(null, 2.5)),
+            "null_97_5": float(np.percentile(null, 97.5)), "noise": noise, "trials": trials}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.identity_factors", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -585,7 +635,27 @@ def main(argv=None) -> int:
             p.add_argument("--real", nargs="*", default=[], help="real photos (files or folders of PNGs)")
             p.add_argument("--judge-python", default=sys.executable)
             p.add_argument("--json", type=Path)
+    c = sub.add_parser("compare", help="two renders of one set (the judge's JSON of identity_diversity "
+                       "measure --keep): the fraction change, paired, against render noise alone")
+    c.add_argument("before", type=Path)
+    c.add_argument("after", type=Path)
+    c.add_argument("--noise", type=float, default=0.203, help="judge distance between two seeds of one frame")
+    c.add_argument("--trials", type=int, default=400)
+    c.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
+    if args.cmd == "compare":
+        r = compare_sets(judged_set(args.before), judged_set(args.after), args.noise, args.trials)
+        print(f"frames found in both: {r['frames']}; changed identities {len(r['changed_identities'])} "
+              f"({r['changed_frames']} frames): {r['changed_identities']}")
+        print(f"different-identity pairs under {THRESHOLD}: {r['fraction_before']:.1%} -> {r['fraction_after']:.1%} "
+              f"({100 * r['change']:+.1f} points); crossed up {r['crossed_up']}, down {r['crossed_down']}")
+        print(f"pairs with a changed identity: {r['pairs_touched']}, median distance {r['median_before_touched']:.3f}"
+              f" -> {r['median_after_touched']:.3f} (median change {r['median_change_touched']:+.3f})")
+        print(f"render noise alone (re-rendering those frames, {r['trials']} draws): {100 * r['null_mean']:+.1f} "
+              f"points, 95 % {100 * r['null_2_5']:+.1f} to {100 * r['null_97_5']:+.1f}")
+        if args.json:
+            args.json.write_text(json.dumps(r, indent=1))
+        return 0
     variants = list(dict.fromkeys([*args.variants, "shape", "b_view"]))  # the pairs and D need these two
     plans = make_plans(args.base, args.work, variants)
     for v, p in plans.items():

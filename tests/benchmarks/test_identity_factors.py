@@ -234,3 +234,30 @@ def test_natural_eyebrows_span_no_more_than_the_other_styles_render():
                 [EyebrowParams.asset_defaults(aid).get(name, getattr(EyebrowParams, name))]
         lo, hi = natural[name]["range"]
         assert min(others) <= lo < before[0] and before[1] < hi <= max(others), name
+
+
+def _set(emb, ident, expr):
+    return {f"id{i:06d}_ex{e:02d}_v{n:02d}": (i, e, x) for n, (i, e, x) in enumerate(zip(ident, expr, emb))}
+
+
+def test_compare_sets_pairs_the_frames_and_finds_what_moved():
+    rng = np.random.default_rng(6)
+    centres = rng.normal(size=(8, 128))
+    centres *= 0.42 / np.linalg.norm(centres, axis=1, keepdims=True)  # different people ~0.6 apart
+    ident = np.repeat(np.arange(8), 2)
+    expr = np.tile([0, 1], 8)
+    emb = centres[ident] + 0.01 * rng.normal(size=(16, 128))
+    before = _set(emb, ident, expr)
+    same = idf.compare_sets(before, _set(emb.copy(), ident, expr), noise=0.2, trials=50)
+    assert same["changed_identities"] == [] and same["change"] == 0.0 and same["pairs_touched"] == 0
+    assert same["null_mean"] == 0.0  # nothing re-rendered, no noise
+    far = emb.copy()
+    far[ident == 3] += 2.0  # identity 3 moved far from everyone
+    r = idf.compare_sets(before, _set(far, ident, expr), noise=0.2, trials=200)
+    assert r["changed_identities"] == [3] and r["changed_frames"] == 2
+    assert r["pairs_touched"] == 2 * 14 and r["median_change_touched"] > 1.0
+    assert r["crossed_down"] == 0 and r["fraction_after"] <= r["fraction_before"]
+    assert r["crossed_up"] == sum(1 for a in range(16) for b in range(a + 1, 16)
+                                  if ident[a] != ident[b] and 3 in (ident[a], ident[b])
+                                  and np.linalg.norm(emb[a] - emb[b]) < 0.6)
+    assert r["null_2_5"] <= r["null_mean"] <= r["null_97_5"]
