@@ -224,10 +224,10 @@ def check_base(plan_dir: Path) -> None:
                          "views_per_expression >= 2", str(plan_dir), "re-plan it with the flags in the docstring")
 
 
-def write_whatif_plan(base_dir: Path, out: Path, identities: list[dict], note: dict) -> str:
-    """A plan of ``identities`` (one per shard, one view each) with the base plan's header
-    otherwise; written by :func:`synth.plan.io.write_plan` (an identical plan already at ``out`` is
-    kept, a different one refused). Returns its plan hash."""
+def write_whatif_plan(base_dir: Path, out: Path, identities: list[dict], note: dict, one_view: bool = True) -> str:
+    """A plan of ``identities`` (one per shard; ``one_view``: one view each) with the base plan's
+    header otherwise; written by :func:`synth.plan.io.write_plan` (an identical plan already at
+    ``out`` is kept, a different one refused). Returns its plan hash."""
     from synth.dataset.layout import shard_name
     from synth.plan import io
     from synth.plan.records import ShardSpec
@@ -236,9 +236,12 @@ def write_whatif_plan(base_dir: Path, out: Path, identities: list[dict], note: d
     header = {k: v for k, v in base.header.items() if k not in ("shards", "plan_hash")}
     header = json.loads(json.dumps(header))
     idents = sorted(identities, key=lambda i: i["identity_index"])
-    header["config"]["dataset"]["views_per_expression"] = 1
-    header.update(views_per_expression=1, first_identity=idents[0]["identity_index"], num_identities=len(idents),
+    header["config"]["dataset"]["identities_per_shard"] = 1
+    header.update(identities_per_shard=1, first_identity=idents[0]["identity_index"], num_identities=len(idents),
                   num_frames=sum(len(e["frames"]) for i in idents for e in i["expressions"]))
+    if one_view:
+        header["config"]["dataset"]["views_per_expression"] = 1
+        header["views_per_expression"] = 1
     specs = []
     for ident in idents:
         sid = shard_name(int(ident["identity_index"]))
@@ -251,6 +254,23 @@ def write_whatif_plan(base_dir: Path, out: Path, identities: list[dict], note: d
     (out / "whatif.json").write_text(json.dumps({**note, "plan_hash": header_out["plan_hash"]}, indent=1))
     io.Plan(out).verify()
     return header_out["plan_hash"]
+
+
+def changed_subset(before_dir: Path, after_dir: Path, out: Path, check: int = 1) -> dict:
+    """The identities whose records differ between two plans of one set (e.g. before and after a
+    catalogue change), as a plan of their own (every frame; one identity per shard), plus the
+    first ``check`` identities whose records are identical (their frames must come out as in the
+    before render: the check that the unchanged frames may be taken from it). The plan header is
+    the after plan's."""
+    b, a = base_identities(before_dir), base_identities(after_dir)
+    if sorted(a) != sorted(b):
+        raise ValueError("the two plans hold different identities")
+    changed = [i for i in sorted(a) if a[i] != b[i]]
+    same = [i for i in sorted(a) if a[i] == b[i]][:check]
+    note = {"what": "identities whose records differ", "before_plan": str(before_dir), "after_plan": str(after_dir),
+            "changed": changed, "unchanged_checked": same}
+    h = write_whatif_plan(after_dir, out, [a[i] for i in sorted(changed + same)], note, one_view=False)
+    return {**note, "plan_hash": h}
 
 
 def make_plans(base_dir: Path, work: Path, variants=VARIANTS) -> dict[str, dict]:
@@ -581,6 +601,26 @@ def judged_set(path: Path) -> dict[str, tuple[int, int, np.ndarray]]:
             for k, v in sorted(det.items()) if v["faces"]}
 
 
+def filled(before: dict, after: dict, before_plan: Path, after_plan: Path) -> dict:
+    """``after`` (the frames of some identities) completed with ``before``'s frames of the other
+    identities, refused unless those identities' plan records are identical in the two plans,
+    and unless every identity ``after`` holds whose record is identical has exactly ``before``'s
+    embeddings (rendering is deterministic here, so a taken frame is the frame a full render
+    would give)."""
+    b, a = base_identities(before_plan), base_identities(after_plan)
+    held = {v[0] for v in after.values()}
+    for k, v in after.items():
+        if a[v[0]] == b[v[0]] and (k not in before or not np.array_equal(before[k][2], v[2])):
+            raise ValueError(f"{k}: identity {v[0]} is planned the same in both, yet its face differs")
+    out = dict(after)
+    for k, v in before.items():
+        if v[0] not in held:
+            if a[v[0]] != b[v[0]]:
+                raise ValueError(f"identity {v[0]} changed between the plans but is not in the after render")
+            out[k] = v
+    return dict(sorted(out.items()))
+
+
 def _median(x) -> float:
     return float(np.median(x)) if len(x) else float("nan")
 
@@ -642,9 +682,26 @@ def main(argv=None) -> int:
     c.add_argument("--noise", type=float, default=0.203, help="judge distance between two seeds of one frame")
     c.add_argument("--trials", type=int, default=400)
     c.add_argument("--json", type=Path)
+    c.add_argument("--fill", nargs=2, type=Path, metavar=("BEFORE_PLAN", "AFTER_PLAN"),
+                   help="AFTER holds only some identities (``subset``): take the others' frames from BEFORE, "
+                        "after checking that their plan records are identical and that every identity AFTER "
+                        "holds with an identical record has the same embeddings in both")
+    s2 = sub.add_parser("subset", help="the identities whose records differ between two plans, as a plan")
+    s2.add_argument("before_plan", type=Path)
+    s2.add_argument("after_plan", type=Path)
+    s2.add_argument("out", type=Path)
+    s2.add_argument("--check", type=int, default=1, help="unchanged identities to render again as a check")
     args = ap.parse_args(argv)
+    if args.cmd == "subset":
+        r = changed_subset(args.before_plan, args.after_plan, args.out, args.check)
+        print(f"{len(r['changed'])} changed identities {r['changed']}, checked {r['unchanged_checked']}: "
+              f"plan {r['plan_hash'][:16]} at {args.out}")
+        return 0
     if args.cmd == "compare":
-        r = compare_sets(judged_set(args.before), judged_set(args.after), args.noise, args.trials)
+        before, after = judged_set(args.before), judged_set(args.after)
+        if args.fill:
+            after = filled(before, after, *args.fill)
+        r = compare_sets(before, after, args.noise, args.trials)
         print(f"frames found in both: {r['frames']}; changed identities {len(r['changed_identities'])} "
               f"({r['changed_frames']} frames): {r['changed_identities']}")
         print(f"different-identity pairs under {THRESHOLD}: {r['fraction_before']:.1%} -> {r['fraction_after']:.1%} "

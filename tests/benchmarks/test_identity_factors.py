@@ -261,3 +261,47 @@ def test_compare_sets_pairs_the_frames_and_finds_what_moved():
                                   if ident[a] != ident[b] and 3 in (ident[a], ident[b])
                                   and np.linalg.norm(emb[a] - emb[b]) < 0.6)
     assert r["null_2_5"] <= r["null_mean"] <= r["null_97_5"]
+
+
+def test_subset_of_a_catalogue_change_and_the_filled_comparison(base, tmp_path):
+    """A catalogue whose natural eyebrows are wider changes exactly the identities with natural
+    brows; ``subset`` plans those (and one unchanged as a check), ``filled`` completes a render of
+    the subset from the before render and refuses a frame that would not match."""
+    import shutil
+
+    from synth.assets.catalogue import default_manifest_dir
+    from synth.cli.main import main
+
+    cat = tmp_path / "cat"
+    shutil.copytree(default_manifest_dir(), cat)
+    p = cat / "eyebrows.toml"
+    p.write_text(p.read_text().replace("thickness = { range = [0.4, 1.5] }", "thickness = { range = [0.2, 1.9] }", 1))
+    after = tmp_path / "after"
+    assert main(["plan", "-j", "1", "-n", "4", "-o", str(after), "-q", *FLAGS,
+                 "--set", f'assets.manifest_dir="{cat}"']) == 0
+    b, a = idf.base_identities(base), idf.base_identities(after)
+    natural = [i for i in sorted(b) if (b[i]["assets"]["eyebrows"] or {}).get("id") == "natural"]
+    assert 0 < len(natural) < 4  # seed 0's first four: some natural, some not
+    r = idf.changed_subset(base, after, tmp_path / "sub", check=1)
+    assert r["changed"] == natural and len(r["unchanged_checked"]) == 1
+    from synth.plan.io import Plan
+
+    sub = Plan(tmp_path / "sub")
+    sub.verify()
+    assert sub.header["views_per_expression"] == 2 and sub.header["num_identities"] == len(natural) + 1
+    # embeddings: the before render has every identity; the subset render its own
+    rng = np.random.default_rng(7)
+    before = {f"id{i:06d}_ex00_v{v:02d}": (i, 0, rng.normal(size=128)) for i in range(4) for v in range(2)}
+    held = set(natural) | set(r["unchanged_checked"])
+    sub_emb = {k: (v[0], 0, v[2] + (1.0 if v[0] in natural else 0.0)) for k, v in before.items() if v[0] in held}
+    full = idf.filled(before, sub_emb, base, after)
+    assert sorted(full) == sorted(before)
+    assert all(np.array_equal(full[k][2], before[k][2]) == (full[k][0] not in natural) for k in full)
+    bad = dict(sub_emb)
+    k = next(k for k, v in bad.items() if v[0] in r["unchanged_checked"])
+    bad[k] = (bad[k][0], 0, bad[k][2] + 1e-6)
+    with pytest.raises(ValueError, match="planned the same"):
+        idf.filled(before, bad, base, after)
+    missing = {k: v for k, v in sub_emb.items() if v[0] != natural[0]}
+    with pytest.raises(ValueError, match="not in the after render"):
+        idf.filled(before, missing, base, after)
