@@ -500,11 +500,22 @@ def real_vs_render(render_emb: np.ndarray, real_emb: np.ndarray) -> dict:
             "render_to_real_centroid": float(np.median(np.linalg.norm(r - cp, axis=1)))}
 
 
-def real_faces(paths: list, python: str, work: Path, min_score: float = 0.2) -> np.ndarray:
-    """Embeddings of every face with a detector score of at least ``min_score`` in the photos."""
+def real_faces(paths: list, python: str, work: Path, min_score: float = 0.2, face_px: int | None = None) -> np.ndarray:
+    """Embeddings of every face with a detector score of at least ``min_score`` in the photos;
+    ``face_px``: each such face cropped and scaled so that its detector box is that wide
+    (:func:`benchmarks.identity_diversity.face_crops`; a face not found again is left out)."""
+    from benchmarks.identity_diversity import face_crops
+
+    (work / "judge").mkdir(parents=True, exist_ok=True)
     det = run_judge(python, work / "judge" / "real.json", paths)["images"]
-    return np.asarray([f["embedding"] for _, v in sorted(det.items()) for f in v["faces"]
-                       if f["score"] >= min_score]).reshape(-1, 128)
+    kept = [(k, f) for k, v in sorted(det.items()) for f in v["faces"] if f["score"] >= min_score]
+    if face_px:
+        folder = work / "png" / f"real_{face_px}px"
+        folder.mkdir(parents=True, exist_ok=True)
+        crops = face_crops(paths, det, kept, face_px, folder)
+        small = run_judge(python, work / "judge" / f"real_{face_px}px.json", crops)["images"]
+        kept = [(k, small[c.name]["faces"][0]) for (k, _), c in zip(kept, crops) if small[c.name]["faces"]]
+    return np.asarray([f["embedding"] for _, f in kept]).reshape(-1, 128)
 
 
 # --------------------------------------------------------------------------- report
@@ -673,6 +684,8 @@ def main(argv=None) -> int:
         p.add_argument("--variants", nargs="*", default=list(VARIANTS), choices=VARIANTS)
         if name == "run":
             p.add_argument("--real", nargs="*", default=[], help="real photos (files or folders of PNGs)")
+            p.add_argument("--real-face-px", type=int, nargs="*", default=[],
+                           help="also with the real faces rescaled to this detector-box width (px)")
             p.add_argument("--judge-python", default=sys.executable)
             p.add_argument("--json", type=Path)
     c = sub.add_parser("compare", help="two renders of one set (the judge's JSON of identity_diversity "
@@ -729,6 +742,11 @@ def main(argv=None) -> int:
         real = real_faces(args.real, args.judge_python, args.work)
         out["real"] = real_vs_render(render_v0, real)
         print_real(out["real"])
+        for px in args.real_face_px:
+            out[f"real_{px}px"] = real_vs_render(render_v0, real_faces(args.real, args.judge_python, args.work,
+                                                                       face_px=px))
+            print(f"\nreal faces {px} px wide:")
+            print_real(out[f"real_{px}px"])
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))
     return 0

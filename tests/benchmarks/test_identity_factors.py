@@ -305,3 +305,18 @@ def test_subset_of_a_catalogue_change_and_the_filled_comparison(base, tmp_path):
     missing = {k: v for k, v in sub_emb.items() if v[0] != natural[0]}
     with pytest.raises(ValueError, match="not in the after render"):
         idf.filled(before, missing, base, after)
+
+
+def test_real_faces_at_their_size_and_at_the_renders(tmp_path):
+    """scikit-image's astronaut: her face (the detector's low-score mission patch dropped), also
+    when cropped and scaled to a 75 px box; the two embeddings are of one person (under 0.6)."""
+    import sys
+
+    from PIL import Image
+    from skimage import data
+
+    Image.fromarray(data.astronaut()).save(tmp_path / "a.png")
+    full = idf.real_faces([tmp_path / "a.png"], sys.executable, tmp_path)
+    small = idf.real_faces([tmp_path / "a.png"], sys.executable, tmp_path, face_px=75)
+    assert full.shape == (1, 128) and small.shape == (1, 128)
+    assert 0.0 < np.linalg.norm(full[0] - small[0]) < 0.6
