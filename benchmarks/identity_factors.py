@@ -36,6 +36,16 @@ less within-condition ones). The lighting is not a factor: every
 identity of the default config has the same studio (``lighting.studio_rotation_deg`` = [0, 0]);
 a swap that would break a catalogue rule (a cap over a bun) is rendered and flagged.
 
+A change to the planner or catalogue, measured on a set (``identity_diversity`` plan flags) as
+before -> after with only the identities it touches rendered again::
+
+    .venv/bin/python -m benchmarks.identity_factors subset BEFORE_PLAN AFTER_PLAN SUB        # + 1 unchanged
+    .venv/bin/python -m benchmarks.identity_factors subset BEFORE_PLAN AFTER_PLAN CTL --reseed
+    .venv/bin/synth render -o SUBSET --plan SUB ; .venv/bin/synth render -o CONTROL --plan CTL
+    .venv/bin/python -m benchmarks.identity_diversity measure BEFORE_SET SUBSET CONTROL --keep J
+    .venv/bin/python -m benchmarks.identity_factors compare J/BEFORE_SET.json J/SUBSET.json \
+        --fill BEFORE_PLAN AFTER_PLAN                       # and J/CONTROL.json: render noise alone
+
 The what-if plans are written through the plan library (:func:`synth.plan.io.write_plan`: fresh
 shard sha256s and plan hash; every identity checked as a :class:`synth.plan.records.ShardSpec`
 first), so ``synth render`` checks them as it checks any plan. Their header is the base plan's
