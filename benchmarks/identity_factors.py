@@ -676,6 +676,50 @@ def compare_sets(before: dict, after: dict) -> dict:
             "crossed_down": int(((db >= THRESHOLD) & (da < THRESHOLD) & diff).sum())}
 
 
+def noisy(img: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:
+    """An 8-bit image with Gaussian noise of ``sigma`` (8-bit units) added, rounded and clipped."""
+    return np.clip(np.asarray(img, np.float64) + rng.normal(0.0, sigma, np.shape(img)), 0, 255).round().astype(np.uint8)
+
+
+def jitter(renders: list[Path], real: list, work: Path, python: str, sigmas=(1.0, 2.0, 4.0), face_px: int = 75,
+           seed: int = 0) -> dict:
+    """How far the judge moves a face when the image gets a little pixel noise: each render PNG and
+    each real face (score >= 0.2, cropped and scaled to a ``face_px`` box) against itself with
+    Gaussian noise of each ``sigma`` (8-bit units). kind -> sigma -> the distances."""
+    from PIL import Image
+
+    from benchmarks.identity_diversity import face_crops
+
+    folder = work / "png" / "jitter"
+    folder.mkdir(parents=True, exist_ok=True)
+    (work / "judge").mkdir(parents=True, exist_ok=True)
+    src = {}
+    if real:
+        det = run_judge(python, work / "judge" / "real.json", real)["images"]
+        kept = [(k, f) for k, v in sorted(det.items()) for f in v["faces"] if f["score"] >= 0.2]
+        for c in face_crops(real, det, kept, face_px, folder):
+            src[f"real_{c.stem}"] = np.asarray(Image.open(c).convert("RGB"))
+    for p in renders:
+        src[f"render_{Path(p).stem}"] = np.asarray(Image.open(p).convert("RGB"))
+    rng = np.random.default_rng(seed)
+    names = []
+    for k, a in src.items():
+        Image.fromarray(a).save(folder / f"{k}__0.png")
+        for s in sigmas:
+            Image.fromarray(noisy(a, s, rng)).save(folder / f"{k}__{s:g}.png")
+        names.append(k)
+    det = run_judge(python, work / "judge" / "jitter.json", [folder])["images"]
+    out: dict = {}
+    for k in names:
+        f0 = det[f"{k}__0.png"]["faces"]
+        for s in sigmas:
+            f1 = det[f"{k}__{s:g}.png"]["faces"]
+            if f0 and f1:
+                out.setdefault(k.split("_")[0], {}).setdefault(s, []).append(
+                    _d(f0[0]["embedding"], f1[0]["embedding"]))
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.identity_factors", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -699,6 +743,12 @@ def main(argv=None) -> int:
                    help="AFTER holds only some identities (``subset``): take the others' frames from BEFORE, "
                         "after checking that their plan records are identical and that every identity AFTER "
                         "holds with an identical record has the same embeddings in both")
+    j = sub.add_parser("jitter", help="the judge's distance between a face and itself with a little pixel noise")
+    j.add_argument("work", type=Path)
+    j.add_argument("--renders", nargs="*", default=[], type=Path, help="render PNGs")
+    j.add_argument("--real", nargs="*", default=[], help="real photos")
+    j.add_argument("--sigma", nargs="*", type=float, default=[1.0, 2.0, 4.0])
+    j.add_argument("--judge-python", default=sys.executable)
     s2 = sub.add_parser("subset", help="the identities whose records differ between two plans, as a plan")
     s2.add_argument("before_plan", type=Path)
     s2.add_argument("after_plan", type=Path)
@@ -707,6 +757,13 @@ def main(argv=None) -> int:
     s2.add_argument("--reseed", action="store_true",
                     help="the noise control: the changed identities as BEFORE_PLAN has them, with other render seeds")
     args = ap.parse_args(argv)
+    if args.cmd == "jitter":
+        res = jitter(args.renders, args.real, args.work, args.judge_python, args.sigma)
+        print("| faces | noise (8-bit SD) | n | median distance | max |\n|---|---:|---:|---:|---:|")
+        for kind, by in res.items():
+            for sg, d in by.items():
+                print(f"| {kind} | {sg:g} | {len(d)} | {np.median(d):.3f} | {max(d):.3f} |")
+        return 0
     if args.cmd == "subset":
         r = changed_subset(args.before_plan, args.after_plan, args.out, args.check, args.reseed)
         print(f"{len(r['changed'])} changed identities {r['changed']}, checked {r['unchanged_checked']}: "

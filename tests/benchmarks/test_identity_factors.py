@@ -308,3 +308,18 @@ def test_real_faces_at_their_size_and_at_the_renders(tmp_path):
     small = idf.real_faces([tmp_path / "a.png"], sys.executable, tmp_path, face_px=75)
     assert full.shape == (1, 128) and small.shape == (1, 128)
     assert 0.0 < np.linalg.norm(full[0] - small[0]) < 0.6
+
+
+def test_noisy_images_and_the_jitter_of_the_astronaut(tmp_path):
+    import sys
+
+    from PIL import Image
+    from skimage import data
+
+    img = np.full((8, 8, 3), 254, np.uint8)
+    a = idf.noisy(img, 2.0, np.random.default_rng(0))
+    b = idf.noisy(img, 2.0, np.random.default_rng(0))
+    assert a.dtype == np.uint8 and np.array_equal(a, b) and a.max() == 255 and (a != img).any()
+    Image.fromarray(data.astronaut()).save(tmp_path / "a.png")
+    res = idf.jitter([], [tmp_path / "a.png"], tmp_path, sys.executable, sigmas=(1.0,))
+    assert list(res) == ["real"] and len(res["real"][1.0]) == 1 and 0.0 < res["real"][1.0][0] < 0.3
