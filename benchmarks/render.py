@@ -19,8 +19,8 @@ settings: Cycles settings against the preset's, on every frame of a plan's first
   base, sppN, adN (adaptive threshold N/1000), noad, adminN (adaptive minimum samples),
   nodenoise, fastpf (denoising prefilter FAST), dqbalanced / dqfast (OIDN quality), noguides
   (OIDN without albedo/normal), diffN / glossN / transN / transpN / maxN (bounces), nocaustics,
-  blurglossyN (N/10), nolt (no light tree), thick / ribbons (hair curve shape), burley (skin
-  subsurface), sssrN (skin subsurface radius N %), nbcloth / nbskin (no bump on cloth / skin),
+  blurglossyN (N/10), nolt (no light tree), guiding (path guiding, CPU), thick / ribbons (hair
+  curve shape), burley (skin subsurface), sssrN (skin subsurface radius N %), nbcloth / nbskin (no bump on cloth / skin),
   threadsN, tileN, nopd (no persistent data), hide<class> (hair, beard, eyebrows, eyelashes,
   clothing, glasses, headwear). Each identity renders its variants
   in turn (reversed every other identity), each from a dropped render cache.
@@ -250,6 +250,8 @@ def _apply_variant(variant: str, sc, defaults: dict, undo: list) -> None:
             c.denoising_quality = part[2:].upper()
         elif part == "nolt":
             c.use_light_tree = False
+        elif part == "guiding":  # path guiding (Open PGL, CPU only): surfaces, deterministic training
+            c.use_guiding, c.use_surface_guiding, c.use_deterministic_guiding = True, True, True
         elif part in ("burley", "nbcloth", "nbskin"):
             for m in bpy.data.materials:
                 for n in (m.node_tree.nodes if m.node_tree else ()):
