@@ -87,6 +87,10 @@ def configure_render(settings: RenderSettings, width: int, height: int) -> dict[
     c.use_light_tree = bool(settings.light_tree)
     c.caustics_reflective = c.caustics_refractive = bool(settings.caustics)
     scene.cycles_curves.shape = str(settings.hair_shape).upper()
+    # path guiding (Open PGL) exists on the CPU only; its deterministic training gives the same pixels whatever the
+    # thread count and whatever was rendered before (checked by tests/blender/test_plan_render_settings.py)
+    c.use_guiding = bool(settings.path_guiding) and device == "cpu"
+    c.use_surface_guiding, c.use_volume_guiding, c.use_deterministic_guiding = True, False, True
     c.use_animated_seed = False
     c.seed = 0
     c.sample_clamp_indirect = float(settings.clamp_indirect)
@@ -120,6 +124,7 @@ def configure_render(settings: RenderSettings, width: int, height: int) -> dict[
         "hair_shape": scene.cycles_curves.shape.lower(),
         "light_tree": c.use_light_tree,
         "caustics": c.caustics_reflective,
+        "path_guiding": c.use_guiding,
         "filter_width": c.pixel_filter_width,
         "alpha_denoised": c.use_denoising,
     }

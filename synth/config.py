@@ -262,6 +262,9 @@ class RenderConfig:
     """prefilter of the denoiser's albedo and normal guides (unset = preset; accurate where the preset leaves it)"""
     denoise_quality: Annotated[str | None, Choices("high", "balanced", "fast")] = None
     """OpenImageDenoise quality (unset = preset; high where the preset leaves it)"""
+    path_guiding: bool | None = None
+    """Cycles' path guiding on surfaces, deterministic training (CPU only: a GPU renders without it; unset = preset;
+    off where the preset leaves it)"""
 
 
 @dataclass(frozen=True)

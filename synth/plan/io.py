@@ -54,7 +54,7 @@ LATER_KEYS = {("dataset", "environments_per_expression"): 1,
               # rendered; synth.plan.records.RenderSettings holds those values)
               **{("render", k): None for k in ("diffuse_bounces", "glossy_bounces", "transmission_bounces",
                                                "transparent_bounces", "hair_shape", "light_tree", "caustics",
-                                               "denoise_prefilter", "denoise_quality")}}
+                                               "denoise_prefilter", "denoise_quality", "path_guiding")}}
 
 
 def planned(config: dict, section: str, key: str):

@@ -350,6 +350,7 @@ class RenderSettings:
     caustics: bool = True
     denoise_prefilter: str = "accurate"
     denoise_quality: str = "high"
+    path_guiding: bool = False
 
     @classmethod
     def from_json(cls, d: Any, where: str = "plan.json config.render") -> RenderSettings:

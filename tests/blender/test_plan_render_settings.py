@@ -81,3 +81,54 @@ def test_unset_light_paths_are_cycles_own_and_set_ones_reach_the_engine():
     assert (eff["diffuse_bounces"], eff["transparent_bounces"], eff["hair_shape"], eff["caustics"],
             eff["denoise_quality"]) == (2, 3, "thick", False, "balanced")
     bscene.reset()
+
+
+def _scene(plan, render_overrides: dict | None = None):
+    from blender_scripts.worker import IdentityScene, software_versions
+    from synth.model.head import HeadModel
+    from synth.plan.records import RenderSettings
+
+    spec = plan.shard_spec(plan.shard_ids()[0])
+    hm = HeadModel(plan.model_data())
+    rs = RenderSettings.from_json({**plan.render_settings(), **(render_overrides or {})})
+    sc = IdentityScene(spec.identities[0], hm, rs, spec.run_seed, {"name": hm.data.name, "sha256": plan.model_sha256()},
+                       software_versions(), plan.shard_ids()[0])
+    return sc, spec.identities[0].expressions[0]
+
+
+def test_path_guided_frames_do_not_depend_on_threads_or_on_the_view_before(tmp_path):
+    """Path guiding learns from the samples of the frame being rendered; with its deterministic
+    training a frame is the same pixels whatever the thread count and whatever the persistent scene
+    rendered before it (the project's rule for every frame)."""
+    import bpy
+    import numpy as np
+
+    from blender_scripts import scene as bscene
+    from synth.config import load_config
+    from synth.plan.io import load_plan
+    from synth.plan.planner import run_plan
+
+    run_plan(load_config(None, ['render.preset="ci"', "render.samples=16", "render.path_guiding=true",
+                                "dataset.expressions_per_identity=1", "dataset.views_per_expression=2"]),
+             1, tmp_path / "plan", seed=5)
+    plan = load_plan(tmp_path / "plan")
+    assert plan.render_settings()["path_guiding"] is True
+
+    def frames(threads: int, views: list[int], overrides=None):
+        sc, e = _scene(plan, overrides)
+        try:
+            sc.set_expression(e)
+            bpy.context.scene.render.threads_mode, bpy.context.scene.render.threads = "FIXED", threads
+            outs = [sc.render(e.frames[v], tmp_path) for v in views]
+        finally:
+            sc.close()
+            bscene.reset()
+        return [o[0]["rgba"] for o in outs], outs[-1][1]
+
+    (_, after_v0), fj = frames(2, [0, 1])
+    assert fj["render"]["path_guiding"] is True
+    (alone,), _ = frames(1, [1])
+    assert np.array_equal(after_v0, alone)
+    (plain,), fj = frames(1, [1], {"path_guiding": False})  # guiding does change the pixels it is said to change
+    assert fj["render"]["path_guiding"] is False and not np.array_equal(plain, alone)
+    assert np.array_equal(plain[..., 3] > 0.5, alone[..., 3] > 0.5) or np.mean(plain[..., 3] != alone[..., 3]) < 0.02
