@@ -170,7 +170,7 @@ def quality(args) -> None:
 _DEFAULTS = ("diffuse_bounces", "glossy_bounces", "transmission_bounces", "transparent_max_bounces",
              "volume_bounces", "use_light_tree", "denoising_prefilter", "denoising_quality", "denoising_input_passes",
              "caustics_reflective", "caustics_refractive", "blur_glossy", "tile_size", "use_auto_tile",
-             "adaptive_min_samples")
+             "adaptive_min_samples", "use_guiding", "use_surface_guiding", "use_deterministic_guiding")
 #: segmentation classes a ``hide<class>`` variant part can hide (benchmarks/render_cost.py's cost per class)
 HIDEABLE = ("hair", "beard", "eyebrows", "eyelashes", "clothing", "glasses", "headwear")
 
