@@ -49,8 +49,8 @@ def run(args) -> None:
     from synth.plan.records import RenderSettings
 
     tree = Path(__import__("synth").__file__).resolve().parents[1]
-    commit = subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True,
-                            text=True).stdout.strip() or "?"
+    commit = args.label or subprocess.run(["git", "-C", str(tree), "rev-parse", "--short", "HEAD"],
+                                          capture_output=True, text=True).stdout.strip() or "?"
     rows = {"tree": str(tree), "commit": commit, "preset": args.preset, "seed": args.seed, "identities": [],
             "frames": []}
     with tempfile.TemporaryDirectory(prefix="synth-body-cost-") as d:
@@ -148,6 +148,7 @@ def main() -> None:
     r.add_argument("--views", type=int, default=2)
     r.add_argument("--seed", type=int, default=0)
     r.add_argument("--preset", default="preview")
+    r.add_argument("--label", default=None, help="what the tree is (default: its git commit)")
     r.set_defaults(run=run)
     c = sub.add_parser("compare")
     c.add_argument("before")

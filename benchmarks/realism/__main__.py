@@ -27,7 +27,7 @@ body-end: the fraction of frames in which the body ends inside the image: no ski
   in the frame; a portrait's body leaves through the bottom border), overall and by camera
   elevation.
 shoulders: the body's breadth over the head's for planned identities (neutral) and garments: the
-  widest extent side to side of the dressed body (garment, the torso below it, the bust's bare
+  widest extent side to side of the dressed body at the deltoids (garment, the torso below it, the bust's bare
   arms), over the breadth of the scalp; next to bideltoid over head breadth of measured adults
   (Pheasant's tables); and hair (--hair styles, tshirt_crew) within the sleeves' reach of the
   upper arms as groomed and after synth.assets.fit.arms.ArmKeepOut.

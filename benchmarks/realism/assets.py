@@ -102,7 +102,8 @@ HEAD_BREADTH_MM = {"men": (155.0, 6.0), "women": (145.0, 6.0)}
 def shoulders(args) -> dict:
     """The body's breadth against the head's (docs/realism.md, "Arms"): for planned identities
     (neutral), each garment of ``--garments``, the widest extent side to side of the dressed body
-    (the garment, the torso below it and the bust's skin: its bare arms) over the head's breadth
+    (the garment, the torso below it and the bust's skin: its bare arms; with the bust's arms, at
+    the deltoids: from 12 cm under to 8 cm over the armholes' centres) over the head's breadth
     (its scalp, above the ears), against bideltoid over head breadth of measured adults; and hair
     (``--hair``, a crew T-shirt) within the sleeves' reach of the upper arms, as groomed and after
     synth.assets.fit.arms.ArmKeepOut."""
@@ -129,8 +130,12 @@ def shoulders(args) -> dict:
             s = fit_shell(body, garment_shell(body, {"id": gid, "params": {}}, ctx.rng("garment")), CLEARANCE)
             head = ctx.vertices[scalp, 0].max() - ctx.vertices[scalp, 0].min()
             Vt, _ = torso.garment_torso(s)
-            x = np.concatenate([np.asarray(s.P)[:, 0], Vt[:, 0], ctx.vertices[bust, 0]])
-            m.append([head, x.max() - x.min()])
+            P = np.concatenate([np.asarray(s.P), Vt, ctx.vertices[bust]])
+            if body.arms is not None:  # at the deltoids: from 12 cm under to 8 cm over the armholes' centres
+                # (bust.measures' bideltoid band; the elbows, hanging out, are wider still)
+                z0 = 0.5 * (body.arms.shoulder["L"][2] + body.arms.shoulder["R"][2])
+                P = P[(P[:, 2] > z0 - 0.12) & (P[:, 2] < z0 + 0.08)]
+            m.append([head, P[:, 0].max() - P[:, 0].min()])
         m = 1000.0 * np.asarray(m)
         r = m[:, 1] / m[:, 0]
         rows.append({"garment": gid, "head_mm": m[:, 0].tolist(), "body_mm": m[:, 1].tolist()})
@@ -142,8 +147,8 @@ def shoulders(args) -> dict:
 
         k = min(args.hair_identities, len(ids))
         print(f"\nHair within the sleeves' reach of the upper arms ({k} identities, tshirt_crew: strand points "
-              "closer to an arm's skin than the cloth's reach plus 2 mm, less than 7 cm inside): groomed "
-              "(the hair alone) / kept out (synth.assets.fit.arms.ArmKeepOut)\n")
+              "whose closest skin point is on an arm, closer to it than the cloth's reach plus 2 mm and less "
+              "than 7 cm inside): groomed (the hair alone) / kept out (synth.assets.fit.arms.ArmKeepOut)\n")
         print("| style | strands | strands too close | deepest mm under the reach | after keep-out: strands / points |\n"
               "|---|---:|---:|---:|---:|")
         for sid in args.hair:
@@ -158,9 +163,8 @@ def shoulders(args) -> dict:
                 pts = np.asarray(groom(ctx, {"id": sid, "params": {}}).pts)
                 kept, _ = keep.push(pts)
                 for j, q in enumerate((pts, kept)):
-                    flat = q[:, 1:].reshape(-1, 3)
-                    d = keep._sdf(flat)
-                    close = (d < keep.clearance - 1e-6) & (d > -arms_fit.HAIR_MAX_DEPTH)
+                    d, on_arm = keep.distance(q[:, 1:].reshape(-1, 3))
+                    close = (d < keep.clearance - 1e-6) & (d > -arms_fit.HAIR_MAX_DEPTH) & on_arm
                     acc[2 * j] += close.reshape(q.shape[0], -1).any(1).sum()
                     acc[2 * j + 1] += close.sum()
                     if j == 0 and close.any():
