@@ -2,7 +2,8 @@
 
 The geometry (necklines, collars, hoods, scarves, the fit to the bust and the binding that
 follows expressions) is numpy in :mod:`synth.assets.fit.garment` and
-:mod:`synth.assets.fit.body`; this module turns a fitted shell into one mesh object
+:mod:`synth.assets.fit.body` (the body below it and the forearms: :mod:`synth.assets.fit.torso`,
+:mod:`synth.assets.fit.arms`); this module turns a fitted shell into one mesh object
 (segmentation class ``clothing``, pass index 9) with Principled cloth materials per
 ``fabric`` (roughness, sheen, knit stitches at ``knit_scale_m``, twill, fleece fuzz, leather
 grain) and procedural wrinkle bump. The headwear rig uses the same helpers.

@@ -4,10 +4,12 @@ Pure numpy; the Blender rig (``blender_scripts/assets/garment.py``) only makes t
 object and the cloth materials. Every garment is one mesh built from the body itself, so it
 fits any identity (tested at +-3 SD):
 
-1. **Shell**: the skin triangles of the ``neck`` and ``shoulders`` regions are clipped exactly
-   at a neckline field ``z_nl(theta) - z`` (``meshops.clip_by_field``; theta is the angle
-   around the neck base ring, ``body.NeckFrame``), subdivided once, and offset along the
-   interpolated body normals by the fabric thickness plus small outward-only wrinkles. The
+1. **Shell**: the skin triangles of the ``neck`` and ``shoulders`` regions (with the default
+   model's bust: the torso to the waist and the upper arms) are clipped exactly at a neckline
+   field ``z_nl(theta) - z`` (``meshops.clip_by_field``; theta is the angle around the neck base
+   ring, ``body.NeckFrame``), at the hem and at the garment's sleeves (:data:`SLEEVES`,
+   :mod:`synth.assets.fit.arms`), subdivided once within 20 cm of the neck's base, and offset
+   along the interpolated body normals by the fabric thickness plus small outward-only wrinkles. The
    neckline per garment: crew, V (depth from ``neckline_depth_m``), turtleneck collar
    (``collar_height_m``, capped 1.2 cm under the jaw line), deep V with raised lapels
    (``lapel_width_m``) for jackets and coats, scoop + straps (``strap_width_m``) for tank tops.
@@ -46,7 +48,8 @@ from synth.model.meshutil import smoothstep
 
 #: minimum distance (m) kept between every garment vertex and the skin
 CLEARANCE = 0.0015
-#: width (m) of the tank top's band along the hem, over the arm stumps
+#: width (m) of the tank top's band along the hem (over the arm stumps of a model without the bust;
+#: with it, the waist's band under the arm holes)
 TANK_BAND = 0.035
 #: rounding (m) of the corner where a turtleneck's collar top meets the cap under the jaw
 COLLAR_ROUND = 0.045
@@ -248,7 +251,7 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
             zr = fr.z_ring(th)
             torso = smooth_min(zr - 0.05 - 0.04 * front_weight(th) - V[:, 2], 0.13 - np.abs(V[:, 0]), TANK_ROUND)
             strap = smooth_min(w / 2 - np.abs(np.abs(V[:, 0]) - xs), zr + 0.01 - V[:, 2], 0.5 * w)
-            band = TANK_BAND - body.hem  # a band along the hem covers the arm stumps (the bust's cut)
+            band = TANK_BAND - body.hem  # a band along the hem (the cut's arm stumps without the bust)
             # the openings' corners (strap on torso, torso on band) rounded: arm holes, not notches
             return smooth_max(smooth_max(torso, strap, TANK_ROUND), band, TANK_ROUND)
         torso_shell(body, parts, lambda t: fr.z_ring(t), wr(base, 0.001), extra_field=extra, rim=0.0, sleeves=sleeves)

@@ -26,8 +26,8 @@ V_TIP_RADIUS = 0.01
 #: an opening of a torso shell's field must span this many body vertices (smaller ones are closed)
 MIN_OPENING = 8
 #: a torso shell is subdivided once where it lies less than this far (m) under the neck's base (its
-#: necklines, collars, lapels and shoulders); further down (the bust's chest, back and arms, about
-#: 2 cm triangles) it keeps the body's triangles
+#: lowest vertex; the shell's necklines, collars, lapels and shoulders); further down (the bust's
+#: chest, back and arms, about 2 cm triangles) it keeps the body's triangles
 REFINE_BELOW_NECK = 0.2
 from synth.assets.fit.meshops import (grid_faces, icosphere, laplacian_smooth, negative_regions,
                                       oriented_boundary_loops, sweep_tube)
@@ -89,10 +89,11 @@ def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None
     lab = negative_regions(body.F[body.torso_tris], np.where(np.isin(np.arange(len(f)), body.F[body.torso_tris]), f, 1.0))
     size = np.bincount(lab)
     f = np.where((f < 0) & (size[lab] < MIN_OPENING), 0.0, f)
-    fr = body.frame
+    # a plain height test (no angle): the same faces on every machine for the same vertices
+    z_refine = float(body.V[body.frame.ring, 2].min()) - REFINE_BELOW_NECK
 
     def near_neck(C):
-        return fr.z_ring(fr.theta(C)) - C[:, 2] < REFINE_BELOW_NECK
+        return C[:, 2] > z_refine
     P, F, cut, W = body.shell(body.torso_tris, np.minimum(f, hem_f), off_fn, weights=True, refine=near_neck)
     on_hem = cut & (np.abs(np.asarray(W @ hem_f)) < 1e-7)
     P = smooth_loops(P, F, on_hem)
