@@ -36,8 +36,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 #: the hair styles of assets_manifest/hair.toml, in its order
-STYLES = ("buzz_cut", "short_straight", "short_curly", "undercut", "medium_wavy", "bob", "long_straight",
-          "long_curly", "afro", "bun", "ponytail", "braids")
+STYLES = ("buzz_cut", "short_straight", "short_curly", "undercut", "short_back_and_sides", "medium_wavy", "bob",
+          "long_straight", "long_layered", "long_curly", "afro", "bun", "ponytail", "braids", "locs")
 UP = np.array([0.0, 0.0, 1.0])  # the head model's vertical axis
 FRONT = np.array([0.0, -1.0, 0.0])  # the direction the face looks
 VIEWS = {"above": -UP, "front": -FRONT}  # the direction of the line of sight (viewer to head)

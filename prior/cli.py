@@ -162,7 +162,8 @@ def fit_cmd(
     prior: Path = typer.Option(..., "--prior", help="Run directory of synth prior train (its newest checkpoint)."),
     out: Path = typer.Option(..., "--out", "-o", help="Fit directory (new)."),
     landmarks: str = typer.Option("auto", "--landmarks", help="json (synth frames), mediapipe (photos; the fit "
-                                                              "extra) or auto."),
+                                                              "extra), dlib (photos, iBUG's 68 points; the judge "
+                                                              "extra) or auto (json for frames, else mediapipe)."),
     steps: Optional[int] = typer.Option(None, "--steps", help="Fine-tuning steps (finetune.steps)."),
     preset: PriorPreset = None,
     config: Optional[Path] = typer.Option(None, "--config", "-c", help="TOML file with landmarks, inversion, "

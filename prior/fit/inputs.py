@@ -33,7 +33,7 @@ from synth.errors import SynthError
 
 PHOTO_SUFFIXES = (".png", ".jpg", ".jpeg")
 FRAME_SUFFIX = ".exr"
-SOURCES = ("auto", "json", "mediapipe")
+SOURCES = ("auto", "json", "mediapipe", "dlib")
 
 
 @dataclass
@@ -162,7 +162,7 @@ def read_inputs(paths, max_side: int) -> list[InputImage]:
 def resolve_source(inputs: list[InputImage], source: str) -> str:
     """``auto`` -> ``json`` when every input is a synth frame, else ``mediapipe``."""
     if source not in SOURCES:
-        raise SynthError(f"unknown landmark source '{source}'", "--landmarks", "use json or mediapipe")
+        raise SynthError(f"unknown landmark source '{source}'", "--landmarks", "use json, mediapipe or dlib")
     if source == "auto":
         return "json" if all(im.frame is not None for im in inputs) else "mediapipe"
     if source == "json":
@@ -196,17 +196,20 @@ def observations(inputs: list[InputImage], source: str, model, *, sigma_px: floa
         obs = Observations(np.stack([to_canvas(im, o.mean[0]) for im, o in zip(inputs, per)]),
                            np.concatenate([o.sigma for o in per]), W, H, landmark_set=per[0].landmark_set)
     else:
-        from prior.fit.landmark_sources import mediapipe_observations
+        from prior.fit.landmark_sources import dlib_observations, mediapipe_observations
 
         try:
-            obs, masks, found = mediapipe_observations([im.srgb8() for im in inputs], model)
+            if source == "dlib":
+                obs, masks, found = dlib_observations([im.srgb8() for im in inputs])
+            else:
+                obs, masks, found = mediapipe_observations([im.srgb8() for im in inputs], model)
         except SynthError as e:
             if e.where and e.where.startswith("image ") and e.where[6:].isdigit():
                 raise SynthError(e.what, str(inputs[int(e.where[6:])].path), e.fix) from None
             raise
         for im, m, d in zip(inputs, masks, found):
             im.detection = d
-            if im.mask is None:
+            if im.mask is None and m is not None:
                 im.mask = np.clip(np.asarray(m, np.float32), 0, 1) * content_mask(im)
                 im.target = im.target * im.mask[..., None]
                 im.mask_source = "segmentation"

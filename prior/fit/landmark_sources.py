@@ -18,11 +18,25 @@ under about a tenth of its width; when it finds none, the full-range detector lo
 and the face mesh runs again on a square crop :data:`CROP_FACTOR` times each face's box.
 The foreground mask is the selfie segmentation's, restricted to the fitted face's person
 (:func:`person_mask`).
+
+``dlib``: the optional ``synth-faces[judge]`` extra (``dlib-bin``, and ``face_recognition_models``
+for the weights): dlib's HOG face detector (the photo as it is and upsampled once, twice if neither
+finds a face; detector scores from 0) and its 68-point shape predictor, whose points are iBUG's 68
+(the ``ibug68`` landmark set of the head model): no correspondence is needed. The face to fit is
+chosen by :func:`choose_face`'s rule with the detector's confidence (score at least
+:data:`DLIB_MIN_SCORE`): the largest face, unless it is not a confident one and a confident face of
+similar size exists; only confident faces make a photo ambiguous; at least :data:`DLIB_MIN_FACE_PX`.
+The predictor was trained on iBUG 300-W, whose images are licensed for research only: prefer
+``mediapipe`` where that matters (docs/fitting.md). Each point's sigma is :data:`DLIB_SIGMA_FACE` of
+the face's size (its points' bounding box), twice that on the jaw (iBUG's jaw is the face's outline,
+which the model's fixed jaw points follow only near the front), at least ``min_sigma_px``. The
+foreground mask is mediapipe's (as above) when the fit extra is installed, else none.
 """
 
 from __future__ import annotations
 
 import contextlib
+import importlib.util
 import json
 import os
 import sys
@@ -56,6 +70,18 @@ PERSON_THRESHOLD = 0.5
 PERSON_EDGE_PX = 3
 #: side of the crop around a face found by the full-range detector, in units of its box's longer side
 CROP_FACTOR = 2.0
+#: dlib's upsampling steps (the last only when the others find no face); the detector score from
+#: which a face is confident enough to make a photo ambiguous (the astronaut's mission patch scores
+#: 0.12, a face turned 60 degrees -0.15 to 0.2, frontal faces 0.5 and more); and the smallest face,
+#: the longer side of its 68 points' box (brows to chin: about three quarters of what mediapipe's
+#: points span, forehead included, so MIN_FACE_PX's face)
+DLIB_UPSAMPLE = (0, 1, 2)
+DLIB_MIN_SCORE = 0.2
+DLIB_MIN_FACE_PX = 48
+#: a dlib point's sigma as a fraction of the face's size (×2 on the jaw); its pixel coordinates
+#: are pixel indices, synth's pixel centres are at +0.5
+DLIB_SIGMA_FACE, DLIB_JAW_SIGMA_FACTOR, DLIB_PIXEL_OFFSET = 0.012, 2.0, 0.5
+DLIB_WEIGHTS = "shape_predictor_68_face_landmarks.dat"
 
 
 # --------------------------------------------------------------------------- synth frames
@@ -182,21 +208,28 @@ def quiet_native_stderr():
             os.close(saved)
 
 
-def choose_face(faces: list[np.ndarray], where: str) -> tuple[int, list[float]]:
-    """Index of the face to fit among detected point sets (each (478, 2) pixels) and every face's
-    size (longer side of its bounding box), or one SynthError line (module docstring)."""
+def choose_face(faces: list[np.ndarray], where: str, *, min_px: float = MIN_FACE_PX,
+                confident: list[bool] | None = None) -> tuple[int, list[float]]:
+    """Index of the face to fit among detected point sets (each (K, 2) pixels) and every face's
+    size (longer side of its bounding box), or one SynthError line (module docstring). With
+    ``confident`` (per face: the detector is sure of it), a face the detector is not sure of gives
+    way to a sure one of similar size, and never makes the photo ambiguous."""
     fix = "use photos with one clearly visible face"
     if not faces:
         raise SynthError("no face found", where, fix)
     sizes = [float(np.max(f.max(0) - f.min(0))) for f in faces]
     order = sorted(range(len(faces)), key=lambda i: (-sizes[i], i))
     best = order[0]
-    if len(order) > 1 and sizes[order[1]] >= SIMILAR_FACE_RATIO * sizes[best]:
-        raise SynthError(f"{len(faces)} faces of similar size ({sizes[best]:.0f} and {sizes[order[1]]:.0f} px)",
+    if confident is not None and not confident[best]:
+        sure = [i for i in order if confident[i] and sizes[i] >= SIMILAR_FACE_RATIO * sizes[best]]
+        best = sure[0] if sure else best
+    rivals = [i for i in order if i != best and (confident is None or confident[i])]
+    if rivals and sizes[rivals[0]] >= SIMILAR_FACE_RATIO * sizes[best]:
+        raise SynthError(f"{len(faces)} faces of similar size ({sizes[best]:.0f} and {sizes[rivals[0]]:.0f} px)",
                          where, "crop the photo to the face to fit (the largest face is fitted when it is clearly "
                          "the largest)")
-    if sizes[best] < MIN_FACE_PX:
-        raise SynthError(f"the face is {sizes[best]:.0f} px across, the fit needs at least {MIN_FACE_PX} px",
+    if sizes[best] < min_px:
+        raise SynthError(f"the face is {sizes[best]:.0f} px across, the fit needs at least {min_px:.0f} px",
                          where, "use a photo where the face is larger (closer, or of a higher resolution)")
     return best, sizes
 
@@ -296,3 +329,89 @@ def mediapipe_points_observations(points, width: int, height: int, corr: dict, *
     sigma = np.maximum(min_sigma_px, corr["sigma_face"][None] * face_px[:, None])
     return Observations(pts[:, corr["index"]], sigma, width, height, None, landmark_set="mediapipe",
                         landmark_def=(corr["triangles"], corr["bary"]))
+
+
+# --------------------------------------------------------------------------- dlib
+
+
+def require_dlib():
+    """(the dlib module, the 68-point predictor's weights file), or one SynthError line saying how
+    to install them. The weights are found without importing face_recognition_models (its
+    ``__init__`` needs pkg_resources, which an environment need not have)."""
+    fix = "install the judge extra: pip install 'synth-faces[judge]' (dlib-bin, face_recognition_models)"
+    try:
+        import dlib
+    except ImportError:
+        raise SynthError("the dlib landmark detector is not installed", "--landmarks dlib", fix) from None
+    spec = importlib.util.find_spec("face_recognition_models")
+    locations = list(spec.submodule_search_locations or []) if spec is not None else []
+    path = Path(locations[0]) / "models" / DLIB_WEIGHTS if locations else None
+    if path is None or not path.is_file():
+        raise SynthError(f"dlib's 68-point landmark weights ({DLIB_WEIGHTS}) are not installed", "--landmarks dlib",
+                         fix)
+    return dlib, path
+
+
+def dlib_faces(detector, predictor, im: np.ndarray) -> tuple[list[np.ndarray], list[float]]:
+    """Every face dlib finds in a photo (module docstring: the photo as it is and upsampled once,
+    twice only if neither finds one; a face found again, its box's centre inside one already
+    kept, counts once, with the higher score): its 68 points ((68, 2) pixels, synth's convention)
+    and the detector's score, in the order found."""
+    boxes: list[tuple[float, float, float, float]] = []
+    dets, scores = [], []
+    for up in DLIB_UPSAMPLE:
+        if up == DLIB_UPSAMPLE[-1] and dets:
+            break
+        found, sc, _ = detector.run(im, up, 0.0)
+        for d, score in zip(found, sc):
+            b = (d.left(), d.top(), d.right(), d.bottom())
+            cx, cy = 0.5 * (b[0] + b[2]), 0.5 * (b[1] + b[3])
+            same = [k for k, o in enumerate(boxes) if o[0] <= cx <= o[2] and o[1] <= cy <= o[3]]
+            if same:
+                if score > scores[same[0]]:
+                    dets[same[0]], scores[same[0]], boxes[same[0]] = d, float(score), b
+                continue
+            dets.append(d)
+            scores.append(float(score))
+            boxes.append(b)
+    out = []
+    for d in dets:
+        shape = predictor(im, d)
+        out.append(np.array([[shape.part(k).x, shape.part(k).y] for k in range(68)], np.float64) + DLIB_PIXEL_OFFSET)
+    return out, scores
+
+
+def dlib_observations(images, *, min_sigma_px: float = 1.0) -> tuple[Observations, list[np.ndarray | None],
+                                                                    list[dict]]:
+    """Observations (ibug68) from RGB photos ((H, W, 3) uint8) by dlib (module docstring), the
+    photos' foreground masks (mediapipe's selfie segmentation restricted to the fitted face's
+    person; None where the fit extra is not installed) and per photo what was found."""
+    dlib, weights = require_dlib()
+    sizes = {np.asarray(im).shape for im in images}
+    if len(sizes) != 1 or len(next(iter(sizes))) != 3:
+        raise SynthError(f"images must be RGB of one size, got {sorted(sizes)}", "--landmarks dlib",
+                         "resize or crop the photos to one size")
+    H, W, _ = next(iter(sizes))
+    detector, predictor = dlib.get_frontal_face_detector(), dlib.shape_predictor(str(weights))
+    per_image = []
+    for i, im in enumerate(images):
+        im = np.ascontiguousarray(im, np.uint8)
+        faces, scores = dlib_faces(detector, predictor, im)
+        best, face_sizes = choose_face(faces, f"image {i}", min_px=DLIB_MIN_FACE_PX,
+                                       confident=[sc >= DLIB_MIN_SCORE for sc in scores])
+        per_image.append((im, faces, best, face_sizes[best]))
+    try:
+        mp = require_mediapipe()
+    except SynthError:
+        mp = None
+    masks: list[np.ndarray | None] = [None] * len(images)
+    if mp is not None:
+        with quiet_native_stderr(), mp.solutions.selfie_segmentation.SelfieSegmentation(model_selection=0) as seg:
+            masks = [person_mask(np.asarray(seg.process(im).segmentation_mask, np.float32), faces, best)
+                     for im, faces, best, _ in per_image]
+    pts = np.stack([faces[best] for _, faces, best, _ in per_image])
+    size = np.array([px for *_, px in per_image])
+    sigma = np.maximum(min_sigma_px, DLIB_SIGMA_FACE * size[:, None] * np.where(np.arange(68) < 17,
+                                                                               DLIB_JAW_SIGMA_FACTOR, 1.0)[None])
+    found = [{"faces": len(faces), "face_px": round(float(px), 1)} for _, faces, _, px in per_image]
+    return Observations(pts, sigma, W, H, None, landmark_set="ibug68"), masks, found

@@ -112,7 +112,7 @@ def _progress(log):
 
 
 def landmark_fit(inputs, source: str, model, cfg, log=print):
-    """Step 2: the inputs' landmarks (``source``: json or mediapipe; photos get their masks) and the
+    """Step 2: the inputs' landmarks (``source``: json, mediapipe or dlib; photos get their masks) and the
     head model and cameras fitted to them, with the config's landmark options (EXIF focal lengths
     as the initial focal length, or a known ``landmarks.focal_px``): the observations and the fit."""
     from prior.fit.landmarks_fit import FitOptions, fit_landmarks
@@ -157,6 +157,10 @@ def fit_face(images, prior_run, out, *, landmarks: str = "auto", preset: str | N
         from prior.fit.landmark_sources import require_mediapipe
 
         require_mediapipe()
+    elif source == "dlib":
+        from prior.fit.landmark_sources import require_dlib
+
+        require_dlib()
     times = {}
     t0 = time.perf_counter()
     obs, fit = landmark_fit(inputs, source, model, cfg, log)

@@ -179,7 +179,7 @@ class IrisParams(Params):
 
 _CURLY_HAIR = ("short_curly", "long_curly", "afro")
 _HAIR_LENGTH_M = {"buzz_cut": 0.006, "short_straight": 0.05, "short_curly": 0.04, "medium_wavy": 0.15, "bob": 0.16,
-                  "long_straight": 0.35, "long_curly": 0.3, "braids": 0.3}
+                  "long_straight": 0.35, "long_layered": 0.35, "long_curly": 0.3, "braids": 0.3, "locs": 0.25}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -203,12 +203,16 @@ class HairParams(Params):
     tie_height: str = "mid"
     tail_length_m: float = 0.25
     braid_count: int = 8
+    loc_count: int = 40
+    layer_ratio: float = 0.6
 
     @classmethod
     def asset_defaults(cls, asset_id: str) -> dict[str, Value]:
         out: dict[str, Value] = {"length_m": _HAIR_LENGTH_M.get(asset_id, 0.1)}
-        if asset_id in ("bob", "long_straight", "medium_wavy"):
+        if asset_id in ("bob", "long_straight", "long_layered", "medium_wavy"):
             out["parting"] = "centre"
+        if asset_id == "short_back_and_sides":
+            out.update(top_length_m=0.05, side_length_m=0.008, parting="left")
         if asset_id in _CURLY_HAIR:
             out["curl"] = 0.9
         if asset_id == "short_curly":

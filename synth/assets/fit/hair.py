@@ -19,9 +19,13 @@ from synth.assets.fit.strands import (BACK, DOWN, FORWARD, LEFT, UP, add_curl, a
                                       trim_below)
 from synth.geometry import exact
 from synth.geometry.normals import normalize
+from synth.model.meshutil import smoothstep
 
-POINTS = {"buzz_cut": 4, "short_straight": 10, "short_curly": 14, "undercut": 14, "medium_wavy": 22, "bob": 20,
-          "long_straight": 28, "long_curly": 40, "afro": 32, "bun": 28, "ponytail": 30, "braids": 40}
+POINTS = {"buzz_cut": 4, "short_straight": 10, "short_curly": 14, "undercut": 14, "short_back_and_sides": 12,
+          "medium_wavy": 22, "bob": 20, "long_straight": 28, "long_layered": 28, "long_curly": 40, "afro": 32,
+          "bun": 28, "ponytail": 30, "braids": 40, "locs": 36}
+#: the styles whose strands are plaited or matted into ropes from a few bases (synth.assets.fit.hair._gathered)
+ROPES = ("braids", "locs")
 
 
 def counts(resolution: int, density: float = 1.0) -> tuple[int, int]:
@@ -113,11 +117,13 @@ def groom(ctx, entry) -> Groom:
         under = (surface.points(c_tri, c_bary) - hat[0]) @ hat[1] > 0.0
         c_tri, c_bary = c_tri[~under], c_bary[~under]
 
-    if sid in ("bun", "ponytail", "braids"):
+    if sid in ("bun", "ponytail") + ROPES:
         pts, clr, g_used = _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng)
         info["guides"] = g_used
         if sid == "braids":
             styling.frizz = 0.0004
+        elif sid == "locs":  # matted: loose fibres stand off the rope
+            styling.frizz = LOC_FRIZZ
     else:
         g_tri, g_bary = roots(g)
         if hat is not None:
@@ -185,6 +191,20 @@ BUZZ_TIP_SHAPE = 0.05
 LOOSE_SWEEP_FLOOR_M = 0.03
 LOOSE_VOLUME = 0.05
 
+#: long layered hair: each root's length falls from the full length at the nape (LAYER_LOW_M below
+#: the head's centre) to ``layer_ratio`` of it at the crown (LAYER_SPAN_M higher), so the ends lie at
+#: different heights (face-framing layers at the front, the longest at the back) instead of one
+#: curtain's edge; and the cut carries more volume off the head than a one-length cut
+LAYER_LOW_M, LAYER_SPAN_M = 0.06, 0.14
+LAYERED_VOLUME = 0.09
+
+#: short back and sides: the clipper's taper from ``side_length_m`` on the sides and back to
+#: ``top_length_m`` on the top, over SBS_TAPER_M of height from SBS_TAPER_FROM_M above the head's
+#: centre (about where the sides turn into the top), SBS_BACK_RISE_M higher at the back (the taper
+#: runs up the back of the head to the crown); the top lies close (volume SBS_VOLUME)
+SBS_TAPER_FROM_M, SBS_TAPER_M, SBS_BACK_RISE_M = 0.01, 0.045, 0.03
+SBS_VOLUME = 0.03
+
 
 class _AfroField:
     """The afro's direction field: the radial sweep, bent by a smooth random field (3 plane
@@ -244,6 +264,19 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
         layer = np.where(is_top, rng.uniform(0.004, 0.014, G), 0.001)
         sweep_w = 1.0
         extra["swept"] = str(prm.swept)
+    elif sid == "short_back_and_sides":
+        Lt, Ls = float(prm.top_length_m), float(prm.side_length_m)
+        back = np.clip((rel[:, 1] - 0.02) / 0.05, 0.0, 1.0)
+        h = smoothstep((rel[:, 2] - SBS_TAPER_FROM_M - SBS_BACK_RISE_M * back) / SBS_TAPER_M)  # 0 sides/back, 1 top
+        L = (Ls + (Lt - Ls) * h) * rng.uniform(0.85, 1.0, G)
+        # the top combed away from a side parting (or back without one), the front lifted back
+        # off the forehead; the sides and back lie down and back
+        top_dir = (np.where(xp is None, 0.0, 1.0) * side_sign[:, None] * LEFT[None] + BACK[None] * (0.5 + front[:, None])
+                   + 0.2 * UP[None])
+        sweep = normalize(h[:, None] * normalize(top_dir) + (1.0 - h[:, None]) * normalize(DOWN + 0.4 * BACK + 0 * gr))
+        grav, lift, bend = 0.25, 0.002 + 0.01 * h, 1.0
+        layer = 0.001 + h * rng.uniform(0.003, 0.01, G)
+        sweep_w, volume = 1.0, SBS_VOLUME
     elif sid == "afro":
         R = float(prm.volume_radius_m)
         ce = c + np.array([0.0, 0.01, 0.025])
@@ -260,6 +293,10 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
     else:
         Lm = float(prm.length_m)
         L = Lm * rng.uniform(0.85, 1.0, G)
+        if sid == "long_layered":
+            L = L * (1.0 - (1.0 - float(prm.layer_ratio)) * np.clip((gr[:, 2] - (c[2] - LAYER_LOW_M)) / LAYER_SPAN_M,
+                                                                    0.0, 1.0))
+            extra["layer_ratio"] = float(prm.layer_ratio)
         short = sid in ("short_straight", "short_curly")
         # sweep away from the parting on top, back over the head at the front
         part_dir = np.where(xp is None, 0.0, 1.0) * side_sign[:, None] * LEFT[None] * top[:, None]
@@ -279,7 +316,8 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
         sweep_w = 1.6 if short else 1.0
         # roots at the front hairline keep the sideways sweep down to the face: it takes them round it
         # (else they fall over the forehead and the face keep-out has to turn them at the hairline)
-        side_floor, volume = LOOSE_SWEEP_FLOOR_M + (-0.03 - LOOSE_SWEEP_FLOOR_M) * front, LOOSE_VOLUME
+        side_floor = LOOSE_SWEEP_FLOOR_M + (-0.03 - LOOSE_SWEEP_FLOOR_M) * front
+        volume = LAYERED_VOLUME if sid == "long_layered" else LOOSE_VOLUME
 
     zc = c[2]
     face_y = float(hf["scalp_lo"][1]) + 0.035
@@ -323,7 +361,7 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
         extra["curl"] = curl
 
     # length limits: bob at the jaw, fringe at the brows
-    if sid == "bob" or (fringe and sid in ("long_straight", "bob", "medium_wavy")):
+    if sid == "bob" or (fringe and sid in ("long_straight", "long_layered", "bob", "medium_wavy")):
         chin_z = float(hf["chin"][2]) if "chin" in hf else c[2] - 0.1
         zcut = np.full(G, -np.inf)
         if sid == "bob":
@@ -361,6 +399,17 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
 
 #: braids: distance of a braid's centre line from the head
 BRAID_CLEARANCE_M = 0.01
+
+#: locs: a rope's radius is LOC_FILL of the radius of the scalp patch it gathers (the scalp's area
+#: shared among the locs; hair matted into a rope packs much denser than it grows), within
+#: LOC_RADIUS_M (3-8 mm: locs are 6-16 mm thick); the strands turn once round the rope's axis every
+#: LOC_TWIST radii, and its end rounds off over the last LOC_TIP of its length; loose fibres (frizz)
+LOC_SCALP_AREA_M2 = 0.055
+LOC_FILL = 0.35
+LOC_RADIUS_M = (0.003, 0.008)
+LOC_TWIST = 12.0
+LOC_TIP = 0.06
+LOC_FRIZZ = 0.0012
 #: braids: the keep-out's margin beyond the wedge's edge is widened by the angle a braid's
 #: radius subtends at the face's radius, times this (its strands wind that far off its centre)
 BRAID_KEEPOUT_SPREAD = 1.5
@@ -409,7 +458,7 @@ def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
     c = hf["centre"]
     R = surface.points(c_tri, c_bary)
     N = len(R)
-    n1 = 12 if sid != "braids" else 8
+    n1 = 8 if sid in ROPES else 12
     n2 = P - n1
     layer = rng.uniform(0.0015, 0.004, N)
     if sid in ("bun", "ponytail"):
@@ -465,8 +514,8 @@ def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
                 pts = add_curl(pts, np.tile(BACK, (N, 1)), curl * 0.01 * rng.uniform(0.7, 1.2, N), 0.045,
                                  rng.uniform(0, 2 * np.pi, N), start=0.1, planar=False)
             g_used = 1
-    else:  # braids
-        K = int(np.clip(int(prm.braid_count), 2, 40))
+    else:  # braids, locs
+        K = int(np.clip(int(prm.braid_count), 2, 40)) if sid == "braids" else int(np.clip(int(prm.loc_count), 8, 90))
         Lb = float(prm.length_m)
         # braid bases: farthest-point sampling over the roots (deterministic)
         # (exact squared distances; argmax/argmin take the lowest index on a tie)
@@ -484,19 +533,31 @@ def _gathered(ctx, sid, prm, surface, hf, c_tri, c_bary, P, rng):
         # per-braid centre lines hanging down from their bases
         cent = grow(surface, Bk, bn, Lb * rng.uniform(0.85, 1.0, K), n2 + 1,
                       lambda p, s, k: DOWN[None] + 0.3 * normalize(p - c), 0.01, BRAID_CLEARANCE_M)
-        rb = float(np.clip(0.012 * np.sqrt(6.0 / K), 0.003, 0.012))
+        if sid == "braids":
+            rb = float(np.clip(0.012 * np.sqrt(6.0 / K), 0.003, 0.012))
+        else:  # a loc's radius from the scalp area each one gathers (its section's share), within LOC_RADIUS_M
+            rb = float(np.clip(LOC_FILL * np.sqrt(LOC_SCALP_AREA_M2 / (np.pi * K)), *LOC_RADIUS_M))
         if "lm" in hf:
             cent = _braids_beside_the_face(surface, hf, c, cent, rb, BRAID_CLEARANCE_M)
         _, b1, b2 = transport_frames(cent, np.tile(LEFT, (K, 1)))
-        sub = np.arange(N) % 3
         u = arc_length(cent)  # (K, n2+1)
-        lam = 6.0 * rb
-        ph = 2 * np.pi * sub / 3.0
-        ang = 2 * np.pi * u[assign] / lam + ph[:, None]
-        taper = 1.0 - 0.5 * u[assign] / np.maximum(u[assign][:, -1:], 1e-6)
-        jit = rng.normal(size=(N, 2)) * 0.18
-        x = rb * taper * (np.sin(ang) + jit[:, :1])
-        y = 0.5 * rb * taper * (np.sin(2 * ang) + jit[:, 1:])
+        if sid == "braids":
+            sub = np.arange(N) % 3
+            lam = 6.0 * rb
+            ph = 2 * np.pi * sub / 3.0
+            ang = 2 * np.pi * u[assign] / lam + ph[:, None]
+            taper = 1.0 - 0.5 * u[assign] / np.maximum(u[assign][:, -1:], 1e-6)
+            jit = rng.normal(size=(N, 2)) * 0.18
+            x = rb * taper * (np.sin(ang) + jit[:, :1])
+            y = 0.5 * rb * taper * (np.sin(2 * ang) + jit[:, 1:])
+        else:  # a rope of matted hair: the strands spread over its round section, slowly twisted,
+            # the section even down to a rounded end (its last LOC_TIP of the length)
+            frac = u[assign] / np.maximum(u[assign][:, -1:], 1e-6)
+            r_s = np.sqrt(rng.uniform(0.0, 1.0, N))[:, None]
+            ang = rng.uniform(0.0, 2 * np.pi, N)[:, None] + 2 * np.pi * u[assign] / (LOC_TWIST * rb)
+            taper = np.sqrt(np.clip((1.0 - frac) / LOC_TIP, 0.0, 1.0))
+            x = rb * r_s * taper * np.cos(ang)
+            y = rb * r_s * taper * np.sin(ang)
         plait = cent[assign] + x[..., None] * b1[assign] + y[..., None] * b2[assign]
         pts = np.concatenate([part1, plait[:, 1:]], 1)
         g_used = K
