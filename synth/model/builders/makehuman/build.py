@@ -8,8 +8,8 @@ import numpy as np
 
 from synth.errors import SynthError
 from synth.model.builders.makehuman.expressions import expression_space, expression_specs
-from synth.model.builders.makehuman.identity import (identity_pca, macro_targets, modifier_files,
-                                                     modifiers, sample_identity_weights)
+from synth.model.builders.makehuman.identity import (N_SAMPLES, SEED, identity_pca, macro_targets,
+                                                     modifier_files, modifiers, sample_identity_weights)
 from synth.model.builders.makehuman.landmarks import regions_and_landmarks
 from synth.model.builders.makehuman.mesh import (CROP_MAX_ABS_X, CROP_MIN_Z, EYE_CORNEA_BULGE, EYE_LIMBUS_DEG,
                                                  build_mesh, triangulate)
@@ -22,8 +22,6 @@ from synth.model.format import HeadModelData
 from synth.model.identity_gmm import fit_gmm
 
 BUILDER_VERSION = "12"  # bump on every output change; what each version changed: CHANGELOG.md
-SEED = 20241128
-N_SAMPLES = 3000  # identity samples before mirroring (the PCA sees 2 * N_SAMPLES)
 GMM_COMPONENTS = 6
 GMM_FIT_SAMPLES = 2000
 GMM_ITERS = 60

@@ -38,9 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from synth.model.builders.makehuman.build import N_SAMPLES, SEED
-from synth.model.builders.makehuman.identity import (identity_pca, macro_targets, modifier_files, modifiers,
-                                                     sample_identity_weights)
+from synth.model.builders.makehuman.identity import (N_SAMPLES, SEED, identity_pca, macro_targets, modifier_files,
+                                                     modifiers, sample_identity_weights)
 from synth.model.builders.makehuman.mesh import build_mesh, triangulate
 from synth.model.builders.makehuman.skinning import JOINT_NAMES
 from synth.model.builders.makehuman.sources import hm08_mirror, read_base_obj, read_target, vertex_groups
