@@ -314,13 +314,20 @@ def test_beards_grow_up_to_the_lips(default_head, case, monkeypatch):
     """A beard meets the lips and the nostrils without fading (masks.BEARD_HARD_EDGES): the upper
     lip between the mouth corners carries the region's strands per area (beard.shape). Faded
     there over 8 mm as at the region's open edges, it had a fifth of them: a full beard's
-    moustache was bare skin."""
+    moustache was bare skin. The upper lip holds some 30 roots at this resolution, so one groom's
+    share there varies by about 20 % with the random roots (0.66-1.31 over run seeds 0-9, mean
+    0.97): the mean of RUN_SEEDS grooms is measured. Under the lower lip only on the closed
+    mouth: with the jaw open 25 degrees no skin lies in the 12 mm under it (beard.shape: nan)."""
     from synth.assets.fit import beard as B
     from synth.assets.fit import masks as M
 
     def lips():
-        ctx, g = _groom(default_head, "beard", "short_full", {"reach": 1.0, "moustache": True}, resolution=256)
-        return B.shape(ctx.data, ctx.vertices, ctx.landmarks["ibug68"], g)
+        out = []
+        for seed in range(RUN_SEEDS):
+            ctx, g = _groom(default_head, "beard", "short_full", {"reach": 1.0, "moustache": True}, resolution=256,
+                            case=case, run_seed=seed)
+            out.append(B.shape(ctx.data, ctx.vertices, ctx.landmarks["ibug68"], g))
+        return {k: float(np.mean([o[k] for o in out])) for k in ("upper_lip", "under_lip")}
 
     now = lips()
     with monkeypatch.context() as m:
@@ -328,7 +335,12 @@ def test_beards_grow_up_to_the_lips(default_head, case, monkeypatch):
             V, M.region_mask(data.regions, ("beard",), len(V)), M.BEARD_FEATHER_M))
         before = lips()
     assert 0.75 < now["upper_lip"] < 1.3 and before["upper_lip"] < 0.5, (now, before)
-    assert 0.75 < now["under_lip"] < 1.5, now
+    if case == "neutral":
+        assert 0.75 < now["under_lip"] < 1.5, now
+
+
+#: grooms (run seeds) whose lip measures test_beards_grow_up_to_the_lips averages
+RUN_SEEDS = 4
 
 
 @pytest.mark.parametrize("case", ["neutral", "id+3_jaw", "id-3_brows"])
