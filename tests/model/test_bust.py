@@ -168,6 +168,13 @@ def test_bottom_edge_is_one_planar_loop_and_the_elbows_are_closed(bust, model, c
         assert np.degrees(np.arccos(abs(n[2]))) < 10.0
     for s, _ in B.SIDES:
         assert any(np.array_equal(p, bust.elbow_loops[s]) for p in bust.polys[-2:])
+    # the right elbow's loop is the left's mirror image vertex for vertex from the same first vertex
+    # (reversed, to face down its arm), so the caps' fans are mirror images: every bust triangle's
+    # mirror image is a bust triangle (the default model's mesh_mirror is exact)
+    el, er = bust.elbow_loops["L"], bust.elbow_loops["R"]
+    assert bust.mirror[el[0]] == er[0] and np.array_equal(bust.mirror[el[1:]], er[:0:-1])
+    tri_set = {tuple(sorted(t)) for t in bust.triangles.tolist()}
+    assert all(tuple(sorted(t)) in tri_set for t in bust.mirror[bust.triangles].tolist())
     loop_edges = {tuple(sorted(e)) for e in zip(lp.tolist(), np.roll(lp, -1).tolist())}
     # the bust alone: open on the bottom loop and on the seam with the head model, nowhere else
     head = set(bust.head_rows[bust.head_rows >= 0].tolist())

@@ -364,8 +364,8 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
         el = P[joint_vertices(rig, f"{ELBOW_BONE}.{s}", groups)].mean(0)
         q = P[lp]
         nrm = np.cross(q - q.mean(0), np.roll(q, -1, axis=0) - q.mean(0)).sum(0)
-        if nrm @ (el - sh) < 0:
-            lp = lp[::-1]
+        if nrm @ (el - sh) < 0:  # reversed about its first vertex: the right loop stays the left's
+            lp = np.concatenate([lp[:1], lp[:0:-1]])  # mirror image vertex for vertex, so the caps' fans are too
         caps[s] = look[lp]
         polys.append(look[lp])
         # the cap's corners take the uv of one loop vertex (skin colour; under a sleeve)
