@@ -102,15 +102,16 @@ def test_keep_out_of_nothing_and_of_strands_behind_the_head():
 def test_long_groom_leaves_the_face_centre_free(default_head, monkeypatch):
     """long_straight (centre parting, 30 cm) on the neutral head: no strand point in front of
     the eyes, nose or mouth from azimuth 0 and +-30 degrees; the keep-out changed strands
-    (it was needed), added no kinks (the sharpest bend of a turned strand grows by at most 60
-    degrees, and that of all but 2 % of the groom's strands by at most 5) and
+    (it was needed), added no kinks (the sharpest bend of the turned strands grows by at most
+    5 degrees, and, strand by strand, that of all but 2 % of the groom's strands too) and
     pushed no more points into the head than were there (signed distance of the moved points)."""
     seen = {}
     real = ko_mod.keep_out
 
     def spy(ko, pts, **kw):
         out = real(ko, pts, **kw)
-        seen.update(ko=ko, before=np.array(pts), after=out[0], turned=out[1], trimmed=out[2])
+        # copies: the groom goes on to push its strands out of the skin in place (hair._free)
+        seen.update(ko=ko, before=np.array(pts), after=np.array(out[0]), turned=out[1], trimmed=out[2])
         return out
 
     monkeypatch.setattr(importlib.import_module("synth.assets.fit.hair"), "keep_out", spy)
@@ -128,14 +129,12 @@ def test_long_groom_leaves_the_face_centre_free(default_head, monkeypatch):
     clean = t & ~through
     assert clean.sum() > 0.8 * t.sum()
     tb, ta = _max_turn(before[clean]), _max_turn(after[clean])
+    assert ta.max() <= tb.max() + 5.0
     # per strand: strands rooted near the front hairline whose path would fall over the face are
-    # turned 1-2 cm from the root (6-9 cm above the brows) and bend by up to ~50 degrees more there
-    # (57.5 on the default model with the bust, whose renumbered triangles draw other roots: the
-    # sharpest bend of the turned strands went from 107.7 to 140.6 degrees; on the shoulders-only
-    # head it grew by under 5); the others by under 5 degrees. 25 of the 1,920 strands (1.3 %; 298
-    # turned); 31 (1.6 %; 264 turned) on the shoulders-only head; 13 (0.7 %; 520 turned) when loose
-    # hair still flared sideways (before 2026-12-01, hair.LOOSE_SWEEP_FLOOR_M)
-    assert (ta - tb).max() <= 60.0
+    # turned 1-2 cm from the root (6-9 cm above the brows) and bend by up to ~50 degrees more there;
+    # the others by under 5 degrees (the share that grows by more, measured with the groom's later
+    # push-out included: 1.3-1.6 % on two draws of roots; 0.7 % when loose hair still flared
+    # sideways, before 2026-12-01, hair.LOOSE_SWEEP_FLOOR_M)
     assert np.sum(ta > tb + 5.0) <= 0.02 * len(before)
     moved = np.abs(after - before).max(-1) > 1e-9
     moved[:, 0] = False
