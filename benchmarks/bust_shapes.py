@@ -1,5 +1,5 @@
-"""Shoulder and chest measures of the MakeHuman bust prototype (synth.model.builders.makehuman.bust)
-against published adult ranges (docs/body-plan.md).
+"""Shoulder and chest measures of the MakeHuman bust (synth.model.builders.makehuman.bust) against
+published adult ranges (docs/body-plan.md).
 
     .venv/bin/python -m benchmarks.bust_shapes [--identities 200] [--seed 0] [--bust FILE] [--samples 400]
 
@@ -12,9 +12,11 @@ against the same ratio of the adults' means; and, on the builder's own first ``-
 identity samples (MakeHuman target weights, sex known), the measures of the bust as MakeHuman
 makes it against the bust the head's code predicts, split by sex. No rendering.
 
-``--clearance baked`` (default): the arms' clearance baked into the linear model
-(:func:`~synth.model.builders.makehuman.bust.bake_clearance`); ``step``: the evaluation-time
-clearance step (the reference). Either way it prints the arm-in-torso depth.
+``--clearance model`` (default): the bust as the default model carries it: its rows of the model's
+own evaluation (``HeadModel``; the pinned arm turn), the joints and weights from the built bust;
+``baked``: the arms' clearance baked anew into the linear model
+(:func:`~synth.model.builders.makehuman.bust.bake_clearance`, about 3 min); ``step``: the
+evaluation-time clearance step (the reference). Each prints the arm-in-torso depth.
 """
 
 from __future__ import annotations
@@ -63,15 +65,33 @@ def head_breadths(model, codes: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
-def measure_all(b, codes, step: bool = False) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
+def model_rows(b, model) -> np.ndarray:
+    """(Vb,) the default model's row of each bust vertex (its new vertices follow the head's)."""
+    V0 = model.extra["bust"]["first_vertex"]
+    rows = np.asarray(b.head_rows, np.int64).copy()
+    new = rows < 0
+    rows[new] = V0 + np.arange(int(new.sum()))
+    return rows
+
+
+def measure_all(b, codes, step: bool = False, model=None) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]:
     """Measures, the clearance step's turn (deg; 0 for a baked bust) and the arm-in-torso depth (mm)
-    of each code: the baked bust's linear model, or with ``step`` the clearance step (clear_arms)."""
+    of each code: the baked bust's linear model, with ``step`` the clearance step (clear_arms), with
+    ``model`` the bust's rows of that model's own evaluation (the default model)."""
     from synth.model.builders.makehuman.bust import arm_torso_penetration, clear_arms, measures
 
+    if model is not None:
+        from synth.model.head import HeadModel
+
+        hm, rows_of = HeadModel(model, np.float64), model_rows(b, model)
     rows, extra, pen = [], [], []
     for c in codes:
         J = b.joints_of(c)
-        if step or b.turn is None:
+        if model is not None:
+            V = hm.evaluate(c, np.zeros(model.expression_dims), np.zeros((hm.J, 3)),
+                            landmarks=False).vertices[0][rows_of]
+            e = {"L": 0.0}
+        elif step or b.turn is None:
             V, e = clear_arms(b, b.posed(c), J)
         else:
             V, e = b.posed(c), {"L": 0.0}
@@ -89,9 +109,10 @@ def main(argv=None) -> int:
     ap.add_argument("--save", type=Path, default=None, help="write the built bust here")
     ap.add_argument("--samples", type=int, default=400, help="builder samples for the sex split (0: none; needs a build)")
     ap.add_argument("--json", type=Path, default=None)
-    ap.add_argument("--clearance", choices=("baked", "step"), default="baked",
-                    help="baked: the linear model with the clearance baked in (bake_clearance, about 3 min "
-                         "unless --bust holds a baked bust); step: the evaluation-time clearance (clear_arms)")
+    ap.add_argument("--clearance", choices=("model", "baked", "step"), default="model",
+                    help="model: the default model's own bust rows (its pinned arm turn); baked: the linear model "
+                         "with the clearance baked anew (bake_clearance, about 3 min unless --bust holds a baked "
+                         "bust); step: the evaluation-time clearance (clear_arms)")
     a = ap.parse_args(argv)
 
     from synth.model.builders.makehuman import bust as B
@@ -117,7 +138,7 @@ def main(argv=None) -> int:
         if a.save is not None:
             B.save_bust(b, a.save)
     print(f"bust: {json.dumps(b.info)}\n")
-    m, extra, pen = measure_all(b, codes, a.clearance == "step")
+    m, extra, pen = measure_all(b, codes, a.clearance == "step", model if a.clearance == "model" else None)
     head = head_breadths(model, codes)
     print(f"### {len(codes)} planned identities of seed {a.seed}, neutral (mm)\n")
     print("| measure | " + " | ".join(f"p{p}" for p in PERCENTILES) + " | min | max | Pheasant men p5/p50/p95 | women p5/p50/p95 | "
@@ -151,6 +172,16 @@ def main(argv=None) -> int:
     if a.samples:
         s = b.samples
         exact, pred = [], []
+        if a.clearance == "model":
+            from synth.model.head import HeadModel
+
+            hm, rows_of = HeadModel(model, np.float64), model_rows(b, model)
+
+            def predicted(c):
+                return hm.evaluate(c, np.zeros(model.expression_dims), np.zeros((hm.J, 3)),
+                                   landmarks=False).vertices[0][rows_of]
+        else:
+            predicted = b.evaluate
         for i in range(len(s["codes"])):
             J = {k: v[i] for k, v in s["joints"].items()}
             V = B.pose(s["rest"][i], J, b.weights, b.rotations)
@@ -158,7 +189,7 @@ def main(argv=None) -> int:
             exact.append(B.measures(b, V, J))
             c = s["codes"][i]
             Jc = b.joints_of(c)
-            pred.append(B.measures(b, b.evaluate(c), Jc))
+            pred.append(B.measures(b, predicted(c), Jc))
         g = s["gender"]
         print(f"### The builder's first {len(g)} samples: MakeHuman's bust (from the target weights) against the "
               "bust the head code predicts (mm; median, and RMS of the difference)\n")

@@ -11,6 +11,8 @@ The steps (mediapipe==0.10.21 is the fit extra, in the project's venv):
     .venv/bin/python scripts/mediapipe_correspondence.py derive WORK --train 4
     # 4. fit the held-out identities with it and compare with the renders' cameras
     .venv/bin/python scripts/mediapipe_correspondence.py evaluate WORK --train 4
+    # a new topology whose face triangles are the old ones (e.g. the bust appended): move the file
+    .venv/bin/python scripts/mediapipe_correspondence.py remap OLD_MODEL.npz [--model NEW_MODEL.npz]
 
 Derivation: for every training frame and detected point, the camera ray through the point
 is cast onto the posed model mesh of that frame (the frame JSON's codes; hair and clothes
@@ -288,6 +290,40 @@ def evaluate(work: Path, train: int) -> None:
                   f"{fit.rmse_px.max():.2f} | {fit.converged} |")
 
 
+def remap(old_path: Path, new_path: Path | None) -> None:
+    """The correspondence of the model ``old_path`` moved onto the model ``new_path`` (default: the
+    shipped one) whose triangles include every triangle it names (the same three vertices, renumbered
+    triangles): each point keeps its weights on the same vertices; its surface point on the new
+    template must be within CORRESPONDENCE_TOLERANCE_M of the old file's. Written beside the old file
+    under the new model key (the old one is removed)."""
+    from prior.fit.landmark_sources import CORRESPONDENCE_DIR, CORRESPONDENCE_TOLERANCE_M, model_key
+    from synth.model.default import packaged_model_path
+    from synth.model.format import read_model
+    from synth.model.meshutil import barycentric_points
+
+    old, new = read_model(old_path), read_model(new_path or packaged_model_path())
+    src = CORRESPONDENCE_DIR / f"mediapipe-{model_key(old)}.json"
+    d = json.loads(src.read_text())
+    T_old, T_new = np.asarray(old.triangles, np.int64), np.asarray(new.triangles, np.int64)
+    where = {tuple(t): i for i, t in enumerate(T_new.tolist())}
+    tris = np.array([where[tuple(T_old[p["triangle"]].tolist())] for p in d["points"]], np.int64)
+    bary = np.array([p["bary"] for p in d["points"]], np.float64)
+    pts = barycentric_points(np.asarray(new.template, np.float64), new.triangles, tris, bary)
+    off = np.linalg.norm(pts - np.asarray(d["template_points"]), axis=1)
+    if off.max() > CORRESPONDENCE_TOLERANCE_M:
+        raise SystemExit(f"the surface points moved by up to {1000 * off.max():.4f} mm: derive the correspondence anew")
+    for p, t in zip(d["points"], tris.tolist()):
+        p["triangle"] = t
+    key = model_key(new)
+    d["model_key"] = key
+    d["derivation"]["remapped"] = {"from_model_key": model_key(old), "points": len(tris), "max_move_m": float(off.max())}
+    out = CORRESPONDENCE_DIR / f"mediapipe-{key}.json"
+    out.write_text(json.dumps(d, indent=0) + "\n")
+    if out != src:
+        src.unlink()
+    print(f"{src.name} -> {out.name}: {len(tris)} points, moved at most {1000 * off.max():.5f} mm")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -309,6 +345,10 @@ def main() -> None:
             s.set_defaults(run=lambda a: derive(a.work, a.train, a.out, a.independent))
         else:
             s.set_defaults(run=lambda a: evaluate(a.work, a.train))
+    r = sub.add_parser("remap")
+    r.add_argument("old_model", type=Path)
+    r.add_argument("--model", type=Path, default=None, help="the new model (default: the shipped one)")
+    r.set_defaults(run=lambda a: remap(a.old_model, a.model))
     a = ap.parse_args()
     a.run(a)
 

@@ -27,10 +27,10 @@ body-end: the fraction of frames in which the body ends inside the image: no ski
   in the frame; a portrait's body leaves through the bottom border), overall and by camera
   elevation.
 shoulders: the body's breadth over the head's for planned identities (neutral) and garments: the
-  widest extent side to side of the garment and the body below it, without and with the arms
-  (synth.assets.fit.torso.arms), over the breadth of the scalp; next to bideltoid over head
-  breadth of measured adults (Pheasant's tables); and hair (--hair styles, tshirt_crew) through
-  the arms as groomed and after synth.assets.fit.torso.keep_strands_out.
+  widest extent side to side of the dressed body at the deltoids (garment, the torso below it, the bust's bare
+  arms), over the breadth of the scalp; next to bideltoid over head breadth of measured adults
+  (Pheasant's tables); and hair (--hair styles, tshirt_crew) within the sleeves' reach of the
+  upper arms as groomed and after synth.assets.fit.arms.ArmKeepOut.
 hair: strands in front of the inner face (synth.assets.fit.occlusion) for the planned hair of
   identities that have hair, seen from cameras at azimuth 0, +-30, +-45 (elevation 0); with
   --style S, of the first --identities planned identities whose hair is S.

@@ -101,22 +101,26 @@ HEAD_BREADTH_MM = {"men": (155.0, 6.0), "women": (145.0, 6.0)}
 
 def shoulders(args) -> dict:
     """The body's breadth against the head's (docs/realism.md, "Arms"): for planned identities
-    (neutral), each garment of ``--garments``, the widest extent side to side of the garment
-    and the body below it, without the arms and with them
-    (synth.assets.fit.torso.arms), over the head's breadth (its scalp, above the ears), against
-    bideltoid over head breadth of measured adults."""
+    (neutral), each garment of ``--garments``, the widest extent side to side of the dressed body
+    (the garment, the torso below it and the bust's skin: its bare arms; with the bust's arms, at
+    the deltoids: from 12 cm under to 8 cm over the armholes' centres) over the head's breadth
+    (its scalp, above the ears), against bideltoid over head breadth of measured adults; and hair
+    (``--hair``, a crew T-shirt) within the sleeves' reach of the upper arms, as groomed and after
+    synth.assets.fit.arms.ArmKeepOut."""
+    from synth.assets.fit import arms as arms_fit
     from synth.assets.fit import torso
     from synth.assets.fit.body import Body, fit_shell
     from synth.assets.fit.garment import CLEARANCE, garment_shell
 
     model, hm, ids, codes = _planned_heads(args.seed, args.identities)
     scalp = np.asarray(model.regions["scalp"])
+    bust = np.asarray(model.regions.get("bust", model.regions.get("shoulders", [])), np.int64)
     print(f"\n### Body breadth over head breadth ({len(ids)} identities of seed {args.seed}, neutral)\n")
     ref = {k: BIDELTOID_MM[k][0] / HEAD_BREADTH_MM[k][0] for k in BIDELTOID_MM}
     print("measured adults (bideltoid / head breadth of the means): "
           + ", ".join(f"{k} {v:.2f}" for k, v in ref.items()) + "\n")
-    print("| garment | head breadth mm (min / median / max) | body breadth mm without / with arms (median) | "
-          "ratio without arms (min / median / max) | ratio with arms (min / median / max) |\n|---|---:|---:|---:|---:|")
+    print("| garment | head breadth mm (min / median / max) | body breadth mm (min / median / max) | "
+          "ratio (min / median / max) |\n|---|---:|---:|---:|")
     rows = []
     for gid in args.garments:
         m = []
@@ -125,62 +129,47 @@ def shoulders(args) -> dict:
             body = Body.of(ctx)
             s = fit_shell(body, garment_shell(body, {"id": gid, "params": {}}, ctx.rng("garment")), CLEARANCE)
             head = ctx.vertices[scalp, 0].max() - ctx.vertices[scalp, 0].min()
-            Vt, _ = torso.garment_torso(s, with_arms=False)
-            Q = np.asarray(s.P)[torso.torso_shell_vertices(s)]
-            Va, _ = torso.arms(Q)
-            x = np.concatenate([np.asarray(s.P)[:, 0], Vt[:, 0]])
-            before = x.max() - x.min()
-            xa = np.concatenate([x, Va[:, 0]])
-            after = xa.max() - xa.min()
-            m.append([head, before, after])
+            Vt, _ = torso.garment_torso(s)
+            P = np.concatenate([np.asarray(s.P), Vt, ctx.vertices[bust]])
+            if body.arms is not None:  # at the deltoids: from 12 cm under to 8 cm over the armholes' centres
+                # (bust.measures' bideltoid band; the elbows, hanging out, are wider still)
+                z0 = 0.5 * (body.arms.shoulder["L"][2] + body.arms.shoulder["R"][2])
+                P = P[(P[:, 2] > z0 - 0.12) & (P[:, 2] < z0 + 0.08)]
+            m.append([head, P[:, 0].max() - P[:, 0].min()])
         m = 1000.0 * np.asarray(m)
-        r0, r1 = m[:, 1] / m[:, 0], m[:, 2] / m[:, 0]
-        rows.append({"garment": gid, "head_mm": m[:, 0].tolist(), "without_mm": m[:, 1].tolist(),
-                     "with_mm": m[:, 2].tolist()})
-        q = lambda v: f"{v.min():.2f} / {np.median(v):.2f} / {v.max():.2f}"  # noqa: E731
-        print(f"| {gid} | {m[:, 0].min():.0f} / {np.median(m[:, 0]):.0f} / {m[:, 0].max():.0f} | "
-              f"{np.median(m[:, 1]):.0f} / {np.median(m[:, 2]):.0f} | {q(r0)} | {q(r1)} |")
+        r = m[:, 1] / m[:, 0]
+        rows.append({"garment": gid, "head_mm": m[:, 0].tolist(), "body_mm": m[:, 1].tolist()})
+        q = lambda v, f=".2f": f"{v.min():{f}} / {np.median(v):{f}} / {v.max():{f}}"  # noqa: E731
+        print(f"| {gid} | {q(m[:, 0], '.0f')} | {q(m[:, 1], '.0f')} | {q(r)} |")
     hair_rows = []
-    if args.hair:
+    if args.hair and arms_fit.has_arms(model.regions):
         from synth.assets.fit.hair import groom
-        from synth.geometry.raycast import ray_hit_counts
 
         k = min(args.hair_identities, len(ids))
-        print(f"\nHair through the arms ({k} identities, tshirt_crew; strand points inside an arm by ray parity; "
-              "strands with such a point, their deepest point): groomed (the hair alone) / kept out "
-              "(synth.assets.fit.torso.keep_strands_out)\n")
-        print("| style | strands | strands through an arm | deepest mm | after keep-out: strands / points |\n|---|---:|---:|---:|---:|")
+        print(f"\nHair within the sleeves' reach of the upper arms ({k} identities, tshirt_crew: strand points "
+              "whose closest skin point is on an arm, closer to it than the cloth's reach plus 2 mm and less "
+              "than 7 cm inside): groomed (the hair alone) / kept out (synth.assets.fit.arms.ArmKeepOut)\n")
+        print("| style | strands | strands too close | deepest mm under the reach | after keep-out: strands / points |\n"
+              "|---|---:|---:|---:|---:|")
         for sid in args.hair:
             acc = np.zeros(4)
             deep = 0.0
             for n, i in enumerate(ids[:k].tolist()):
                 ctx, _ = _neutral_context(model, hm, codes[n], i, args.seed, 256, {})
                 body = Body.of(ctx)
-                s = fit_shell(body, garment_shell(body, {"id": "tshirt_crew", "params": {}}, ctx.rng("garment")), CLEARANCE)
-                arms = torso.arm_params(np.asarray(s.P)[torso.torso_shell_vertices(s)])
-                Va, Fa = torso.arms(np.asarray(s.P)[torso.torso_shell_vertices(s)])
+                s = garment_shell(body, {"id": "tshirt_crew", "params": {}}, ctx.rng("garment"))
+                keep = arms_fit.ArmKeepOut(body.V, body.F, body.regions,
+                                           arms_fit.HAIR_CLEARANCE + s.info["cloth_reach_m"])
                 pts = np.asarray(groom(ctx, {"id": sid, "params": {}}).pts)
-                kept, _ = torso.keep_strands_out(arms, pts)
+                kept, _ = keep.push(pts)
                 for j, q in enumerate((pts, kept)):
-                    flat = q.reshape(-1, 3)
-                    near = np.zeros(len(flat), bool)
-                    for a in arms:
-                        dxy = np.linalg.norm(flat[:, :2] - a.axis, axis=1)
-                        near |= dxy < a.radius * 1.01
-                    inside = np.zeros(len(flat), bool)
-                    if near.any():
-                        up = np.tile([0.0, 0.0, 1.0], (int(near.sum()), 1))
-                        inside[near] = ray_hit_counts(flat[near], up, Va, Fa) % 2 == 1
-                    per = inside.reshape(q.shape[0], -1).any(1)
-                    acc[2 * j] += per.sum()
-                    acc[2 * j + 1] += inside.sum()
-                    if j == 0 and inside.any():
-                        for a in arms:
-                            m = inside & (np.linalg.norm(flat[:, :2] - a.axis, axis=1) < a.radius * 1.01)
-                            if m.any():
-                                moved, _ = a.push_out(flat[m], 0.0)
-                                deep = max(deep, float(np.linalg.norm(moved - flat[m], axis=1).max()))
-            hair_rows.append({"style": sid, "strands_through": acc[0], "points_through": acc[1],
+                    d, on_arm = keep.distance(q[:, 1:].reshape(-1, 3))
+                    close = (d < keep.clearance - 1e-6) & (d > -arms_fit.HAIR_MAX_DEPTH) & on_arm
+                    acc[2 * j] += close.reshape(q.shape[0], -1).any(1).sum()
+                    acc[2 * j + 1] += close.sum()
+                    if j == 0 and close.any():
+                        deep = max(deep, float((keep.clearance - d[close]).max()))
+            hair_rows.append({"style": sid, "strands_close": acc[0], "points_close": acc[1],
                               "after_strands": acc[2], "after_points": acc[3], "deepest_m": deep})
             print(f"| {sid} | {k * pts.shape[0]} | {acc[0]:.0f} | {1000 * deep:.0f} | {acc[2]:.0f} / {acc[3]:.0f} |")
     return {"reference": ref, "rows": rows, "hair": hair_rows}

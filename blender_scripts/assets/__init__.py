@@ -94,11 +94,11 @@ def dress(ctx: HeadContext, assets: Mapping[str, AssetPick | Mapping | None]) ->
             continue
         mod = rig_module(cls, entry)
         rigs[cls] = mod.build(ctx, entry)
-    arms = getattr(rigs.get("garment"), "arms", None)
-    if arms and hasattr(rigs.get("hair"), "keep_out_of"):
-        # hair is groomed before the garment, on the head and bust alone: it keeps out of the
-        # garment's arms from here on (synth.assets.fit.torso.keep_strands_out)
-        rigs["hair"].keep_out_of(arms, ctx)
+    keep = getattr(rigs.get("garment"), "arm_keep_out", None)
+    if keep is not None and hasattr(rigs.get("hair"), "keep_out_of"):
+        # hair is groomed before the garment, clear of the skin: it keeps off the sleeves over the
+        # upper arms from here on (synth.assets.fit.arms.ArmKeepOut)
+        rigs["hair"].keep_out_of(keep, ctx)
     return rigs
 
 

@@ -2,7 +2,8 @@
 
 The geometry (necklines, collars, hoods, scarves, the fit to the bust and the binding that
 follows expressions) is numpy in :mod:`synth.assets.fit.garment` and
-:mod:`synth.assets.fit.body`; this module turns a fitted shell into one mesh object
+:mod:`synth.assets.fit.body` (the body below it and the forearms: :mod:`synth.assets.fit.torso`,
+:mod:`synth.assets.fit.arms`); this module turns a fitted shell into one mesh object
 (segmentation class ``clothing``, pass index 9) with Principled cloth materials per
 ``fabric`` (roughness, sheen, knit stitches at ``knit_scale_m``, twill, fleece fuzz, leather
 grain) and procedural wrinkle bump. The headwear rig uses the same helpers.
@@ -15,7 +16,7 @@ import numpy as np
 from blender_scripts.assets import HeadContext, Rig
 from synth.assets.classes import CLASSES
 from synth.assets.fit.body import Body, Cloth, FittedShell, fit_shell
-from synth.assets.fit.garment import BARE_ARMS, CLEARANCE, FABRICS, colour_rgb, garment_shell
+from synth.assets.fit.garment import CLEARANCE, FABRICS, colour_rgb, garment_shell
 from synth.assets.fit.hem import hidden_polygons
 from synth.assets.fit import torso as torso_fit
 from synth.assets.params import AssetPick
@@ -116,8 +117,9 @@ class FittedRig(Rig):
     def __init__(self, ob, fitted: FittedShell):
         super().__init__(fitted.cls, [ob], fitted.info)
         self.fitted = fitted
-        self.torso = None  # (rest vertices, hem band indices) of the body below the bust
-        self.arms = []  # its upper arms (synth.assets.fit.torso.Arm), which hair keeps out of
+        self.torso = None  # (rest vertices, hem rim indices) of the body below the bust and the forearms
+        #: the bust's upper arms, which hair keeps off (synth.assets.fit.arms.ArmKeepOut), or None
+        self.arm_keep_out = None
 
     def update(self, ctx: HeadContext) -> None:
         from blender_scripts.mesh import set_positions
@@ -144,35 +146,46 @@ def see_through_from_inside(mat):
     return mat
 
 
-def shell_rig(fitted: FittedShell, torso: bool = False, skin=None) -> FittedRig:
+def shell_rig(fitted: FittedShell, torso: bool = False, skin=None, body: Body | None = None) -> FittedRig:
     """The mesh object of a fitted shell, with one cloth material per slot; ``torso``: and the
-    body below the bust and its upper arms in the first cloth
-    (:func:`synth.assets.fit.torso.garment_torso`), a second object that follows the garment's
-    hem band. ``skin``: the material of bare upper arms (the head's skin), for the garments
-    without sleeves (:data:`synth.assets.fit.garment.BARE_ARMS`); the arms are then the second
-    object's second material slot (segmentation class skin)."""
+    body below the bust in the first cloth (:func:`synth.assets.fit.torso.garment_torso_parts`), a
+    second object that follows the garment's hem; with ``body`` (the bust's arms: the default
+    model) the forearms join it, in the sleeves' cloth under long sleeves and in ``skin`` (the
+    head's skin material; segmentation class skin, the object's second material slot) under short
+    ones or none, and the rig keeps hair off the upper arms (:class:`synth.assets.fit.arms.ArmKeepOut`,
+    ``clearance`` the cloth's reach plus ``HAIR_CLEARANCE``)."""
     from blender_scripts.mesh import link_object, new_triangle_mesh
+    from synth.assets.fit import arms as arms_fit
 
     materials = [cloth_material(fitted.cls, c) for c in fitted.cloths]
     ob = link_object(fitted.name, new_triangle_mesh(fitted.name, fitted.P, fitted.F, fitted.M), materials)
     rig = FittedRig(ob, fitted)
+    with_arms = body is not None and body.arms is not None
+    bare = fitted.info.get("sleeves", "long") != "long"
+    reach = float(fitted.info.get("cloth_reach_m", 0.0))
     if torso:
-        (Vp, Fp), (Va, Fa) = torso_fit.garment_torso_parts(fitted)
-        Vt, Ft = np.vstack([Vp, Va]), np.vstack([Fp, Fa + len(Vp)])
+        offset = 0.0 if bare else max(reach - arms_fit.FOREARM_INSET, 0.0)
+        parts = torso_fit.garment_torso_parts(fitted, (body.V, body.F, body.regions) if with_arms else None, offset)
+        (Vp, Fp), (Va, Fa) = parts
+        Vt, Ft = np.vstack([Vp, Va]), np.vstack([Fp, np.asarray(Fa, np.int64) + len(Vp)])
         name = f"{fitted.name}_torso"
         mats = [see_through_from_inside(cloth_material(fitted.cls, fitted.cloths[0]))]
         slots = None
-        bare = skin is not None and fitted.info.get("id") in BARE_ARMS
-        if bare:
+        skin_arms = bare and skin is not None and len(Fa) > 0
+        if skin_arms:
             mats.append(skin)
             slots = np.concatenate([np.zeros(len(Fp), np.int64), np.ones(len(Fa), np.int64)])
         rig.objects.append(link_object(name, new_triangle_mesh(name, Vt, Ft, slots), mats))
         rig.torso = (Vt, torso_fit.hem_band(fitted))
-        rig.arms = torso_fit.arm_params(np.asarray(fitted.P, np.float64)[torso_fit.torso_shell_vertices(fitted)])
         rig.info["torso_vertices"] = int(len(Vt))
-        rig.info["torso_arms"] = True
-        if bare:
-            rig.info["torso_arms_skin"] = True
+        if len(Fa):
+            rig.info["torso_forearms"] = True
+        if skin_arms:
+            rig.info["torso_forearms_skin"] = True
+    if with_arms:
+        clearance = arms_fit.HAIR_CLEARANCE + (0.0 if fitted.info.get("sleeves") == "none" else reach)
+        rig.arm_keep_out = arms_fit.ArmKeepOut(body.V, body.F, body.regions, clearance)
+        rig.info["hair_arm_clearance_m"] = round(clearance, 6)
     return rig
 
 
@@ -212,6 +225,6 @@ def build(ctx: HeadContext, entry: AssetPick) -> Rig:
     body = Body.of(ctx)
     skin = (ctx.materials or {}).get(SEGMENTATION["skin"])
     rig = shell_rig(fit_shell(body, garment_shell(body, entry, ctx.rng("garment")), CLEARANCE), torso=True,
-                    skin=skin)
+                    skin=skin, body=body)
     rig.info["hidden_bust_polygons"] = hide_bust_under_hem(ctx.head, body)
     return rig

@@ -213,7 +213,7 @@ class StrandRig(Rig):
         super().__init__(cls, [ob], info)
         self.ob = ob
         self.attachment = attachment
-        self.arms = []  # closed shapes the strands keep out of (keep_out_of)
+        self.keep = None  # what the strands keep off (keep_out_of): the sleeves over the upper arms
 
     @classmethod
     def build(cls_, ctx, g: Groom) -> "StrandRig":
@@ -232,21 +232,20 @@ class StrandRig(Rig):
                      "root_radius_m": float(g.styling.root_radius), "shader": mat["shader"].to_dict()})
         return cls_(g.cls, ob, attachment, info)
 
-    def keep_out_of(self, arms, ctx) -> None:
-        """From now on keep the strands out of ``arms`` (:class:`synth.assets.fit.torso.Arm`, the
-        garment's upper arms, built after the hair); moves the strands out of them now."""
-        self.arms = list(arms)
+    def keep_out_of(self, keep, ctx) -> None:
+        """From now on keep the strands off ``keep`` (:class:`synth.assets.fit.arms.ArmKeepOut`, the
+        upper arms under the garment's sleeves, built after the hair); moves the strands now."""
+        self.keep = keep
         pts, moved = self._positions(ctx)
         set_curves_positions(self.ob, pts)
         self.info["points_out_of_arms"] = moved
 
     def _positions(self, ctx):
         pts = self.attachment.positions(ctx)
-        if not self.arms:
+        if self.keep is None:
             return pts, 0
-        from synth.assets.fit.torso import keep_strands_out
-
-        return keep_strands_out(self.arms, pts)
+        self.keep.follow(ctx.vertices)
+        return self.keep.push(pts)
 
     def update(self, ctx) -> None:
         set_curves_positions(self.ob, self._positions(ctx)[0])

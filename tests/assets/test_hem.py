@@ -100,3 +100,51 @@ def test_smooth_loops_straightens_a_zigzag_only_on_the_hem():
     assert hem.turning_angles(out[lo]).max() < hem.turning_angles(V[lo]).max()
     top = np.arange(11, len(V), 12)
     assert np.array_equal(out[top], V[top])  # the other rim is left alone
+
+
+def test_edge_distance_is_dijkstra_along_the_edges():
+    """edge_distance: the shortest path along the mesh's edges from the sources (a brute-force
+    Bellman-Ford on the tube), inf where no path leads."""
+    V, F = _tube()
+    src = np.arange(0, len(V), 12)  # the lower rim
+    got = hem.edge_distance(V, F, src)
+    E = np.unique(np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), 1), axis=0)
+    w = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+    d = np.full(len(V), np.inf)
+    d[src] = 0.0
+    for _ in range(len(V)):
+        nd = d.copy()
+        np.minimum.at(nd, E[:, 1], d[E[:, 0]] + w)
+        np.minimum.at(nd, E[:, 0], d[E[:, 1]] + w)
+        if np.array_equal(nd, d):
+            break
+        d = nd
+    np.testing.assert_allclose(got, d, atol=1e-12)
+    V2 = np.vstack([V, V[:3] + 5.0])  # a separate triangle: unreachable
+    F2 = np.vstack([F, [[len(V), len(V) + 1, len(V) + 2]]])
+    assert np.isinf(hem.edge_distance(V2, F2, src)[-3:]).all()
+
+
+def test_an_elbow_beside_the_cut_is_not_near_it(default_head):
+    """The default model's elbows hang beside the waist's cut (at +3 SD 6 mm from it): in space
+    near the cut, along the body 30 cm and more from it. The cut distance takes the longer (at
+    least GEODESIC_SHARE of the way along the edges), so no arm polygon is hidden under a hem
+    and every arm vertex is far above the hem."""
+    from tests.support import asset_scene
+
+    for case in ("neutral", "id+3_jaw"):
+        ctx = asset_scene.head_arrays(default_head, case)
+        V, F, reg = ctx.vertices, np.asarray(ctx.data.triangles, np.int64), ctx.data.regions
+        arm = np.concatenate([reg["arm_l"], reg["arm_r"]])
+        loop = hem.cut_loop(F, V)
+        euclid = hem._segment_distance(V[arm], V[loop], V[np.roll(loop, -1)])
+        d = hem.cut_distance(V, F)
+        assert d[arm].min() > 0.1 > hem.HEM_MARGIN, case
+        if case == "id+3_jaw":
+            assert euclid.min() < hem.HEM_MARGIN  # the case: in space the elbow is near the cut
+        off = np.asarray(ctx.data.poly_offsets, np.int64)
+        idx = np.asarray(ctx.data.poly_indices, np.int64)
+        hidden = hem.hidden_polygons(V, F, off, idx)
+        on_arm = np.isin(idx, arm)
+        arm_polys = np.add.reduceat(on_arm.astype(int), off[:-1]) == np.diff(off)
+        assert hidden.any() and not (hidden & arm_polys).any(), case

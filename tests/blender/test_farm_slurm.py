@@ -6,10 +6,12 @@ backend. Skipped, saying why, where a local Slurm cannot be installed or started
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 
 import pytest
-from tests.support.farm_helpers import ROOT, SMALL, compare, env, frame_keys, leave_nothing_running, start_synth, synth, wait_for
+from tests.support.farm_helpers import (ROOT, SMALL, compare, env, frame_keys, lease_holder, leave_nothing_running,
+                                        staged, start_synth, synth, wait_for)
 
 pytest.importorskip("bpy")
 pytest.importorskip("submitit")
@@ -46,20 +48,35 @@ def test_slurm_array_with_a_cancelled_task_then_rerun_equals_local(slurm, farm_r
             "--array-parallelism", "1", "--progress-every", "5"]
     ctl = start_synth(*args, extra_env=slurm)
     try:
-        # one task at a time: cancel the first while its worker renders (a frame staged, not committed)
-        def running_mid_shard():
-            running = [t for t, s in squeue(slurm).items() if s == "RUNNING"]
-            mid = list(out.glob(".staging/shard_*/id*.json"))
-            return running[0] if running and mid and not list(out.glob("shards/*/manifest.json")) else None
+        # one task at a time: cancel the first while its worker renders (a frame staged, not
+        # committed). The worker is stopped (SIGSTOP) as soon as it has staged a frame, so the
+        # cancel cannot come after its shard's last frame: one frame is 0.4 s of Cycles on an idle
+        # machine at this preset, less than finding the task with squeue and scancel's delivery
+        # take, and the run then ended with every shard committed (exit 0). scancel sends the job
+        # SIGCONT and SIGTERM: the worker goes on only to stop at once (renderer_jobs/guard.py).
+        def stopped_mid_shard():
+            for p in staged(out):
+                h = lease_holder(out, p.parent.name)
+                if h is None:
+                    continue
+                os.kill(h["pid"], signal.SIGSTOP)
+                if (out / "shards" / p.parent.name / "manifest.json").exists():  # committed meanwhile
+                    os.kill(h["pid"], signal.SIGCONT)
+                    continue
+                return p.parent.name
+            return None
 
-        task = wait_for(running_mid_shard, "a running array task with a staged frame", 600, every=0.2)
-        subprocess.run(["scancel", task], check=True, env=env(**slurm))
+        shard = wait_for(stopped_mid_shard, "a worker with a staged frame", 600)
+        running = [t for t, s in squeue(slurm).items() if s == "RUNNING"]
+        assert len(running) == 1, running  # --array-parallelism 1: the stopped worker's task
+        subprocess.run(["scancel", running[0]], check=True, env=env(**slurm))
         stdout, err = ctl.communicate(timeout=900)
     finally:
         leave_nothing_running(ctl, out)
     assert ctl.returncode == 3, stdout + err
     assert "synth: error: 1 shard(s) failed after their retries" in err
     assert len(list(out.glob("shards/*/manifest.json"))) == 2  # the other tasks ran on
+    assert not (out / "shards" / shard / "manifest.json").exists()  # the cancelled one did not
     assert list(out.glob("logs/slurm-*/submitit/*")), "submitit's per-task logs live under the dataset"
     p = synth(*args, extra_env=slurm)
     assert "6/6 frames in 3/3 shards committed" in p.stdout

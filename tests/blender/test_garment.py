@@ -18,6 +18,7 @@ pytestmark = [pytest.mark.blender, pytest.mark.slow]
 def test_rig_mesh_is_the_fitted_shell():
     from tests.support import asset_scene
     from blender_scripts.assets import garment, headwear
+    from synth.assets.fit.arms import FOREARM_INSET, HAIR_CLEARANCE
     from synth.assets.fit.body import Body, fit_shell
     from synth.assets.fit import torso
     from synth.assets.fit.garment import CLEARANCE, garment_shell
@@ -29,20 +30,21 @@ def test_rig_mesh_is_the_fitted_shell():
     want = fit_shell(body, garment_shell(body, entry, ctx.rng("garment")), CLEARANCE)
     got, faces = asset_scene.evaluated_mesh(rig.objects[0])
     assert np.array_equal(got, want.P.astype(np.float32).astype(np.float64)) and np.array_equal(faces, want.F)
-    # the body below the bust (synth.assets.fit.torso): a second object, in the garment's cloth
-    Vt, Ft = torso.garment_torso(want)
+    # the body below the bust and the forearms (synth.assets.fit.torso, .arms): a second object, in
+    # the garment's cloth (long sleeves: the forearms' wall at the sleeve's reach, less the inset)
+    reach = want.info["cloth_reach_m"]
+    Vt, Ft = torso.garment_torso(want, (body.V, body.F, body.regions), reach - FOREARM_INSET)
     got_t, faces_t = asset_scene.evaluated_mesh(rig.objects[1])
     assert np.array_equal(got_t, Vt.astype(np.float32).astype(np.float64)) and np.array_equal(faces_t, Ft)
     assert rig.objects[1].data.materials[0].pass_index == rig.objects[0].data.materials[0].pass_index
+    assert len(rig.objects[1].data.materials) == 1
     rec = rig.record()
     assert rec.pop("hidden_bust_polygons") > 0  # the bust under the hem (synth.assets.fit.hem)
     assert rec.pop("torso_vertices") == len(Vt)
-    assert rec.pop("torso_arms") is True  # the arms follow the prism's vertices
-    arms = torso.arm_params(want.P[torso.torso_shell_vertices(want)])
-    assert len(rig.arms) == 2 and rig.arms == arms
-    Va, Fa = torso.arms(want.P[torso.torso_shell_vertices(want)])
-    np.testing.assert_array_equal(Vt[-len(Va):], Va)
-    assert rec == want.info and rec["vertices"] == len(got)
+    assert rec.pop("torso_forearms") is True
+    assert rec.pop("hair_arm_clearance_m") == pytest.approx(reach + HAIR_CLEARANCE)
+    assert rig.arm_keep_out is not None and rig.arm_keep_out.clearance == pytest.approx(reach + HAIR_CLEARANCE)
+    assert rec == want.info and rec["vertices"] == len(got) and rec["sleeves"] == "long"
     asset_scene.set_case(ctx, hm, "id-3_jaw")
     rig.update(ctx)
     moved = want.follow(ctx.vertices, ctx.data.triangles)
@@ -81,25 +83,24 @@ def test_render_shows_clothing_and_headwear(tmp_path):
     assert np.isfinite(r["rgba"]).all()
 
 
-def test_dressed_hair_keeps_out_of_the_arms():
-    """Hair is groomed before the garment, on the head and bust alone; once the garment's arms exist
-    (``dress``) its strands leave them (synth.assets.fit.torso.keep_strands_out), also after an
-    expression change. Long straight hair on this head hangs through both shoulders otherwise."""
+def test_dressed_hair_keeps_off_the_sleeves():
+    """Hair is groomed before the garment, clear of the skin; once the garment exists (``dress``) its
+    strands keep the sleeves' reach off the upper arms (synth.assets.fit.arms.ArmKeepOut), also
+    after an expression change. Long straight hair on this head lies on the arms' tops otherwise
+    (a few points: the groom keeps it off the skin, not off the cloth)."""
     from tests.support import asset_scene
     from blender_scripts.assets import dress, update
-    from synth.assets.fit import torso
-    from synth.geometry.raycast import ray_hit_counts
+    from synth.assets.fit.arms import HAIR_MAX_DEPTH
 
     ctx, hm = asset_scene.head_context("neutral", resolution=96)
     rigs = dress(ctx, {"hair": {"id": "long_straight", "generator": "procedural:hair_strands", "params": {}},
                        "garment": {"id": "tshirt_crew", "generator": "procedural:garment_shell", "params": {}}})
-    arms = rigs["garment"].arms
-    V, F = torso.arms(rigs["garment"].fitted.P[torso.torso_shell_vertices(rigs["garment"].fitted)])
+    keep = rigs["garment"].arm_keep_out
     hair = rigs["hair"]
-    groomed = hair.attachment.positions(ctx).reshape(-1, 3)  # where the groom alone puts them
 
-    def inside(pts):
-        return ray_hit_counts(pts, np.tile([0.0, 0.0, 1.0], (len(pts), 1)), V, F, t_min=1e-9) % 2 == 1
+    def short(pts):
+        d, on_arm = keep.distance(pts)
+        return (d < keep.clearance - 1e-6) & (d > -HAIR_MAX_DEPTH) & on_arm
 
     def curve_points():
         cv = hair.ob.data
@@ -107,25 +108,39 @@ def test_dressed_hair_keeps_out_of_the_arms():
         cv.position_data.foreach_get("vector", out)
         return out.reshape(-1, 3).astype(np.float64)
 
-    assert inside(groomed).sum() > 50 and hair.record()["points_out_of_arms"] > 50
-    assert len(arms) == 2 and not inside(curve_points()).any()
+    groomed = hair.attachment.positions(ctx)  # where the groom alone puts them
+    n = hair.record()["points_out_of_arms"]
+    before = int(short(groomed[:, 1:].reshape(-1, 3)).sum())
+    assert before > 0 and n >= before
+    # the Curves object's points (float32) keep off the arms: the rig's own positions, but where the
+    # crease between arm and torso leaves no room for the clearance
+    kept, _ = keep.push(groomed)
+    left = int(short(kept[:, 1:].reshape(-1, 3)).sum())
+    assert left <= 0.1 * before
+    pts = curve_points().reshape(groomed.shape)
+    assert short(pts[:, 1:].reshape(-1, 3)).sum() <= left
     asset_scene.set_case(ctx, hm, "id+3_jaw")
     update(rigs, ctx)
-    assert not inside(curve_points()).any()
-    # without a garment there is nothing to keep out of
+    now = curve_points().reshape(groomed.shape)
+    np.testing.assert_allclose(now, keep.push(hair.attachment.positions(ctx))[0], atol=1e-6)
+    # without a garment there is nothing to keep off
     ctx2, _ = asset_scene.head_context("neutral", resolution=96)
     alone = dress(ctx2, {"hair": {"id": "long_straight", "generator": "procedural:hair_strands", "params": {}}})
     assert "points_out_of_arms" not in alone["hair"].record()
 
 
-@pytest.mark.parametrize("garment_id,bare", [("tank_top", True), ("tshirt_crew", False)])
-def test_sleeveless_garments_have_bare_arms(tmp_path, garment_id, bare):
-    """A tank top's upper arms are the head's skin (segmentation class skin, second slot of the
-    torso object); a T-shirt's are its cloth. Checked on the mesh and in the pixels: the outer side of
-    each arm, 8 cm under its cap's base, seen from the front."""
+@pytest.mark.parametrize("garment_id,sleeve,forearm", [("tank_top", "skin", "skin"), ("tshirt_crew", "skin", "skin"),
+                                                       ("sweater", "clothing", "clothing")])
+def test_arms_under_each_kind_of_sleeve(tmp_path, garment_id, sleeve, forearm):
+    """The bust's upper arm below a short sleeve, or under none, is the head's skin, under a long one
+    the garment's cloth; the forearms are the head's skin (the torso object's second material slot)
+    under short sleeves and none, the cloth under long ones. Checked on the mesh and in the pixels,
+    seen from the front: the front of each upper arm at 70 % of the way down to the elbow, and each
+    forearm 10 cm under the elbow."""
     from tests.support import asset_scene
     from blender_scripts import camera, passes, scene
     from blender_scripts.assets import garment
+    from synth.assets.fit.arms import FOREARM_BEND_DEG
     from synth.conventions import intrinsics, invert_rigid, orbit_camera_to_world, project
     from synth.dataset.segmentation import CLASSES
 
@@ -136,23 +151,28 @@ def test_sleeveless_garments_have_bare_arms(tmp_path, garment_id, bare):
     slots = np.zeros(len(torso_ob.data.polygons), np.int64)
     torso_ob.data.polygons.foreach_get("material_index", slots)
     assert mats[0].pass_index == CLASSES["clothing"]
-    if bare:
-        assert g.record()["torso_arms_skin"] is True
+    if forearm == "skin":
+        assert g.record()["torso_forearms_skin"] is True
         assert len(mats) == 2 and mats[1] is ctx.materials[CLASSES["skin"]]
-        assert 0 < (slots == 1).sum() < len(slots)  # the arms' faces, not the prism's
+        assert 0 < (slots == 1).sum() < len(slots)  # the forearms' faces, not the prism's
     else:
-        assert "torso_arms_skin" not in g.record() and len(mats) == 1 and not slots.any()
-    scene.configure_render(RenderSettings(samples=4, denoise=False, device="cpu"), 64, 64)
+        assert "torso_forearms_skin" not in g.record() and len(mats) == 1 and not slots.any()
+    from synth.assets.fit.body import Body
+
+    fr = Body.of(ctx).arms
+    scene.configure_render(RenderSettings(samples=4, denoise=False, device="cpu"), 96, 96)
     scene.uniform_environment(1.0)
     cam = camera.make_camera()
-    z = min(a.z_base for a in g.arms) - 0.08
-    target = np.array([0.0, float(np.mean([a.axis[1] for a in g.arms])), z])
-    K = intrinsics(64, 64, 40.0, (0.0, 0.0))
-    w2c = invert_rigid(orbit_camera_to_world(0.0, 0.0, 1.0, target))
-    camera.set_camera(cam, K, w2c, 64, 64, 0.05, 10.0)
+    target = 0.5 * (fr.elbow["L"] + fr.elbow["R"])
+    K = intrinsics(96, 96, 40.0, (0.0, 0.0))
+    w2c = invert_rigid(orbit_camera_to_world(0.0, 0.0, 1.6, target))
+    camera.set_camera(cam, K, w2c, 96, 96, 0.05, 10.0)
     seg = passes.render_view(tmp_path, 3)["segmentation"]
-    pts = np.array([[a.axis[0] + a.side * 0.8 * float(a.radius_at(z)), a.axis[1], z] for a in g.arms])
-    uv, _ = project(K, w2c, pts)
-    want = CLASSES["skin"] if bare else CLASSES["clothing"]
-    for u, v in uv:
-        assert seg[int(v), int(u)] == want, (garment_id, seg[int(v), int(u)])
+    b = np.radians(FOREARM_BEND_DEG)
+    for s, sign in (("L", 1.0), ("R", -1.0)):
+        on = (fr.side == sign) & (np.abs(fr.t - 0.7) < 0.05)
+        front = ctx.vertices[on][np.argmin(ctx.vertices[on, 1])]  # the arm's front
+        fore = fr.elbow[s] + 0.1 * np.array([0.0, -np.sin(b), -np.cos(b)])  # on the forearm's axis
+        uv, _ = project(K, w2c, np.array([front, fore]))
+        for (u, v), want in zip(uv, (sleeve, forearm)):
+            assert seg[int(v), int(u)] == CLASSES[want], (garment_id, s, want, seg[int(v), int(u)])

@@ -129,3 +129,30 @@ def test_ray_grid_outside_the_grid_and_shared_edges():
     lines = np.array([[0.5, 0.5, -1.0], [0.25, 0.75, -2.0], [0.0, 1.0, -1.0], [1.0, 0.0, -1.0], [0.2, 0.2, -3.0]])
     np.testing.assert_array_equal(np.sum(g.hits(lines) > 0, axis=1), [2, 2, 2, 0, 1])
     np.testing.assert_allclose(g.first_hit(lines), [1.0, 2.0, 1.0, np.inf, 3.0])
+
+
+
+def test_edge_eps_keeps_rays_along_a_shared_edge_from_slipping_between_its_triangles():
+    """A ray in a symmetric mesh's midline plane runs along its midline edges. Cast from a metre
+    away at a 6 mm triangle pair whose off-plane corners come first (as hm08's do at the chin),
+    rounding often gives *both* triangles a barycentric coordinate of about -2e-15 there, and the
+    ray passes between them to whatever lies behind (prior.fit.contour's chin line did). With
+    ``edge_eps`` every ray hits the pair, on the edge."""
+    rng = np.random.default_rng(0)
+    a = np.array([0.0, -0.13, 0.62])
+    b = a + [0.0, 0.004, -0.005]
+    c = 0.5 * (a + b) + [0.0058, 0.002, 0.001]
+    behind = [[-1.0, 1.0, -1.0], [1.0, 1.0, -1.0], [0.0, 1.0, 2.0]]
+    v = np.array([a, b, c, c * [-1.0, 1.0, 1.0], *behind])
+    f = np.array([[3, 1, 0], [2, 0, 1], [4, 5, 6]])  # the pair (mirror images), then a plane behind
+    target = a + rng.uniform(0.0, 1.0, (400, 1)) * (b - a)
+    ang = rng.uniform(0.0, 2.0 * np.pi, 400)
+    d = np.stack([np.zeros(400), np.cos(ang), np.sin(ang)], 1)
+    o = target - d  # a metre out
+    tri, bary, t = first_hits(o, d, v, f, edge_eps=1e-9)
+    assert np.all((tri == 0) | (tri == 1))
+    np.testing.assert_allclose(t, 1.0, atol=1e-9)
+    assert np.all(bary >= 0.0) and np.allclose(bary.sum(1), 1.0)
+    np.testing.assert_allclose(np.einsum("nk,nkc->nc", bary, v[f[tri]]), target, atol=1e-9)
+    tri0, _, _ = first_hits(o, d, v, f)  # without: some slip through (about one in six here)
+    assert np.all(np.isin(tri0, [-1, 0, 1, 2])) and np.sum(tri0 < 0) + np.sum(tri0 == 2) > 10

@@ -1,5 +1,5 @@
-"""The bust prototype (synth.model.builders.makehuman.bust, docs/body-plan.md): the MakeHuman upper
-body with its arms hanging, shaped by the head model's identity code."""
+"""The bust (synth.model.builders.makehuman.bust, docs/body-plan.md): the MakeHuman upper body with its
+arms hanging, shaped by the head model's identity code, and the default model that carries it."""
 
 import numpy as np
 import pytest
@@ -7,7 +7,7 @@ import pytest
 from synth.model import default as dm
 from synth.model.builders.makehuman import bust as B
 
-pytestmark = pytest.mark.slow  # one build, about 15 s
+pytestmark = pytest.mark.slow  # one build of the bust (about 15 s) and a quick bake (about 40 s)
 
 FLIP = np.array([-1.0, 1.0, 1.0])
 
@@ -46,7 +46,8 @@ def test_seam_with_the_head_model_does_not_move(bust, model, codes):
     """The head model's polygons the bust does not replace meet it on vertices the pose leaves where
     they are: head and bust stitch without a crack for every identity."""
     off = np.asarray(model.poly_offsets)
-    pk = [np.asarray(model.poly_indices[off[i]:off[i + 1]]) for i in range(len(off) - 1)]
+    n_head = len(off) - 1 - model.extra["bust"]["polygons_added"]  # the head's polygons, then the bust's
+    pk = [np.asarray(model.poly_indices[off[i]:off[i + 1]]) for i in range(n_head)]
     replaced = {tuple(sorted(bust.head_rows[p].tolist())) for p, h in zip(bust.polys, bust.head_polys) if h}
     kept = np.unique(np.concatenate([p for p in pk if tuple(sorted(p.tolist())) not in replaced]))
     seam = np.nonzero(np.isin(bust.head_rows, kept))[0]
@@ -167,6 +168,13 @@ def test_bottom_edge_is_one_planar_loop_and_the_elbows_are_closed(bust, model, c
         assert np.degrees(np.arccos(abs(n[2]))) < 10.0
     for s, _ in B.SIDES:
         assert any(np.array_equal(p, bust.elbow_loops[s]) for p in bust.polys[-2:])
+    # the right elbow's loop is the left's mirror image vertex for vertex from the same first vertex
+    # (reversed, to face down its arm), so the caps' fans are mirror images: every bust triangle's
+    # mirror image is a bust triangle (the default model's mesh_mirror is exact)
+    el, er = bust.elbow_loops["L"], bust.elbow_loops["R"]
+    assert bust.mirror[el[0]] == er[0] and np.array_equal(bust.mirror[el[1:]], er[:0:-1])
+    tri_set = {tuple(sorted(t)) for t in bust.triangles.tolist()}
+    assert all(tuple(sorted(t)) in tri_set for t in bust.mirror[bust.triangles].tolist())
     loop_edges = {tuple(sorted(e)) for e in zip(lp.tolist(), np.roll(lp, -1).tolist())}
     # the bust alone: open on the bottom loop and on the seam with the head model, nowhere else
     head = set(bust.head_rows[bust.head_rows >= 0].tolist())
@@ -209,45 +217,51 @@ def test_baked_clearance_is_linear_symmetric_and_keeps_arms_out(bust, baked, mod
     assert max(after) <= 0.003, max(after)
 
 
-def test_model_with_the_bust_loads_and_evaluates(bust, baked, model, tmp_path):
-    """append_bust: the head model's vertex indices, landmarks and regions stay valid (head rows the
-    pose does not move keep their bits, landmarks evaluate where they did), the bust's rows evaluate
-    to the baked bust, and the file round-trips through write_model / read_model."""
-    from synth.model.format import read_model, write_model
+def test_apply_turn_is_the_bake_of_a_fitted_turn(bust, baked):
+    """bake_clearance folds its fitted turn in with apply_turn: the pinned turn of the default
+    model goes in the same way."""
+    again = B.apply_turn(bust, baked.turn)
+    assert np.array_equal(again.template, baked.template) and np.array_equal(again.basis, baked.basis)
+    with pytest.raises(ValueError, match="already baked"):
+        B.apply_turn(baked, baked.turn)
+
+
+@pytest.fixture(scope="module")
+def pinned(bust):
+    """The bust as the default model carries it: the pinned arm turn folded in."""
+    from synth.model.builders.makehuman import arm_turn
+
+    return B.apply_turn(bust, arm_turn.TURN)
+
+
+def test_default_model_carries_the_bust(bust, pinned, model, codes, tmp_path):
+    """The default model is the head with the bust appended (append_bust): the head's vertex indices,
+    landmarks and regions stay valid, the bust's rows evaluate to the pinned bust, the arms of planned
+    identities stay out of the torso, and the only open edges of the bust are its bottom loop's."""
     from synth.model.head import HeadModel
 
-    out = B.append_bust(model, baked)
-    p = write_model(out, tmp_path / "m.npz", compress=True)
-    m2 = read_model(p)
-    V0 = model.num_vertices
+    V0 = model.extra["bust"]["first_vertex"]
     new = int((bust.head_rows < 0).sum())
-    assert m2.num_vertices == V0 + new
-    moved = bust.head_rows[(bust.head_rows >= 0) & (bust.weights[:, 0] < 1 - 1e-9)]
-    keep = np.setdiff1d(np.arange(V0), moved)
-    assert np.array_equal(m2.template[keep], model.template[keep])
-    assert np.array_equal(m2.identity_basis[:, keep], model.identity_basis[:, keep])
-    for k in model.regions:
-        assert np.array_equal(m2.regions[k][: len(model.regions[k])], model.regions[k])
-    for k in ("bust", "torso", "arm_l", "arm_r", "bust_bottom"):
-        assert len(m2.regions[k]) > 0
-    assert set(m2.regions["bust"].tolist()) >= set(range(V0, V0 + new))
-    h1, h2 = HeadModel(model, np.float64), HeadModel(m2, np.float64)
-    from synth.config import load_config
-    from synth.plan import identities
-
-    c = identities.planned_codes(0, np.arange(2), model, load_config().identity)
+    assert model.num_vertices == V0 + new and model.name == "makehuman-head"
+    assert model.provenance["builder_version"] == "12" and "bust" in model.provenance
+    for k in ("bust", "torso", "arm_l", "arm_r", "bust_bottom", "elbow_l", "elbow_r"):
+        assert len(model.regions[k]) > 0
+    assert set(model.regions["bust"].tolist()) >= set(range(V0, V0 + new))
+    assert set(model.regions["shoulders"].tolist()) >= set(range(V0, V0 + new))
     rows = np.where(bust.head_rows >= 0, bust.head_rows, 0)
     rows[bust.head_rows < 0] = V0 + np.arange(new)
-    for ci in c:
-        e = np.zeros(model.expression_dims)
-        a = h1.evaluate(ci, e, np.zeros((h1.J, 3)), landmarks=True)
-        b = h2.evaluate(ci, e, np.zeros((h2.J, 3)), landmarks=True)
-        assert np.abs(b.vertices[0][rows] - baked.posed(ci)).max() < 1e-5
-        for k in a.landmarks:
-            assert np.abs(np.asarray(a.landmarks[k]) - np.asarray(b.landmarks[k])).max() < 1e-6
+    for s, _ in B.SIDES:
+        assert np.array_equal(model.regions[f"elbow_{s.lower()}"], rows[bust.elbow_loops[s]])
+    h = HeadModel(model, np.float64)
+    worst = 0.0
+    for ci in [np.zeros(model.identity_dims), *codes[:10]]:
+        v = h.evaluate(ci, np.zeros(model.expression_dims), np.zeros((h.J, 3)), landmarks=False).vertices[0]
+        assert np.abs(v[rows] - pinned.posed(ci)).max() < 1e-5
+        worst = max(worst, *B.arm_torso_penetration(pinned, pinned.posed(ci), bust.joints_of(ci)).values())
+    assert worst <= 0.002, worst
     # one mesh: the bust's open edges are the bottom loop's only
-    lp = np.asarray(m2.regions["bust_bottom"])
+    lp = np.asarray(model.regions["bust_bottom"])
     loop_edges = {tuple(sorted(e)) for e in zip(lp.tolist(), np.roll(lp, -1).tolist())}
-    bv = set(m2.regions["bust"].tolist())
-    open_e = {e for e in _boundary_edges(np.asarray(m2.triangles)) if e[0] in bv or e[1] in bv}
+    bv = set(model.regions["bust"].tolist())
+    open_e = {e for e in _boundary_edges(np.asarray(model.triangles)) if e[0] in bv or e[1] in bv}
     assert open_e == loop_edges

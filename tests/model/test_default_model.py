@@ -80,11 +80,14 @@ def test_template_is_mirror_symmetric(default_model):
 
 
 def test_identity_components(default_model):
-    B = default_model.identity_basis.reshape(default_model.identity_dims, -1).astype(np.float64)
+    """The identity basis is the PCA's, orthonormal on the head's own vertices, but for its
+    shoulders: the bust (appended after them) poses those rows, arms down (docs/body-plan.md)."""
+    V0 = default_model.extra["bust"]["first_vertex"]
+    B = default_model.identity_basis[:, :V0].reshape(default_model.identity_dims, -1).astype(np.float64)
     n = np.linalg.norm(B, axis=1)
-    np.testing.assert_allclose(n, 1.0, atol=1e-4)
+    np.testing.assert_allclose(n, 1.0, atol=0.06)
     cos = (B @ B.T) / np.outer(n, n)
-    assert np.abs(cos - np.eye(len(B))).max() < 0.05
+    assert np.abs(cos - np.eye(len(B))).max() < 0.1
     s = default_model.identity_scale
     assert np.all(s > 0) and np.all(np.diff(s) <= 1e-6)
     assert np.isfinite(default_model.prior_means).all() and len(default_model.prior_weights) >= 4

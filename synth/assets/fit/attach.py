@@ -36,12 +36,18 @@ def push_out(P: np.ndarray, query: SignedDistance, clearance, iterations: int = 
     alone (they belong to a different body part; callers trim them instead)."""
     P = np.array(P, np.float64, copy=True)
     clr = np.broadcast_to(np.asarray(clearance, np.float64), (len(P),))
+    idx = np.arange(len(P))
     for _ in range(iterations):
-        h = query.query(P)
-        bad = (h.signed < clr - 1e-7) & (h.signed > -max_depth)
+        if not len(idx):
+            break
+        # only the points moved by the last pass are queried again: the others' answer is the same
+        h = query.query(P[idx])
+        bad = (h.signed < clr[idx] - 1e-7) & (h.signed > -max_depth)
         if not bad.any():
             break
-        P[bad] = h.point[bad] + h.normal[bad] * clr[bad, None]
+        j = idx[bad]
+        P[j] = h.point[bad] + h.normal[bad] * clr[j, None]
+        idx = j
     return P
 
 
@@ -58,15 +64,20 @@ class Binding:
         E = self._frames(np.asarray(V, np.float64))
         self.coords = np.einsum("nij,nj->ni", E, np.asarray(P, np.float64) - c.point)
 
-    def _frames(self, V):
-        A, B, C = V[self.F[:, 0]], V[self.F[:, 1]], V[self.F[:, 2]]
+    def _frames(self, V, F=None):
+        F = self.F if F is None else F
+        A, B, C = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
         e1 = normalize(B - A)
         n = normalize(np.cross(B - A, C - A))
         e2 = np.cross(n, e1)
         return np.stack([e1, e2, n], 1)  # rows
 
-    def apply(self, V: np.ndarray) -> np.ndarray:
+    def apply(self, V: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """The points on body vertices ``V`` (``rows``: a mask or indices of the points wanted)."""
         V = np.asarray(V, np.float64)
-        c = (self.bary[:, :, None] * V[self.F]).sum(1)
-        E = self._frames(V)
-        return c + np.einsum("nij,ni->nj", E, self.coords)
+        if rows is None:
+            F, bary, coords = self.F, self.bary, self.coords
+        else:
+            F, bary, coords = self.F[rows], self.bary[rows], self.coords[rows]
+        c = (bary[:, :, None] * V[F]).sum(1)
+        return c + np.einsum("nij,ni->nj", self._frames(V, F), coords)

@@ -19,7 +19,8 @@ import numpy as np
 
 from synth.assets.fit.attach import Binding, body_query, push_out
 from synth.assets.fit.masks import jaw_line, region_mask
-from synth.assets.fit.meshops import clip_by_field, level_points, oriented_boundary_loops, resample_loop, subdivide
+from synth.assets.fit.meshops import (clip_by_field, level_points, oriented_boundary_loops, resample_loop, subdivide,
+                                      subdivide_where)
 from synth.assets.fit.trim import Rim, add_rims, place_rims, push_out_edges, trim_part
 from synth.geometry.normals import normalize, vertex_normals
 
@@ -115,6 +116,7 @@ class Body:
         self.frame = NeckFrame(self.V, self.F, regions, ibug68)
         self.lm = np.asarray(ibug68, np.float64)
         self._hem = None
+        self._arms = False
 
     @classmethod
     def of(cls, head) -> "Body":
@@ -131,16 +133,44 @@ class Body:
             self._hem = hem_field(self.V, self.F)
         return self._hem
 
-    def shell(self, tris: np.ndarray, field: np.ndarray, offset_fn, subdiv: int = 1, weights: bool = False):
+    @property
+    def arms(self):
+        """The bust's upper arms (:class:`synth.assets.fit.arms.ArmFrame`; None for a model without
+        them), computed once."""
+        if self._arms is False:
+            from synth.assets.fit.arms import arm_frame
+
+            self._arms = arm_frame(self.V, self.F, self.regions)
+        return self._arms
+
+    @property
+    def arm_faces(self) -> np.ndarray | None:
+        """(T,) bool: the triangles of the bust's upper arms (None for a model without them)."""
+        if self.arms is None:
+            return None
+        from synth.assets.fit.arms import arm_triangles
+
+        out = np.zeros(len(self.F), bool)
+        out[arm_triangles(self.F, self.regions)] = True
+        return out
+
+    def shell(self, tris: np.ndarray, field: np.ndarray, offset_fn, subdiv: int = 1, weights: bool = False,
+              refine=None):
         """Clip ``tris`` at ``field >= 0``, subdivide, offset by ``offset_fn(base points, normals)``.
         Returns (P, faces, cut mask), and the (M, V) combination matrix of the body vertices
-        giving each point's base position when ``weights``."""
+        giving each point's base position when ``weights``. ``refine``: subdivide only the faces
+        for whose base centroids (n, 3) it returns True (and their neighbours as the mesh needs:
+        :func:`synth.assets.fit.meshops.subdivide_where`); None: every face."""
         W, faces, cut = clip_by_field(self.F[tris], field, len(self.V))
         if len(faces) == 0:
             P = np.zeros((0, 3))
             return (P, faces, cut, W) if weights else (P, faces, cut)
         for _ in range(subdiv):
-            W, faces, cut = subdivide(W, faces, cut)
+            if refine is None:
+                W, faces, cut = subdivide(W, faces, cut)
+            else:
+                base = np.asarray(W @ self.V)
+                W, faces, cut = subdivide_where(W, faces, cut, np.asarray(refine(base[faces].mean(1)), bool))
         base = np.asarray(W @ self.V)
         nrm = normalize(np.asarray(W @ self.N))
         P = base + nrm * np.asarray(offset_fn(base, nrm))[:, None]
@@ -210,6 +240,11 @@ class Shell:
     info: dict = field(default_factory=dict)
 
 
+#: :meth:`FittedShell.follow` recomputes the garment's vertices within this distance (m) of a body
+#: vertex that moved since the fit (a jaw opening moves the chin by 2-3 cm); the others keep theirs
+FOLLOW_REACH = 0.05
+
+
 @dataclass
 class FittedShell:
     """A shell trimmed, pushed out and bound: the mesh and what ``follow`` needs."""
@@ -227,18 +262,56 @@ class FittedShell:
     inside: np.ndarray | None = None  # (V,) vertices never pushed out (hem caps)
     edge_loops: list = field(default_factory=list)  # boundary loops kept smooth (necklines)
     rims: list[Rim] = field(default_factory=list)  # tubes laid on necklines
+    body_rest: np.ndarray | None = None  # (B, 3) the body's vertices at the fit
+
+    def moving(self, vertices: np.ndarray) -> np.ndarray | None:
+        """(V,) the vertices :meth:`follow` recomputes on new body ``vertices``: those bound to a
+        triangle with a vertex that moved since the fit, or within :data:`FOLLOW_REACH` of such a
+        vertex, and every vertex of a neckline loop that has one and of its rim; None: all (no rest
+        body known)."""
+        V = np.asarray(vertices, np.float64)
+        if self.body_rest is None or V.shape != self.body_rest.shape:
+            return None
+        moved = np.any(V != self.body_rest, axis=1)
+        active = np.zeros(len(self.P), bool)
+        if not moved.any():
+            return active
+        from scipy.spatial import cKDTree
+
+        active = moved[self.binding.F].any(1)
+        d, _ = cKDTree(V[moved]).query(self.P, distance_upper_bound=FOLLOW_REACH)
+        active |= np.isfinite(d)
+        for lo in self.edge_loops:
+            if active[lo].any():
+                active[lo] = True
+        for r in self.rims:  # a rim is laid anew on its neckline
+            if active[r.loop].any():
+                active[r.start:r.stop] = True
+        return active
 
     def follow(self, vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
         """Positions on new body vertices: the binding re-applied, then pushed out again (the
         necklines from their build shape plus the body's motion averaged along them:
         :func:`synth.assets.fit.trim.push_out_edges`), and the rims laid anew on the necklines
-        (:func:`synth.assets.fit.trim.place_rims`)."""
+        (:func:`synth.assets.fit.trim.place_rims`). Vertices far from every body vertex that moved
+        (:meth:`moving`: the body below the neck does not move with an expression) keep their fitted
+        positions."""
+        active = self.moving(vertices)
+        if active is not None and not active.any():
+            return np.array(self.P, np.float64, copy=True)
         query = body_query(vertices, triangles, self.body_tris)
         skip = np.zeros(len(self.P), bool) if self.inside is None else self.inside.copy()
         for r in self.rims:
             skip[r.start:r.stop] = True  # placed from their neckline below
-        P = push_out_edges(self.binding.apply(vertices), query, self.clearance, skip, self.edge_loops, rest=self.P)
-        return place_rims(P, self.rims, query, self.clearance)
+        if active is None:
+            P = push_out_edges(self.binding.apply(vertices), query, self.clearance, skip, self.edge_loops,
+                               rest=self.P)
+            return place_rims(P, self.rims, query, self.clearance)
+        P = np.array(self.P, np.float64, copy=True)
+        P[active] = self.binding.apply(vertices, active)
+        loops = [lo for lo in self.edge_loops if active[lo[0]]]
+        P = push_out_edges(P, query, self.clearance, skip | ~active, loops, rest=self.P)
+        return place_rims(P, [r for r in self.rims if active[r.loop[0]]], query, self.clearance)
 
 
 def fit_shell(body: Body, shell: Shell, clearance: float) -> FittedShell:
@@ -249,7 +322,7 @@ def fit_shell(body: Body, shell: Shell, clearance: float) -> FittedShell:
     src = shell.parts
     for P, F, M, T, R, S, rim in zip(src.P, src.F, src.M, src.T, src.R, src.S, src.rim):
         if T.any():
-            P, F, S, n = trim_part(body.query, P, F, S)
+            P, F, S, n = trim_part(body.query, P, F, S, body.arm_faces)
             trimmed += n
         parts.add(P, F, int(M[0]), bool(T.any()), bool(R.any()), S, rim)
     P, F, M, _, R, S = parts.merged()
@@ -262,4 +335,4 @@ def fit_shell(body: Body, shell: Shell, clearance: float) -> FittedShell:
     binding = Binding(body.V, body.F, shell.anchor_tris, P)
     info = dict(shell.info, vertices=int(len(P)), faces=int(len(F)), trimmed_vertices=int(trimmed))
     return FittedShell(shell.cls, shell.name, P, F, M, shell.cloths, binding, body.skin_tris, clearance, info,
-                       R if R.any() else None, loops, rims)
+                       R if R.any() else None, loops, rims, body.V.copy())

@@ -4,10 +4,12 @@ Pure numpy; the Blender rig (``blender_scripts/assets/garment.py``) only makes t
 object and the cloth materials. Every garment is one mesh built from the body itself, so it
 fits any identity (tested at +-3 SD):
 
-1. **Shell**: the skin triangles of the ``neck`` and ``shoulders`` regions are clipped exactly
-   at a neckline field ``z_nl(theta) - z`` (``meshops.clip_by_field``; theta is the angle
-   around the neck base ring, ``body.NeckFrame``), subdivided once, and offset along the
-   interpolated body normals by the fabric thickness plus small outward-only wrinkles. The
+1. **Shell**: the skin triangles of the ``neck`` and ``shoulders`` regions (with the default
+   model's bust: the torso to the waist and the upper arms) are clipped exactly at a neckline
+   field ``z_nl(theta) - z`` (``meshops.clip_by_field``; theta is the angle around the neck base
+   ring, ``body.NeckFrame``), at the hem and at the garment's sleeves (:data:`SLEEVES`,
+   :mod:`synth.assets.fit.arms`), subdivided once within 20 cm of the neck's base, and offset
+   along the interpolated body normals by the fabric thickness plus small outward-only wrinkles. The
    neckline per garment: crew, V (depth from ``neckline_depth_m``), turtleneck collar
    (``collar_height_m``, capped 1.2 cm under the jaw line), deep V with raised lapels
    (``lapel_width_m``) for jackets and coats, scoop + straps (``strap_width_m``) for tank tops.
@@ -46,7 +48,8 @@ from synth.model.meshutil import smoothstep
 
 #: minimum distance (m) kept between every garment vertex and the skin
 CLEARANCE = 0.0015
-#: width (m) of the tank top's band along the hem, over the arm stumps
+#: width (m) of the tank top's band along the hem (over the arm stumps of a model without the bust;
+#: with it, the waist's band under the arm holes)
 TANK_BAND = 0.035
 #: rounding (m) of the corner where a turtleneck's collar top meets the cap under the jaw
 COLLAR_ROUND = 0.045
@@ -89,9 +92,17 @@ def colour_rgb(value) -> tuple[float, float, float]:
     return (lin(r), lin(g), lin(b))
 
 
-#: garments without sleeves: their upper arms (synth.assets.fit.torso.arms) are bare skin, not
-#: the garment's cloth
-BARE_ARMS = frozenset({"tank_top"})
+#: sleeves over the bust's upper arms (synth.assets.fit.arms.sleeve_field) per garment id, or
+#: ``id:style`` for a uniform; every other garment has long ones (to the elbows and on, down the
+#: forearms), and so has a jacket's or coat's undershirt (under the jacket's: no arm holes to keep
+#: smooth where nothing shows them)
+SLEEVES = {"tshirt_crew": "short", "tshirt_vneck": "short", "tank_top": "none", "uniform:scrubs": "short",
+           "uniform:polo": "short"}
+
+
+def sleeves_of(aid: str, style: str | None = None) -> str:
+    """The sleeves ('long', 'short', 'none') of garment ``aid`` (a uniform's ``style``)."""
+    return SLEEVES.get(f"{aid}:{style}", SLEEVES.get(aid, "long"))
 
 
 def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generator) -> Shell:
@@ -110,7 +121,11 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
     parts = Parts()
     info = {"id": aid, "fabric": fabric, "colour": colour if isinstance(colour, str) else list(colour)}
 
+    sleeves = sleeves_of(aid, style if aid == "uniform" else None)
+    reach = []  # the outer cloth's largest offset from the skin (base + wrinkles): hair keeps off it
+
     def wr(base, amp=0.0015):
+        reach.append(base + amp)
         return wrinkle_offset(rng, base, amp)
 
     if aid in ("tshirt_crew", "sweater", "hoodie", "scarf_over_sweater") or (aid == "uniform" and style not in (
@@ -118,7 +133,8 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
         depth = p.neckline_depth(vneck=False)
         base = thick + 0.0015
         rim = 0.0035 if aid != "tshirt_crew" else 0.002
-        torso_shell(body, parts, crew_neckline(body, 0.008, depth), wr(base), rim=rim, rim_flatten=0.8)
+        torso_shell(body, parts, crew_neckline(body, 0.008, depth), wr(base), rim=rim, rim_flatten=0.8,
+                    sleeves=sleeves)
         if aid == "hoodie":
             if bool(p.hood_up):
                 hood_up(body, parts, 0, base)
@@ -158,7 +174,8 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
     elif aid in ("tshirt_vneck",) or (aid == "uniform" and style == "scrubs"):
         depth = p.neckline_depth(vneck=True)
         base = thick + 0.0015
-        torso_shell(body, parts, vee_neckline(body, 0.008, depth, 0.75), wr(base), rim=0.002, rim_flatten=0.8)
+        torso_shell(body, parts, vee_neckline(body, 0.008, depth, 0.75), wr(base), rim=0.002, rim_flatten=0.8,
+                    sleeves=sleeves)
         info["neckline_depth_m"] = depth
     elif aid == "turtleneck":
         h = float(p.collar_height_m)
@@ -171,7 +188,7 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
         def z(t):  # the collar's top: h above the neck base, under the jaw, the corner between rounded
             top = fr.z_ring(t) + h
             return smooth_min(top, np.minimum(fr.z_cap(t), top + 1.0), COLLAR_ROUND)
-        torso_shell(body, parts, z, off, rim=0.006, rim_flatten=0.9)
+        torso_shell(body, parts, z, off, rim=0.006, rim_flatten=0.9, sleeves=sleeves)
         # folded roll: a second tube a little under the top
         neck_tube(body, parts, 0, lambda t: z(t) - 0.018, base + 0.009, 0.012)
         info["collar_height_m"] = h
@@ -180,7 +197,7 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
         open_top = bool(p.top_button_open) and not tie
         base = thick + 0.001
         depth = 0.045 if open_top else 0.0
-        torso_shell(body, parts, vee_neckline(body, 0.006, depth, 0.35), wr(base, 0.001), rim=0.0)
+        torso_shell(body, parts, vee_neckline(body, 0.006, depth, 0.35), wr(base, 0.001), rim=0.0, sleeves=sleeves)
         shirt_collar(body, parts, 0, base, open_top, leaf=0.035 if style == "polo" else 0.045)
         if tie:
             cloths.append(Cloth("garment_tie", (rng.uniform(), 0.7, 0.5), "linen", 0.005, seed + 2))
@@ -193,10 +210,11 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
             cloths.append(Cloth("garment_under", "white" if under == "shirt" else "grey", ufab, 0.005, seed + 3))
             ub = FABRICS[ufab][0] + 0.001
             if under == "shirt":
-                torso_shell(body, parts, vee_neckline(body, 0.006, 0.0, 0.35), wr(ub, 0.0008), slot=1)
+                torso_shell(body, parts, vee_neckline(body, 0.006, 0.0, 0.35), wrinkle_offset(rng, ub, 0.0008), slot=1)
                 shirt_collar(body, parts, 1, ub, False, band_h=0.028, leaf=0.035)
             else:
-                torso_shell(body, parts, crew_neckline(body, 0.006, 0.01), wr(ub, 0.0008), slot=1, rim=0.002)
+                torso_shell(body, parts, crew_neckline(body, 0.006, 0.01), wrinkle_offset(rng, ub, 0.0008), slot=1,
+                            rim=0.002)
         coat = aid == "coat"
         base = (0.014 if coat else 0.009) + thick
         lw = float(p.lapel_width_m)
@@ -214,7 +232,7 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
             band = smoothstep(s, -0.002, 0.004) * (1.0 - smoothstep(s, lw - 0.008, lw))
             band = band * (np.cos(th) > 0.2) * (frac < 0.999)
             return wrf(P, N) + 0.005 * band
-        torso_shell(body, parts, zfn, off, rim=0.003, rim_flatten=0.7)
+        torso_shell(body, parts, zfn, off, rim=0.003, rim_flatten=0.7, sleeves=sleeves)
         if coat and bool(p.collar_up):
             neck_tube(body, parts, 0, lambda t: np.minimum(fr.z_ring(t) + 0.04, fr.z_cap(t) - 0.02), base, 0.03,
                        angles=(0.6, 2 * np.pi - 0.6))
@@ -233,13 +251,19 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
             zr = fr.z_ring(th)
             torso = smooth_min(zr - 0.05 - 0.04 * front_weight(th) - V[:, 2], 0.13 - np.abs(V[:, 0]), TANK_ROUND)
             strap = smooth_min(w / 2 - np.abs(np.abs(V[:, 0]) - xs), zr + 0.01 - V[:, 2], 0.5 * w)
-            band = TANK_BAND - body.hem  # a band along the hem covers the arm stumps (the bust's cut)
+            band = TANK_BAND - body.hem  # a band along the hem (the cut's arm stumps without the bust)
             # the openings' corners (strap on torso, torso on band) rounded: arm holes, not notches
             return smooth_max(smooth_max(torso, strap, TANK_ROUND), band, TANK_ROUND)
-        torso_shell(body, parts, lambda t: fr.z_ring(t), wr(base, 0.001), extra_field=extra, rim=0.0)
+        torso_shell(body, parts, lambda t: fr.z_ring(t), wr(base, 0.001), extra_field=extra, rim=0.0, sleeves=sleeves)
         info["strap_width_m"] = w
     else:
         raise ValueError(f"unknown garment id '{aid}'")
 
+    info["sleeves"] = sleeves
+    if body.arms is not None and sleeves == "short":
+        from synth.assets.fit.arms import SHORT_SLEEVE_T, sleeve_end
+
+        info["sleeve_end_t"] = round(sleeve_end(body.arms, SHORT_SLEEVE_T), 4)
+    info["cloth_reach_m"] = round(float(reach[0]), 6)  # the outer shell's (its first wrinkle offset)
     anchors = np.union1d(body.torso_tris, body.head_tris) if aid == "hoodie" else body.torso_tris
     return Shell("garment", f"garment_{aid}", parts, anchors, cloths, info)

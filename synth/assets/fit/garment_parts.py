@@ -25,6 +25,10 @@ NECK_SMOOTHING = 12
 V_TIP_RADIUS = 0.01
 #: an opening of a torso shell's field must span this many body vertices (smaller ones are closed)
 MIN_OPENING = 8
+#: a torso shell is subdivided once where it lies less than this far (m) under the neck's base (its
+#: lowest vertex; the shell's necklines, collars, lapels and shoulders); further down (the bust's
+#: chest, back and arms, about 2 cm triangles) it keeps the body's triangles
+REFINE_BELOW_NECK = 0.2
 from synth.assets.fit.meshops import (grid_faces, icosphere, laplacian_smooth, negative_regions,
                                       oriented_boundary_loops, sweep_tube)
 
@@ -64,13 +68,20 @@ def wrinkle_offset(rng, base_off: float, amp: float, wavelength: float = 0.05):
 
 
 def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None, rim: float = 0.0,
-                rim_slot=None, rim_flatten: float = 1.0):
+                rim_slot=None, rim_flatten: float = 1.0, sleeves: str = "long"):
     """Torso shell under the neckline ``z_fn`` and above the hem (:mod:`synth.assets.fit.hem`),
-    with an optional rim tube on the neckline and a cap closing the hem from below."""
+    with an optional rim tube on the neckline (and the sleeves' ends) and a cap closing the hem
+    from below. ``sleeves``: over the bust's upper arms, 'long' (to the elbows), 'short' or 'none'
+    (:func:`synth.assets.fit.arms.sleeve_field`; a model without the arms ignores it)."""
+    from synth.assets.fit.arms import sleeve_field
+
     th = body.frame.theta(body.V)
     f = z_fn(th) - body.V[:, 2]
     if extra_field is not None:
         f = extra_field(f)
+    sl = sleeve_field(body.arms, sleeves)
+    if sl is not None:
+        f = np.minimum(f, sl)
     hem_f = body.hem
     # a neckline never reaches the hem (a deep V on a short torso): it stops HEM_BAND above it
     f = np.maximum(f, HEM_BAND - hem_f)
@@ -78,7 +89,12 @@ def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None
     lab = negative_regions(body.F[body.torso_tris], np.where(np.isin(np.arange(len(f)), body.F[body.torso_tris]), f, 1.0))
     size = np.bincount(lab)
     f = np.where((f < 0) & (size[lab] < MIN_OPENING), 0.0, f)
-    P, F, cut, W = body.shell(body.torso_tris, np.minimum(f, hem_f), off_fn, weights=True)
+    # a plain height test (no angle): the same faces on every machine for the same vertices
+    z_refine = float(body.V[body.frame.ring, 2].min()) - REFINE_BELOW_NECK
+
+    def near_neck(C):
+        return C[:, 2] > z_refine
+    P, F, cut, W = body.shell(body.torso_tris, np.minimum(f, hem_f), off_fn, weights=True, refine=near_neck)
     on_hem = cut & (np.abs(np.asarray(W @ hem_f)) < 1e-7)
     P = smooth_loops(P, F, on_hem)
     # every other boundary loop (the neckline, a tank top's arm holes), spread evenly along itself

@@ -127,6 +127,49 @@ def subdivide(W, faces: np.ndarray, is_cut: np.ndarray | None = None):
     return W2, nf, cut2
 
 
+def subdivide_where(W, faces: np.ndarray, is_cut: np.ndarray | None, refine: np.ndarray):
+    """Midpoint subdivision of the faces marked in ``refine`` only (1-to-4), kept conforming: a face
+    with two or three of its edges split is refined too (repeated until none is left), and a face
+    with one split edge is halved through it (1-to-2). With every face marked this is
+    :func:`subdivide`'s mesh (its vertices in another order)."""
+    faces = np.asarray(faces, np.int64)
+    refine = np.array(refine, bool, copy=True)
+    M = W.shape[0]
+    T = len(faces)
+    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), 1)
+    uniq, inv = np.unique(e, axis=0, return_inverse=True)
+    inv = inv.ravel().reshape(3, T)  # edge of (a, b), (b, c), (c, a) per face
+    split = np.zeros(len(uniq), bool)
+    while True:
+        split[inv[:, refine].ravel()] = True
+        grow = ~refine & (split[inv].sum(0) >= 2)
+        if not grow.any():
+            break
+        refine |= grow
+    ids = np.full(len(uniq), -1, np.int64)
+    ids[split] = M + np.arange(int(split.sum()))
+    a, b, c = faces.T
+    m01, m12, m20 = ids[inv[0]], ids[inv[1]], ids[inv[2]]
+    cnt = split[inv].sum(0)
+    out = [faces[cnt == 0]]
+    r = refine
+    out += [np.stack([a[r], m01[r], m20[r]], 1), np.stack([m01[r], b[r], m12[r]], 1),
+            np.stack([m20[r], m12[r], c[r]], 1), np.stack([m01[r], m12[r], m20[r]], 1)]
+    one = cnt == 1
+    for k, (x, y, z, m) in enumerate(((a, b, c, m01), (b, c, a, m12), (c, a, b, m20))):
+        h = one & split[inv[k]]
+        out += [np.stack([x[h], m[h], z[h]], 1), np.stack([m[h], y[h], z[h]], 1)]
+    nf = np.concatenate(out)
+    su = uniq[split]
+    E = len(su)
+    avg = sparse.csr_matrix((np.full(2 * E, 0.5), (np.repeat(np.arange(E), 2), su.ravel())), shape=(E, M))
+    W2 = sparse.vstack([W, avg @ W]).tocsr()
+    cut2 = None
+    if is_cut is not None:
+        cut2 = np.concatenate([is_cut, is_cut[su[:, 0]] & is_cut[su[:, 1]]])
+    return W2, nf, cut2
+
+
 def oriented_boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
     """Boundary vertex loops of a triangle mesh (manifold boundaries), each in the direction of its
     half-edges (so a loop's order says which side the mesh is on). :func:`synth.model.meshutil.boundary_loops`

@@ -108,16 +108,21 @@ def _open_only(F: np.ndarray, g: np.ndarray, smooth: np.ndarray) -> np.ndarray:
     return g
 
 
-def trim_part(query, P: np.ndarray, F: np.ndarray, smooth: np.ndarray):
+def trim_part(query, P: np.ndarray, F: np.ndarray, smooth: np.ndarray, no_crease: np.ndarray | None = None):
     """Cut the part (P, F) where it lies deeper than ``TRIM_DEPTH`` in the skin (``query``: a
     :class:`synth.geometry.sdf.SignedDistance`; see the module docstring). ``smooth``: per
-    vertex, off the hem (``Parts.add``'s ``smooth_edge``). Returns the new (P, F, smooth) and
-    how many of the part's vertices were cut away."""
+    vertex, off the hem (``Parts.add``'s ``smooth_edge``). ``no_crease``: per body triangle, the
+    skin whose creases are not cut (the bust's upper arms, which hang against the torso along
+    their length: a sleeve there is cloth in the armpit, not a neckline under a chin). Returns the
+    new (P, F, smooth) and how many of the part's vertices were cut away."""
     P = np.asarray(P, np.float64)
     F = np.asarray(F, np.int64)
     h = query.query(P)
     probe = 0.5 * CREASE_GAP
-    across = np.asarray(query(h.point + h.normal * probe), np.float64)
+    hit = query.query(h.point + h.normal * probe)
+    across = np.asarray(hit.signed, np.float64)
+    if no_crease is not None:
+        across = np.where(no_crease[h.face] | no_crease[hit.face], np.inf, across)
     g = np.minimum(h.signed + TRIM_DEPTH, across - (probe - CREASE_TOLERANCE))
     if (g >= 0).all():
         return P, F, smooth, 0

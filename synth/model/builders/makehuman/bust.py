@@ -38,9 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from synth.model.builders.makehuman.build import N_SAMPLES, SEED
-from synth.model.builders.makehuman.identity import (identity_pca, macro_targets, modifier_files, modifiers,
-                                                     sample_identity_weights)
+from synth.model.builders.makehuman.identity import (N_SAMPLES, SEED, identity_pca, macro_targets, modifier_files,
+                                                     modifiers, sample_identity_weights)
 from synth.model.builders.makehuman.mesh import build_mesh, triangulate
 from synth.model.builders.makehuman.skinning import JOINT_NAMES
 from synth.model.builders.makehuman.sources import hm08_mirror, read_base_obj, read_target, vertex_groups
@@ -313,10 +312,13 @@ def select(obj, mesh, Wc: np.ndarray, rig: dict, groups: dict,
     return np.unique(np.concatenate([obj.polys[i] for i in keep])), keep, np.array(in_head, bool), cut
 
 
-def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_samples: int = 0) -> BustData:
-    """Build the bust (module docstring). ``head_model``: the shipped head model
+def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_samples: int = 0,
+               feature_sigma: float | None = None) -> BustData:
+    """Build the bust (module docstring). ``head_model``: a head model built from the same data
     (:class:`synth.model.format.HeadModelData`) to check the shared vertices and the basis
-    against (optional)."""
+    against (optional; on the rows its own bust, if any, does not pose). ``feature_sigma``: the
+    head's what-if spread of the inner face's modifiers (``build_makehuman_head``), so that the
+    bust's basis regresses on that model's codes."""
     from synth.model.builders.makehuman.skinning import skin_weights
 
     data = Path(data_dir)
@@ -362,8 +364,8 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
         el = P[joint_vertices(rig, f"{ELBOW_BONE}.{s}", groups)].mean(0)
         q = P[lp]
         nrm = np.cross(q - q.mean(0), np.roll(q, -1, axis=0) - q.mean(0)).sum(0)
-        if nrm @ (el - sh) < 0:
-            lp = lp[::-1]
+        if nrm @ (el - sh) < 0:  # reversed about its first vertex: the right loop stays the left's
+            lp = np.concatenate([lp[:1], lp[:0:-1]])  # mirror image vertex for vertex, so the caps' fans are too
         caps[s] = look[lp]
         polys.append(look[lp])
         # the cap's corners take the uv of one loop vertex (skin colour; under a sleeve)
@@ -412,8 +414,12 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
     Bm = B[:, mirror] * flip
     BJm = BJ[:, jmirror] * flip
     W = sample_identity_weights(rng, N_SAMPLES, macro, mods)
+    W_mean = None
+    if feature_sigma is not None:  # as build_makehuman_head: wider features about the same template
+        W, W_mean = sample_identity_weights(np.random.default_rng(SEED), N_SAMPLES, macro, mods,
+                                            float(feature_sigma)), W
     mean, _, basis, std, _, codes, rank, explained = identity_pca(
-        W, T, TJ, Tm.reshape(nt, -1), TJm.reshape(nt, -1), int(identity_dims))
+        W, T, TJ, Tm.reshape(nt, -1), TJm.reshape(nt, -1), int(identity_dims), W_mean=W_mean)
 
     # ---- regression of the bust (and its joints) on the head codes, over the same samples
     n = len(W)
@@ -422,6 +428,10 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
     W2[n:, nt:] = W
     wbar = W2.mean(0)
     Wc2 = W2 - wbar
+    if W_mean is not None:  # the template: the mean of the default draws (identity_pca's W_mean)
+        W2[:n, :nt] = W_mean
+        W2[n:, nt:] = W_mean
+        wbar = W2.mean(0)
     B2 = np.concatenate([B, Bm]).reshape(2 * nt, -1)
     J2 = np.concatenate([BJ, BJm]).reshape(2 * nt, -1)
     XB = Wc2 @ B2  # (2n, 3Vb) centred bust samples
@@ -461,11 +471,13 @@ def build_bust(data_dir: Path, head_model=None, identity_dims: int = 48, keep_sa
     hb = basis.reshape(len(std), V, 3)[:, head_rows[shared]]
     info["shared_basis_max_diff"] = float(np.abs(hb - rest_basis[:, shared]).max())
     if head_model is not None:
-        hm_b = np.asarray(head_model.identity_basis, np.float64)[:, head_rows[shared]]
+        # a model that has a bust already holds the posed shape on the rows the pose moves
+        cmp = shared & ((Wc_hm[hm08, 0] >= 1.0 - 1e-9) | ("bust" not in head_model.regions))
+        hm_b = np.asarray(head_model.identity_basis, np.float64)[:, head_rows[cmp]]
         k = min(len(hm_b), len(std))
-        info["shipped_basis_max_diff"] = float(np.abs(hm_b[:k] - rest_basis[:k, shared]).max())
+        info["shipped_basis_max_diff"] = float(np.abs(hm_b[:k] - rest_basis[:k, cmp]).max())
         info["shipped_template_max_diff"] = float(np.abs(np.asarray(head_model.template, np.float64)[
-            head_rows[shared]] - rest_template[shared]).max())
+            head_rows[cmp]] - rest_template[cmp]).max())
         info["shipped_scale_max_rel_diff"] = float(np.abs(np.asarray(head_model.identity_scale)[:k] / std[:k] - 1).max())
     samples = None
     if keep_samples:
@@ -799,38 +811,13 @@ def bake_clearance(b: BustData, prior, radius: float | None, seed: int = BAKE_SE
         return np.concatenate([codes, codes * signs]), np.array([r["L"] for r in rows] + [r["R"] for r in rows])
 
     X, need = needs(C)
-    flip = np.array([-1.0, 1.0, 1.0])
-    rows = np.nonzero(b.weights[:, 2] > 0)[0]  # the left arm's
     checks = prior.sample(np.random.default_rng(seed + 1), check, radius)
     checks = np.concatenate([checks, np.concatenate([np.eye(K), -np.eye(K)]) * BAKE_AXIS_SD])
     many = prior.sample(np.random.default_rng(seed + 2), BAKE_MANY, radius)
     added = 0
     for rnd in range(rounds + 1):
         w = _fit_turn(X, need, np.radians(BAKE_FLOOR_DEG))
-        # the turned bust, linearised about the mean code (its template: the exact turn of the
-        # template; its basis: the derivative, by central differences): a turn's tangent moves the
-        # arm a little further out than the turn itself (safe), and the arm grows by 1 / cos of the
-        # turn's departure from the mean's (6 % at 20 degrees). The left arm's rows from the left
-        # turn, the right arm's as the mirror image (exact symmetry)
-        def turned(c):
-            J = b.joints_of(c)
-            V = b.posed(c)
-            return (turn_arm(b, V, J, "L", float(w[0] + w[1:] @ c)) - V)[rows]
-
-        coef = np.empty((K + 1, len(rows), 3))
-        coef[0] = turned(np.zeros(K))
-        for k in range(K):
-            e = np.zeros(K)
-            e[k] = BAKE_EPS
-            coef[1 + k] = (turned(e) - turned(-e)) / (2 * BAKE_EPS)
-        A = np.hstack([np.ones((len(X), 1)), X])
-        dT = np.zeros_like(b.template)
-        dB = np.zeros_like(b.basis)
-        dT[rows] = coef[0]
-        dB[:, rows] = coef[1:] / b.scale[:, None, None]
-        # the right arm: the mirror image of the left (the mirror rows of the left arm are the right arm's)
-        dT = dT + dT[b.mirror] * flip
-        dB = dB + dB[:, b.mirror] * flip * signs[:, None, None]
+        dT, dB = _turn_offsets(b, w, signs)
         if rnd == rounds:
             break
         # cutting planes: the check codes whose baked arm is under BAKE_TARGET out of the torso join
@@ -854,22 +841,72 @@ def bake_clearance(b: BustData, prior, radius: float | None, seed: int = BAKE_SE
         added += len(newX)
         X, need = np.concatenate([X, np.array(newX)]), np.concatenate([need, np.array(newn)])
     info = dict(b.info)
+    A = np.hstack([np.ones((len(X), 1)), X])
     info["clearance"] = {"baked": True, "fit_codes": int(len(C)), "cutting_planes": added, "margin_m": BAKE_MARGIN,
                          "turn_at_mean_deg": round(float(np.degrees(w[0])), 3),
                          "turn_fit_deg": {"p50": round(float(np.degrees(np.median(A @ w))), 2),
                                           "max": round(float(np.degrees((A @ w).max())), 2),
                                           "min": round(float(np.degrees((A @ w).min())), 2)},
                          }
+    out = apply_turn(b, w)
+    out.info = info
+    return out
+
+
+def _turn_offsets(b: BustData, w: np.ndarray, signs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(template offset, basis offset) of the arms turned by the linear turn ``w`` (intercept
+    first), linearised about the mean code: the template turned exactly, the basis by the turn's
+    derivative (central differences of BAKE_EPS). A turn's tangent moves the arm a little further
+    out than the turn itself (safe), and the arm grows by 1 / cos of the turn's departure from the
+    mean's (6 % at 20 degrees). The left arm's rows from the left turn, the right arm's as their
+    mirror image (exact symmetry; ``signs``: :func:`code_mirror_signs`)."""
+    K = len(b.basis)
+    flip = np.array([-1.0, 1.0, 1.0])
+    rows = np.nonzero(b.weights[:, 2] > 0)[0]  # the left arm's
+
+    def turned(c):
+        J = b.joints_of(c)
+        V = b.posed(c)
+        return (turn_arm(b, V, J, "L", float(w[0] + w[1:] @ c)) - V)[rows]
+
+    coef = np.empty((K + 1, len(rows), 3))
+    coef[0] = turned(np.zeros(K))
+    for k in range(K):
+        e = np.zeros(K)
+        e[k] = BAKE_EPS
+        coef[1 + k] = (turned(e) - turned(-e)) / (2 * BAKE_EPS)
+    dT = np.zeros_like(b.template)
+    dB = np.zeros_like(b.basis)
+    dT[rows] = coef[0]
+    dB[:, rows] = coef[1:] / b.scale[:, None, None]
+    # the right arm: the mirror image of the left (the mirror rows of the left arm are the right arm's)
+    dT = dT + dT[b.mirror] * flip
+    dB = dB + dB[:, b.mirror] * flip * signs[:, None, None]
+    return dT, dB
+
+
+def apply_turn(b: BustData, w) -> BustData:
+    """The bust ``b`` (unbaked) with the linear arm turn ``w`` (radians; intercept, then one
+    coefficient per identity component: :func:`bake_clearance`'s fit, or the pinned
+    :data:`synth.model.builders.makehuman.arm_turn.TURN`) folded into its template and basis.
+    Coefficients beyond the bust's components are dropped, missing ones are 0."""
+    if b.turn is not None:
+        raise ValueError("the bust's arm turn is already baked")
+    K = len(b.basis)
+    w = np.asarray(w, np.float64)
+    ww = np.zeros(K + 1)
+    ww[: min(len(w), K + 1)] = w[: K + 1]
+    dT, dB = _turn_offsets(b, ww, code_mirror_signs(b))
     out = BustData(**{f.name: getattr(b, f.name) for f in b.__dataclass_fields__.values()})
     out.template = b.template + dT
     out.basis = b.basis + dB
-    out.info = info
-    out.turn = w
+    out.info = dict(b.info)
+    out.turn = ww
     return out
 
 
 # ---- the head model with the bust appended (a builder option, not the default model) --------------
-def append_bust(m, b: BustData):
+def append_bust(m, b: BustData, name: str | None = None):
     """A copy of the head model ``m`` (:class:`synth.model.format.HeadModelData`, built from the same
     MakeHuman data) with the bust ``b`` (posed, its clearance baked: :func:`bake_clearance`) in its
     mesh:
@@ -883,7 +920,10 @@ def append_bust(m, b: BustData):
     * new rows: the bust's identity basis, zero expression rows, skin weight 1 on the root joint
       (``neck``: the plans rotate only jaw and eyes), hm08's uvs;
     * regions ``bust`` (every bust vertex), ``torso``, ``arm_l``, ``arm_r`` (arm weight >= 0.5),
-      ``bust_bottom`` (the open waist loop); ``shoulders`` and ``skin`` grow by the new vertices."""
+      ``bust_bottom`` (the open waist loop), ``elbow_l``, ``elbow_r`` (the loops the elbow caps
+      close, in order); ``shoulders`` and ``skin`` grow by the new vertices.
+
+    ``name``: the result's name (default: the model's, ``+bust``)."""
     import copy
 
     if b.turn is None:
@@ -955,6 +995,8 @@ def append_bust(m, b: BustData):
     reg["arm_l"] = np.sort(idx[b.weights[:, 2] >= ARM_WEIGHT]).astype(np.int32)
     reg["arm_r"] = np.sort(idx[b.weights[:, 4] >= ARM_WEIGHT]).astype(np.int32)
     reg["bust_bottom"] = idx[b.bottom_loop].astype(np.int32)
+    for s, _ in SIDES:
+        reg[f"elbow_{s.lower()}"] = idx[b.elbow_loops[s]].astype(np.int32)
     for k in ("shoulders", "skin"):
         if k in reg:
             reg[k] = np.concatenate([np.asarray(reg[k]), idx[new]]).astype(np.int32)
@@ -977,5 +1019,5 @@ def append_bust(m, b: BustData):
     prov["triangles"] = int(len(out.triangles))
     prov["polygons"] = int(len(pi))
     out.provenance = prov
-    out.name = m.name + "+bust"
+    out.name = m.name + "+bust" if name is None else name
     return out

@@ -12,6 +12,10 @@ import numpy as np
 from synth.errors import SynthError
 from synth.model.builders.makehuman.sources import check_files
 
+#: the builder's one random generator seed (``np.random.default_rng(SEED)``): the head's and the
+#: bust's identity samples are the same draws
+SEED = 20241128
+N_SAMPLES = 3000  # identity samples before mirroring (the PCA sees 2 * N_SAMPLES)
 AGE_YEARS = (18.0, 80.0)
 MODIFIER_SIGMA = 0.3  # std-dev of two-sided face/head modifiers (MakeHuman slider units, clipped to [-1, 1])
 ONE_SIDED_SIGMA = 0.25  # half-normal scale of one-sided shape modifiers (head-oval, chin-triangle, ...)
