@@ -10,7 +10,7 @@ throughput: the same plan (``--identities`` x 1 expression x ``--views`` at ``ci
   shards: worker start, bpy import, scene and asset build, writing, commit, and the backend's
   own start-up (a local Ray runtime; Slurm's scheduling), spread over the shards.
   ``slurm`` needs a running Slurm (``SLURM_CONF``; scripts/slurm_local.sh start).
-projection: seconds per frame at ``preview`` and ``production`` from a small local render
+projection: seconds per frame at each of ``--presets`` (preview, production, production-max) from a small local render
   (1 identity x 1 expression x ``--projection-views``; the first views of a scene pay its
   build, as a real shard's 390 frames do not, so this errs on the slow side), turned into
   hours for 1,500 identities (585,000 frames) on N machines like this one.
@@ -82,7 +82,7 @@ def throughput(args) -> None:
 
 def projection(args) -> None:
     per_frame = {}
-    for preset in ("preview", "production"):
+    for preset in args.presets:
         r = render("local", 1, 1, args.projection_views, preset)
         per_frame[preset] = (r["wall_seconds"] / r["frames_rendered"], r["render_seconds"] / r["frames_rendered"],
                              r["load"])
@@ -105,6 +105,8 @@ def main() -> None:
     ap.add_argument("--backends", nargs="+", default=["local", "ray"])
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--projection-views", type=int, default=2)
+    ap.add_argument("--presets", nargs="+", default=["preview", "production", "production-max"],
+                    help="projection: the presets timed")
     args = ap.parse_args()
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
     if args.what in ("throughput", "all"):

@@ -548,7 +548,7 @@ def main() -> None:
     ap.add_argument("work")
     ap.add_argument("--candidates", type=int, default=300)
     ap.add_argument("--seed", type=int, default=11)
-    ap.add_argument("--preset", default="production")
+    ap.add_argument("--preset", default="production-max", help="the preset of the planned frames: the study's base")
     ap.add_argument("--expressions", type=int, default=13)
     ap.add_argument("--views", type=int, default=30, help="pick: views planned per expression; persistent: views timed")
     ap.add_argument("--full-spp", type=int, default=512)

@@ -33,7 +33,10 @@ def test_render_presets_resolve_and_can_be_overridden():
     assert (ci.resolution, ci.samples) == ((64, 64), 4) and ci.samples <= 4
     prod = load_config(overrides=["render.preset=production", "render.samples=64"]).resolved().render
     assert prod.resolution == (512, 512) and prod.adaptive_sampling and prod.denoise and prod.samples == 64
-    assert set(RENDER_PRESETS) == {"ci", "preview", "production"}
+    assert set(RENDER_PRESETS) == {"ci", "preview", "production", "production-max"}
+    pmax = load_config(overrides=["render.preset=production-max"]).resolved().render
+    assert (pmax.samples, pmax.adaptive_threshold, pmax.path_guiding) == (256, 0.01, None)
+    assert prod.path_guiding is True
 
 
 def test_light_path_settings_are_recorded_only_when_set():
@@ -42,10 +45,10 @@ def test_light_path_settings_are_recorded_only_when_set():
     from synth.plan.planner import header_config
     from synth.plan.records import RenderSettings
 
-    plain = header_config(load_config(overrides=["render.preset=production"]).resolved())["render"]
+    plain = header_config(load_config(overrides=["render.preset=production-max"]).resolved())["render"]
     assert not {"diffuse_bounces", "hair_shape", "light_tree", "denoise_quality"} & set(plain)
     assert RenderSettings.from_json(plain).transparent_bounces == 8
-    cfg = load_config(overrides=["render.preset=production", "render.diffuse_bounces=2", "render.hair_shape=thick",
+    cfg = load_config(overrides=["render.preset=production-max", "render.diffuse_bounces=2", "render.hair_shape=thick",
                                  "render.light_tree=false", "render.denoise_prefilter=fast"])
     rec = header_config(cfg.resolved())["render"]
     assert (rec["diffuse_bounces"], rec["hair_shape"], rec["light_tree"], rec["denoise_prefilter"]) == (

@@ -60,7 +60,7 @@ def render_cmd(
     environments: Optional[int] = typer.Option(None, "--environments", min=1, max=100,
                                                help="Lighting environments per expression (default: config, 1)."),
     config: Optional[Path] = typer.Option(None, "--config", "-c", help="TOML configuration file."),
-    preset: Optional[str] = typer.Option(None, "--preset", "-p", help="Render preset: ci, preview or production."),
+    preset: Optional[str] = typer.Option(None, "--preset", "-p", help="Render preset: ci, preview, production or production-max."),
     workers: Optional[int] = typer.Option(None, "--workers", "-w", min=1, max=256,
                                           help="Workers at a time (local: default one per GPU, else 1; ray without "
                                                "--ray-address: CPUs of the local runtime, default all)."),

@@ -26,7 +26,8 @@ def test_a_plan_keeps_its_presets_settings_after_the_preset_changes(tmp_path, mo
     before = load_plan(tmp_path / "plan").render_settings()
     changed = copy.deepcopy(config.RENDER_PRESETS)
     changed["ci"].update(samples=99, denoise=True, adaptive_sampling=True, adaptive_threshold=0.05,
-                         diffuse_bounces=1, transparent_bounces=2, hair_shape="thick", light_tree=False)
+                         diffuse_bounces=1, transparent_bounces=2, hair_shape="thick", light_tree=False,
+                         path_guiding=True)
     monkeypatch.setattr(config, "RENDER_PRESETS", changed)  # the preset as a later release defines it
     plan = load_plan(tmp_path / "plan")
     assert plan.render_settings() == before and before["samples"] == 4 and before["denoise"] is False
@@ -45,6 +46,7 @@ def test_a_plan_keeps_its_presets_settings_after_the_preset_changes(tmp_path, mo
     assert r["preset"] == "ci" and r["samples"] == 4 and r["denoise"] is False and r["adaptive"] is False
     # ... and Cycles' own light paths, as before the preset could set them
     assert (r["diffuse_bounces"], r["transparent_bounces"], r["hair_shape"], r["light_tree"]) == (4, 8, "ribbons", True)
+    assert r["path_guiding"] is False
     # a plan made now takes the changed preset
     run_plan(load_config(None, ['render.preset="ci"']), 1, tmp_path / "plan2", seed=3)
     new = load_plan(tmp_path / "plan2").render_settings()
