@@ -31,8 +31,7 @@ RENDER_PRESETS: dict[str, dict[str, Any]] = {
     # frames and crops at about 0.8 of its CPU time; path guiding is CPU-only, so on a GPU it renders 192 plain samples
     "production": {"resolution": (512, 512), "samples": 192, "denoise": True, "adaptive_sampling": True,
                    "adaptive_threshold": 0.01, "path_guiding": True},
-    # the production preset of before the study: 256 samples, no path guiding (GPU farms: the same error as
-    # production's on the CPU)
+    # 256 samples, no path guiding: on a GPU (which has no path guiding) the error production reaches on the CPU
     "production-max": {"resolution": (512, 512), "samples": 256, "denoise": True, "adaptive_sampling": True,
                        "adaptive_threshold": 0.01},
 }
