@@ -118,13 +118,18 @@ def subdivide(W, faces: np.ndarray, is_cut: np.ndarray | None = None):
     a, b, c = faces.T
     nf = np.concatenate([np.stack([a, m01, m20], 1), np.stack([m01, b, m12], 1),
                          np.stack([m20, m12, c], 1), np.stack([m01, m12, m20], 1)])
-    E = len(uniq)
-    avg = sparse.csr_matrix((np.full(2 * E, 0.5), (np.repeat(np.arange(E), 2), uniq.ravel())), shape=(E, M))
-    W2 = sparse.vstack([W, avg @ W]).tocsr()
-    cut2 = None
-    if is_cut is not None:
-        cut2 = np.concatenate([is_cut, is_cut[uniq[:, 0]] & is_cut[uniq[:, 1]]])
+    W2, cut2 = _with_midpoints(W, is_cut, uniq)
     return W2, nf, cut2
+
+
+def _with_midpoints(W, is_cut: np.ndarray | None, edges: np.ndarray):
+    """``W`` with one row more per edge (the mean of its two vertices' rows), and the cut flags
+    extended (a midpoint is cut where both its ends are)."""
+    E, M = len(edges), W.shape[0]
+    avg = sparse.csr_matrix((np.full(2 * E, 0.5), (np.repeat(np.arange(E), 2), edges.ravel())), shape=(E, M))
+    W2 = sparse.vstack([W, avg @ W]).tocsr()
+    cut2 = None if is_cut is None else np.concatenate([is_cut, is_cut[edges[:, 0]] & is_cut[edges[:, 1]]])
+    return W2, cut2
 
 
 def subdivide_where(W, faces: np.ndarray, is_cut: np.ndarray | None, refine: np.ndarray):
@@ -160,13 +165,7 @@ def subdivide_where(W, faces: np.ndarray, is_cut: np.ndarray | None, refine: np.
         h = one & split[inv[k]]
         out += [np.stack([x[h], m[h], z[h]], 1), np.stack([m[h], y[h], z[h]], 1)]
     nf = np.concatenate(out)
-    su = uniq[split]
-    E = len(su)
-    avg = sparse.csr_matrix((np.full(2 * E, 0.5), (np.repeat(np.arange(E), 2), su.ravel())), shape=(E, M))
-    W2 = sparse.vstack([W, avg @ W]).tocsr()
-    cut2 = None
-    if is_cut is not None:
-        cut2 = np.concatenate([is_cut, is_cut[su[:, 0]] & is_cut[su[:, 1]]])
+    W2, cut2 = _with_midpoints(W, is_cut, uniq[split])
     return W2, nf, cut2
 
 
