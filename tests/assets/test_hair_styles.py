@@ -26,7 +26,10 @@ def test_short_back_and_sides_tapers_from_the_top_to_the_nape(ctx):
     """Top 6 cm, sides 8 mm: strands rooted on the top are about the top's length, those on the
     sides and back below the head's centre about the sides' (the clipper's taper between), and
     hardly any strand is longer than the top's length (the final push-out out of the head
-    stretches a few children, as it does those of short_straight)."""
+    stretches a few children, as it does those of short_straight). The sides and back lie along
+    the scalp at their 1 mm layer, and laying them over it joint by joint (strands.settle)
+    stretches them a little: the back's median is 8.8 mm (8.6 without the settle; drawn at
+    0.85-1 x 8 mm)."""
     g = hair.groom(ctx, {"id": "short_back_and_sides",
                          "params": {"top_length_m": 0.06, "side_length_m": 0.008, "parting": "left"}})
     c = head_frame(ctx)["centre"]
@@ -35,7 +38,7 @@ def test_short_back_and_sides_tapers_from_the_top_to_the_nape(ctx):
     assert np.median(L[z > 0.06]) > 0.85 * 0.06 and np.percentile(L, 99) <= 0.06 * 1.1
     assert np.median(L[z < -0.03]) < 0.008 * 1.1
     front_half = g.pts[:, 0, 1] < c[1] + 0.02
-    assert np.median(L[(z < 0.0) & ~front_half]) < 0.008 * 1.1  # the back, up to the head's centre height
+    assert np.median(L[(z < 0.0) & ~front_half]) < 0.008 * 1.15  # the back, up to the head's centre height
     mid = (z > 0.015) & (z < 0.05) & front_half  # inside the taper: in between, growing with height
     assert 0.008 < np.median(L[mid]) < 0.06
     assert np.corrcoef(z[mid], L[mid])[0, 1] > 0.5

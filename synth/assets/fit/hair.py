@@ -14,7 +14,7 @@ from synth.assets.fit.groom import Groom, Styling, setup
 from synth.assets.fit.headwear import headwear_cut
 from synth.assets.fit.keepout import envelope, face_keep_out, follow_the_leader, keep_out
 from synth.assets.fit.masks import hair_grows
-from synth.assets.fit.strands import (BACK, DOWN, FORWARD, LEFT, UP, add_curl, arc_length, grow, interpolate,
+from synth.assets.fit.strands import (BACK, DOWN, FORWARD, LEFT, UP, add_curl, arc_length, grow, interpolate, settle,
                                       push_out_strands, resample_fast, scale_count, transport_frames, trim_at_plane,
                                       trim_below)
 from synth.geometry import exact
@@ -372,6 +372,10 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
 
     clr_g = layer
     guides = push_out_strands(surface, guides, clr_g)
+    if xp is not None:
+        # children interpolate within their side of the parting: a child between guides combed
+        # to opposite sides would take their mean, straight down through the skull
+        group = group * 2 + (side_sign > 0)
 
     # children in the guides' root frames, within their interpolation group
     cr = surface.points(c_tri, c_bary)
@@ -390,6 +394,9 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
     if "lm" in hf:  # strands turned out of the wedge in front of the inner face (keepout.py)
         pts, turned, trimmed = keep_out(face_keep_out(surface.data, surface.V, hf["lm"], c), pts)
     clr = np.minimum(float(np.median(layer)), 0.6 * arc_length(pts))
+    # children blended from guides that drape over a shoulder on different sides run through it:
+    # laid over it from the root on (settle), not folded onto it point by point
+    pts = settle(surface, pts, clr)
     pts[:, 1:] = surface.push_out(pts[:, 1:], clr[:, 1:], iterations=2)
     return pts, clr, extra
 

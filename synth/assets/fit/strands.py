@@ -222,6 +222,35 @@ def grow(surface: Surface, roots: np.ndarray, normals: np.ndarray, lengths: np.n
     return out
 
 
+def settle(surface: Surface, P: np.ndarray, clearance, tol: float = 1e-4) -> np.ndarray:
+    """Strands (N, P, 3) that dip below their ``clearance`` ((N, P) or broadcastable) laid over the
+    surface instead: from the root on, each point keeps its segment's direction from the settled
+    point before it, is pushed out, given back its segment's length and pushed out again (as
+    :func:`grow` does; the second push lengthens segments that lie along the skin a little).
+    A strand that runs through a shoulder drapes over it; pushing its points out one by one along
+    the normal would fold it (points deep inside go to the far side's surface: hooks). Only strands
+    with a point below its clearance less ``tol`` are walked; walking one that stays above it
+    changes nothing but rounding, so which strands are walked is not a discrete choice."""
+    P = np.array(P, np.float64)
+    clr = np.broadcast_to(np.asarray(clearance, np.float64), P.shape[:-1])
+    d, _ = surface.signed_offset(P[:, 1:])
+    rows = np.flatnonzero((d < clr[:, 1:] - tol).any(1))
+    if not len(rows):
+        return P
+    Q = P[rows]
+    c = clr[rows]
+    seg = np.diff(Q, axis=1)
+    length = np.linalg.norm(seg, axis=2)
+    out = Q.copy()
+    for k in range(1, Q.shape[1]):
+        prev = out[:, k - 1]
+        p = surface.push_out(prev + seg[:, k - 1], c[:, k], iterations=1)
+        p = prev + length[:, k - 1, None] * normalize(p - prev)
+        out[:, k] = surface.push_out(p, c[:, k], iterations=1)
+    P[rows] = out
+    return P
+
+
 def push_out_strands(surface: Surface, P: np.ndarray, layer, exact: bool = False) -> np.ndarray:
     """Push all but the root points out of the head to min(layer, 0.6 x arc length)."""
     P = np.array(P, np.float64)
