@@ -1,23 +1,73 @@
 """Eyebrows: strands in a parametric brow shape around the ibug68 brow landmarks
 (assets_manifest/eyebrows.toml): arch, thickness profile (thick head, thin tail), density,
 unruliness, monobrow. Hairs lie nearly flat on the skin, pointing up at the head of the brow
-and outward/down along the tail."""
+and outward/down along the tail.
+
+The band under the strands (:func:`band`). A render carries a few hundred strands per face, each a
+fraction of a pixel wide at ``preview``: together they cover about a third of the brow, so a brow
+read as a thin, faint line whatever its thickness (docs/realism.md, "Eyebrows at the render's
+resolution"). Real brows read as a dense band at that size. The band is the optical density the
+strands do not carry: a coverage layer on the skin material in the brow's own shape
+(:func:`brow_shape`: the strands' thickness profile and arch, the monobrow's glabella patch), with an
+optical depth of :data:`BAND_DEPTH` x density at full coverage, less what the strands of this
+render already give (:func:`strand_depth`: their projected area over the brow's, which grows with
+the strand count and so with the resolution). So the brow's total optical depth is the style's at
+every resolution, and the strands keep the hair-by-hair structure where the pixels resolve it.
+The band's colour is the hair mass's (:func:`band_colour`). It is drawn per shading point from
+per-vertex brow coordinates (:func:`band_coordinates`, written once at build, so the band moves
+with the skin under expressions exactly as the strands' root triangles do); it draws no random
+number."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from dataclasses import dataclass
+
+from synth.appearance import pigment as pig
 from synth.assets.fit.groom import Groom, Styling, setup
 from synth.assets.fit.strands import LEFT, UP, arc_length, push_out_strands, scale_count
+from synth.assets.params import AssetPick
 from synth.geometry.normals import normalize
+from synth.model.meshutil import smoothstep
+
+#: the band's optical depth at full coverage per unit of the ``density`` parameter (the strands'
+#: share included): calibrated on preview renders against real photos (docs/realism.md)
+BAND_DEPTH = 2.0
+#: across the brow: full coverage up to |w| = BAND_FULL, none from |w| = BAND_EDGE, where w is the
+#: offset from the brow's centre line over half its thickness (the strands' roots: |w| < 1)
+BAND_FULL, BAND_EDGE = 0.6, 1.35
+#: along it: faded in over BAND_END of its length before the head and out after the tail
+BAND_END = 0.04
+#: the tail carries this much less density than the head
+BAND_TAIL = 0.35
+#: the monobrow's glabella patch at this share of the brows' density (the groom keeps half its roots)
+MONO_SHARE = 0.5
+#: what a vertex far from the brows gets as its across-coordinate (no band)
+FAR = 8.0
+#: how far (m) a vertex may lie from the brow line other than vertically and still carry the band
+DEPTH_REACH = 0.012
+#: the hair mass's colour (:func:`band_colour`): the share of light a fibre scatters back after
+#: twice its absorption, the specular reflection of its cuticle, an unpigmented fibre's albedo
+MASS_SCATTER, MASS_SHEEN, WHITE_MASS = 0.6, 0.03, 0.6
 
 
 def counts(resolution: int, density: float = 1.0) -> int:
     return max(40, int(scale_count(resolution, 1.6, 160, 1600) * float(density)))
 
 
+def brow_shape(s, thick: float, arch: float) -> tuple[np.ndarray, np.ndarray]:
+    """The brow's centre line (vertical offset from the landmark polyline, m) and thickness (m) at
+    ``s`` (0 inner end, 1 outer; clamped): the roots of the strands lie within half the thickness
+    of the centre line, and the band follows the same shape."""
+    s = np.clip(s, 0, 1)
+    centre = (arch - 0.3) * 0.008 * np.sin(np.pi * s ** 0.8) - 0.0015
+    return centre, thick * 0.0085 * (1.0 - 0.6 * s) + 0.0015
+
+
 def _brow_coords(p, line):
-    """(s in [0,1] inner->outer, vertical offset above the line, distance) to a brow polyline."""
+    """(s in [0,1] inner->outer, vertical offset above the line, distance) to a brow polyline
+    (nearest point over its segments, each extended by 30 % at both ends; ties: the first)."""
     a, b = line[:-1], line[1:]
     ab = b - a
     seg_len = np.linalg.norm(ab, axis=1)
@@ -29,7 +79,7 @@ def _brow_coords(p, line):
     i = np.arange(len(p))
     s = (cum[j] + t[i, j] * seg_len[j]) / cum[-1]
     v = p[:, 2] - q[i, j, 2]
-    return s, v
+    return s, v, d[i, j]
 
 
 def groom(ctx, entry) -> Groom:
@@ -52,11 +102,9 @@ def groom(ctx, entry) -> Groom:
     s_all = np.zeros(len(p))
     side_all = np.zeros(len(p))
     for sign, line in ((-1.0, right), (1.0, left)):
-        s, v = _brow_coords(p, line)
+        s, v, _ = _brow_coords(p, line)
         on_side = np.sign(p[:, 0] - 0.5 * (lm[21, 0] + lm[22, 0])) == sign
-        arch_off = (arch - 0.3) * 0.008 * np.sin(np.pi * np.clip(s, 0, 1) ** 0.8)
-        h = thick * 0.0085 * (1.0 - 0.6 * np.clip(s, 0, 1)) + 0.0015
-        centre = arch_off - 0.0015
+        centre, h = brow_shape(s, thick, arch)
         inside = on_side & (s > -0.03) & (s < 1.02) & (np.abs(v - centre) < 0.5 * h)
         keep |= inside
         s_all = np.where(inside, s, s_all)
@@ -90,3 +138,119 @@ def groom(ctx, entry) -> Groom:
             "monobrow": mono}
     return Groom("eyebrows", f"eyebrows_{sid}", surface, pts, tri, bary, clr, styling, info, pg,
                  roughness=0.35, exact=True)
+
+
+# --------------------------------------------------------------------------- the band under the strands
+
+
+@dataclass(frozen=True)
+class BrowBand:
+    """What the eyebrow rig paints on the skin: per-vertex brow coordinates (V, 3) (s along the
+    brow, w across it over half its thickness, g the monobrow's glabella coordinate; :data:`FAR`
+    where there is no brow), the optical depth at full coverage, the colour, and the record."""
+
+    coords: np.ndarray
+    depth: float
+    colour: tuple[float, float, float]
+    mono_share: float
+    record: dict
+
+
+def band_coordinates(V: np.ndarray, lm: np.ndarray, thick: float, arch: float, mono: bool,
+                     near: np.ndarray | None = None) -> np.ndarray:
+    """(V, 3) brow coordinates of the vertices ``V`` for the ibug68 points ``lm`` (the strands'
+    :func:`brow_shape`): s in [-0.5, 1.5] along the vertex's own side's brow (x below the brows'
+    midpoint: the subject's right; at it exactly: the left), w the offset from the centre line over
+    half the thickness, clipped to +-:data:`FAR`, and g (monobrow only, else :data:`FAR`) the larger
+    of the offsets from the glabella patch's centre over its half width and half height (within :data:`DEPTH_REACH` of it in depth). A vertex
+    not in ``near`` (default: all), or more than :data:`DEPTH_REACH` off the brow line other than
+    vertically (behind it: the eye sockets' lining; beyond its ends), keeps the sign of its w and
+    gets |w| = g = FAR, so that no triangle between it and the brow interpolates a band it does
+    not have. Smooth in the vertex positions elsewhere, so that linear interpolation over a
+    triangle gives the brow's outline finer than the triangles."""
+    V = np.asarray(V, np.float64)
+    out = np.zeros((len(V), 3))
+    out[:, 1:] = FAR
+    keep = np.ones(len(V), bool) if near is None else np.asarray(near, bool)
+    mid = 0.5 * (lm[21] + lm[22])
+    left = V[:, 0] >= mid[0]
+    for side, line in ((False, lm[17:22][::-1]), (True, lm[22:27])):
+        on = np.flatnonzero(left == side)
+        s, v, d = _brow_coords(V[on], line)
+        centre, h = brow_shape(s, thick, arch)
+        w = np.clip((v - centre) / (0.5 * h), -FAR, FAR)
+        off = ~keep[on] | (d * d - v * v > DEPTH_REACH ** 2)
+        out[on, 0] = np.clip(s, -0.5, 1.5)
+        out[on, 1] = np.where(off, np.where(w < 0.0, -FAR, FAR), w)
+    if mono:
+        half_w = 0.5 * abs(lm[22, 0] - lm[21, 0])
+        g = np.maximum(np.abs(V[:, 0] - mid[0]) / half_w, np.abs(V[:, 2] - mid[2]) / (0.004 * thick))
+        out[:, 2] = np.where(keep & (np.abs(V[:, 1] - mid[1]) < DEPTH_REACH), np.minimum(g, FAR), FAR)
+    return out
+
+
+def band_shape(coords: np.ndarray, mono_share: float = MONO_SHARE) -> np.ndarray:
+    """The band's relative density (0..1) at brow coordinates (..., 3): full across |w| <=
+    :data:`BAND_FULL`, none from :data:`BAND_EDGE`, faded over :data:`BAND_END` at the ends, the
+    tail :data:`BAND_TAIL` lighter; the glabella patch at ``mono_share``. The shader evaluates the
+    same formula per shading point (``blender_scripts.assets.eyebrows.band_nodes``)."""
+    c = np.asarray(coords, np.float64)
+    s, w, g = c[..., 0], c[..., 1], c[..., 2]
+    across = smoothstep(np.abs(w), BAND_EDGE, BAND_FULL)
+    ends = smoothstep(s, -BAND_END, 0.0) * smoothstep(s, 1.0 + BAND_END, 1.0)
+    tail = 1.0 - BAND_TAIL * np.clip(s, 0.0, 1.0)
+    return np.maximum(across * ends * tail, mono_share * smoothstep(g, BAND_EDGE, BAND_FULL))
+
+
+def band_coverage(coords: np.ndarray, depth: float, mono_share: float = MONO_SHARE) -> np.ndarray:
+    """The band's coverage: 1 - exp(-depth x :func:`band_shape`)."""
+    return 1.0 - np.exp(-float(depth) * band_shape(coords, mono_share))
+
+
+def brow_area(lm: np.ndarray, thick: float) -> float:
+    """Both brows' area (m^2): the thickness :func:`brow_shape` gives, integrated along the
+    landmark polylines (curvature of the skin ignored)."""
+    s = np.linspace(0.0, 1.0, 101)
+    h = brow_shape(s, thick, 0.3)[1]
+    mean_h = float(np.mean(0.5 * (h[:-1] + h[1:])))
+    length = sum(float(np.linalg.norm(np.diff(lm[a:b], axis=0), axis=1).sum()) for a, b in ((17, 22), (22, 27)))
+    return mean_h * length
+
+
+def strand_depth(g: Groom, lm: np.ndarray, thick: float) -> float:
+    """The strands' mean optical depth over the brows: their projected area (length x root
+    diameter x the mean of the taper profile, :func:`synth.assets.fit.groom.profile`) over
+    :func:`brow_area`. Strands lie nearly flat on the skin, so their area on it is their full area."""
+    from synth.assets.fit.groom import profile
+
+    L = np.linalg.norm(np.diff(np.asarray(g.pts, np.float64), axis=1), axis=2).sum(1)
+    taper = float(np.mean(profile(np.linspace(0.0, 1.0, 201), g.styling.tip_shape)))
+    return float(L.sum() * 2.0 * g.styling.root_radius * taper / brow_area(lm, thick))
+
+
+def band_colour(pg: pig.HairPigment) -> tuple[float, float, float]:
+    """Linear RGB albedo of a mass of these hairs seen from the front: pigmented fibres scatter
+    :data:`MASS_SCATTER` of the light that crosses them twice (exp(-2 sigma_a)) plus the cuticle's
+    :data:`MASS_SHEEN`; the unpigmented share (``white_fraction``) :data:`WHITE_MASS`."""
+    pigmented = MASS_SCATTER * np.exp(-2.0 * pg.absorption()) + MASS_SHEEN
+    wf = float(pg.white_fraction)
+    return tuple(float(x) for x in (1.0 - wf) * pigmented + wf * WHITE_MASS)
+
+
+def band(ctx, entry, g: Groom) -> BrowBand:
+    """The band under the strands of ``g`` (the groom of ``entry`` on ``ctx``), module docstring."""
+    prm = AssetPick.coerce("eyebrows", entry).params
+    thick, dens, arch, mono = float(prm.thickness), float(prm.density), float(prm.arch), bool(prm.monobrow)
+    lm = np.asarray(ctx.landmarks["ibug68"], np.float64)
+    V = np.asarray(ctx.vertices, np.float64)
+    regions = np.zeros(len(V), bool)
+    for r in ("brow", "face"):
+        if r in ctx.data.regions:
+            regions[np.asarray(ctx.data.regions[r])] = True
+    coords = band_coordinates(V, lm, thick, arch, mono, regions)
+    strands = strand_depth(g, lm, thick)
+    depth = max(0.0, BAND_DEPTH * dens - strands)
+    colour = band_colour(g.pigment)
+    record = {"optical_depth": round(depth, 4), "strand_depth": round(strands, 4),
+              "colour": [round(c, 4) for c in colour]}
+    return BrowBand(coords, depth, colour, MONO_SHARE if mono else 0.0, record)
