@@ -21,17 +21,32 @@ def _smoothstep(mat, x, e0: float, e1: float):
     return m(mat, "MULTIPLY", m(mat, "MULTIPLY", t, t), m(mat, "SUBTRACT", 3.0, m(mat, "MULTIPLY", t, 2.0)))
 
 
-def band_nodes(mat, depth: float, mono_share: float):
+def band_nodes(mat, depth: float, mono_share: float, seed: int = 0):
     """The band's coverage per shading point: :func:`synth.assets.fit.eyebrows.band_coverage` of
-    the interpolated ``brow_band`` coordinates, as nodes (socket)."""
+    the interpolated ``brow_band`` coordinates, as nodes (socket), its shape times a mean-one
+    texture (:data:`synth.assets.fit.eyebrows.TEXTURE`; the Noise's W from ``seed``)."""
     m = bmat.math_node
     sep = mat.node_tree.nodes.new("ShaderNodeSeparateXYZ")
     mat.node_tree.links.new(bmat.attribute(mat, "brow_band").outputs["Vector"], sep.inputs[0])
     s, w, g = sep.outputs["X"], sep.outputs["Y"], sep.outputs["Z"]
-    across = _smoothstep(mat, m(mat, "ABSOLUTE", w), fe.BAND_EDGE, fe.BAND_FULL)
-    ends = m(mat, "MULTIPLY", _smoothstep(mat, s, -fe.BAND_END, 0.0), _smoothstep(mat, s, 1.0 + fe.BAND_END, 1.0))
+    across = m(mat, "MULTIPLY", _smoothstep(mat, w, -fe.BAND_LOW[1], -fe.BAND_LOW[0]),
+               _smoothstep(mat, w, fe.BAND_UP[1], fe.BAND_UP[0]))
+    ends = m(mat, "MULTIPLY", _smoothstep(mat, s, -fe.BAND_END, fe.BAND_HEAD), _smoothstep(mat, s, 1.0 + fe.BAND_END, 1.0))
     tail = m(mat, "SUBTRACT", 1.0, m(mat, "MULTIPLY", m(mat, "MINIMUM", m(mat, "MAXIMUM", s, 0.0), 1.0), fe.BAND_TAIL))
     shape = m(mat, "MULTIPLY", m(mat, "MULTIPLY", across, ends), tail)
+    nt = mat.node_tree
+    uv = nt.nodes.new("ShaderNodeCombineXYZ")
+    nt.links.new(m(mat, "MULTIPLY", s, fe.TEXTURE_SCALE[0]), uv.inputs["X"])
+    nt.links.new(m(mat, "MULTIPLY", w, fe.TEXTURE_SCALE[1]), uv.inputs["Y"])
+    noise = nt.nodes.new("ShaderNodeTexNoise")
+    noise.noise_dimensions = "4D"
+    noise.inputs["Scale"].default_value = 1.0
+    noise.inputs["Detail"].default_value = 2.0
+    noise.inputs["W"].default_value = float(seed % 1000)
+    nt.links.new(uv.outputs[0], noise.inputs["Vector"])
+    tex = m(mat, "MULTIPLY_ADD", noise.outputs["Fac"], 2.0 * fe.TEXTURE)
+    tex.node.inputs[2].default_value = 1.0 - fe.TEXTURE
+    shape = m(mat, "MULTIPLY", shape, tex)
     if mono_share > 0.0:
         shape = m(mat, "MAXIMUM", shape, m(mat, "MULTIPLY", _smoothstep(mat, g, fe.BAND_EDGE, fe.BAND_FULL), mono_share))
     return m(mat, "SUBTRACT", 1.0, m(mat, "EXPONENT", m(mat, "MULTIPLY", shape, -float(depth))))
@@ -44,6 +59,6 @@ def build(ctx, entry: AssetPick) -> StrandRig:
     mat = ctx.materials.get(CLASSES["skin"]) if ctx.materials else None
     if ctx.head is not None and mat is not None and b.depth > 0.0:
         bmat.write_point_vector(ctx.head.data, "brow_band", b.coords)
-        bmat.layer_over(mat, "Base Color", b.colour, band_nodes(mat, b.depth, b.mono_share))
+        bmat.layer_over(mat, "Base Color", b.colour, band_nodes(mat, b.depth, b.mono_share, g.styling.seed))
     rig.info["band"] = dict(b.record, drawn=bool(ctx.head is not None and mat is not None and b.depth > 0.0))
     return rig

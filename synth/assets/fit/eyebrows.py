@@ -33,12 +33,16 @@ from synth.model.meshutil import smoothstep
 
 #: the band's optical depth at full coverage per unit of the ``density`` parameter (the strands'
 #: share included): calibrated on preview renders against real photos (docs/realism.md)
-BAND_DEPTH = 2.0
-#: across the brow: full coverage up to |w| = BAND_FULL, none from |w| = BAND_EDGE, where w is the
-#: offset from the brow's centre line over half its thickness (the strands' roots: |w| < 1)
+BAND_DEPTH = 3.0
+#: across the brow, w being the offset from the brow's centre line over half its thickness (the
+#: strands' roots: |w| < 1): full coverage from -BAND_LOW[0] to BAND_UP[0], none below -BAND_LOW[1]
+#: or above BAND_UP[1]: a defined lower edge, a feathered upper one
+BAND_LOW, BAND_UP = (0.7, 1.2), (0.45, 1.5)
+#: the monobrow's glabella patch: full up to g = BAND_FULL, none from BAND_EDGE
 BAND_FULL, BAND_EDGE = 0.6, 1.35
-#: along it: faded in over BAND_END of its length before the head and out after the tail
-BAND_END = 0.04
+#: along it: faded in from the head's end (s = -BAND_END) to s = BAND_HEAD (a feathered head), out
+#: over BAND_END after the tail
+BAND_END, BAND_HEAD = 0.04, 0.1
 #: the tail carries this much less density than the head
 BAND_TAIL = 0.35
 #: the monobrow's glabella patch at this share of the brows' density (the groom keeps half its roots)
@@ -49,7 +53,11 @@ FAR = 8.0
 DEPTH_REACH = 0.012
 #: the hair mass's colour (:func:`band_colour`): the share of light a fibre scatters back after
 #: twice its absorption, the specular reflection of its cuticle, an unpigmented fibre's albedo
-MASS_SCATTER, MASS_SHEEN, WHITE_MASS = 0.6, 0.03, 0.6
+MASS_SCATTER, MASS_SHEEN, WHITE_MASS = 0.6, 0.03, 0.3
+TEXTURE, TEXTURE_SCALE = 0.35, (30.0, 2.5)
+#: the shader's texture (``blender_scripts.assets.eyebrows.band_nodes``): the shape times
+#: 1 + TEXTURE x (2 noise - 1), a Noise texture over the brow coordinates, TEXTURE_SCALE cells per
+#: unit of s and w (about 1.5 mm along, 1-2 mm across): hair-scale unevenness, mean one
 
 
 def counts(resolution: int, density: float = 1.0) -> int:
@@ -190,14 +198,15 @@ def band_coordinates(V: np.ndarray, lm: np.ndarray, thick: float, arch: float, m
 
 
 def band_shape(coords: np.ndarray, mono_share: float = MONO_SHARE) -> np.ndarray:
-    """The band's relative density (0..1) at brow coordinates (..., 3): full across |w| <=
-    :data:`BAND_FULL`, none from :data:`BAND_EDGE`, faded over :data:`BAND_END` at the ends, the
-    tail :data:`BAND_TAIL` lighter; the glabella patch at ``mono_share``. The shader evaluates the
-    same formula per shading point (``blender_scripts.assets.eyebrows.band_nodes``)."""
+    """The band's relative density (0..1) at brow coordinates (..., 3): across, :data:`BAND_LOW`
+    and :data:`BAND_UP`; along, faded in over the head (:data:`BAND_END`, :data:`BAND_HEAD`) and
+    out after the tail, the tail :data:`BAND_TAIL` lighter; the glabella patch at ``mono_share``.
+    The shader evaluates the same formula per shading point (``blender_scripts.assets.eyebrows
+    .band_nodes``), times its mean-one texture."""
     c = np.asarray(coords, np.float64)
     s, w, g = c[..., 0], c[..., 1], c[..., 2]
-    across = smoothstep(np.abs(w), BAND_EDGE, BAND_FULL)
-    ends = smoothstep(s, -BAND_END, 0.0) * smoothstep(s, 1.0 + BAND_END, 1.0)
+    across = smoothstep(w, -BAND_LOW[1], -BAND_LOW[0]) * smoothstep(w, BAND_UP[1], BAND_UP[0])
+    ends = smoothstep(s, -BAND_END, BAND_HEAD) * smoothstep(s, 1.0 + BAND_END, 1.0)
     tail = 1.0 - BAND_TAIL * np.clip(s, 0.0, 1.0)
     return np.maximum(across * ends * tail, mono_share * smoothstep(g, BAND_EDGE, BAND_FULL))
 
