@@ -34,8 +34,8 @@ from synth.model.meshutil import smoothstep
 #: the band's optical depth at full coverage per unit of the ``density`` parameter (the strands'
 #: share included): calibrated on preview renders against real photos (docs/realism.md)
 BAND_DEPTH = 3.0
-#: across the brow, w being the offset from the brow's centre line over half its thickness (the
-#: strands' roots: |w| < 1): full coverage from -BAND_LOW[0] to BAND_UP[0], none below -BAND_LOW[1]
+#: across the brow, w being the offset from the middle of what the hairs cover over half its height
+#: (:func:`band_coordinates`): full coverage from -BAND_LOW[0] to BAND_UP[0], none below -BAND_LOW[1]
 #: or above BAND_UP[1]: a defined lower edge, a feathered upper one
 BAND_LOW, BAND_UP = (0.7, 1.2), (0.45, 1.5)
 #: the monobrow's glabella patch: full up to g = BAND_FULL, none from BAND_EDGE
@@ -71,6 +71,24 @@ def brow_shape(s, thick: float, arch: float) -> tuple[np.ndarray, np.ndarray]:
     s = np.clip(s, 0, 1)
     centre = (arch - 0.3) * 0.008 * np.sin(np.pi * s ** 0.8) - 0.0015
     return centre, thick * 0.0085 * (1.0 - 0.6 * s) + 0.0015
+
+
+def hair_direction(s) -> np.ndarray:
+    """A brow hair's mean angle above the horizontal (rad) at ``s``: up at the head, outward and
+    down along the tail (the groom adds its unruliness around it)."""
+    return np.radians(70.0 - 85.0 * np.asarray(s, np.float64))
+
+
+def hair_length(s) -> np.ndarray:
+    """A brow hair's length (m) at ``s`` before the groom's per-strand factor (0.7-1.1)."""
+    return 0.008 - 0.003 * np.asarray(s, np.float64)
+
+
+def hair_reach(s) -> np.ndarray:
+    """How far (m) above its root a brow hair's tip lies on average at ``s`` (0 where they point
+    down): the band covers the roots' band and this much above it."""
+    s = np.clip(s, 0, 1)
+    return 0.9 * hair_length(s) * np.maximum(np.sin(hair_direction(s)), 0.0)
 
 
 def _brow_coords(p, line):
@@ -128,10 +146,10 @@ def groom(ctx, entry) -> Groom:
     N = len(tri)
     R = surface.points(tri, bary)
     nrm = surface.normals(tri, bary)
-    ang = np.radians(70.0 - 85.0 * s) + np.radians(40.0) * unruly * rng.normal(0, 1, N)
+    ang = hair_direction(s) + np.radians(40.0) * unruly * rng.normal(0, 1, N)
     d = np.cos(ang)[:, None] * side[:, None] * LEFT[None] + np.sin(ang)[:, None] * UP[None]
     d = normalize(d - np.einsum("nd,nd->n", d, nrm)[:, None] * nrm)
-    L = (0.008 - 0.003 * s) * rng.uniform(0.7, 1.1, N) * (0.8 if sid == "sparse" else 1.0)
+    L = hair_length(s) * rng.uniform(0.7, 1.1, N) * (0.8 if sid == "sparse" else 1.0)
     lift = rng.uniform(0.3, 0.5 + 0.4 * unruly, N)
     k = np.linspace(0.0, 1.0, 5)[None, :, None]
     # a flat arc: leaves the skin at ``lift`` rad and bends back toward it
@@ -168,8 +186,8 @@ def band_coordinates(V: np.ndarray, lm: np.ndarray, thick: float, arch: float, m
                      near: np.ndarray | None = None) -> np.ndarray:
     """(V, 3) brow coordinates of the vertices ``V`` for the ibug68 points ``lm`` (the strands'
     :func:`brow_shape`): s in [-0.5, 1.5] along the vertex's own side's brow (x below the brows'
-    midpoint: the subject's right; at it exactly: the left), w the offset from the centre line over
-    half the thickness, clipped to +-:data:`FAR`, and g (monobrow only, else :data:`FAR`) the larger
+    midpoint: the subject's right; at it exactly: the left), w the offset from the middle of what
+    the hairs cover (the roots' band and :func:`hair_reach` above it) over half its height, clipped to +-:data:`FAR`, and g (monobrow only, else :data:`FAR`) the larger
     of the offsets from the glabella patch's centre over its half width and half height (within :data:`DEPTH_REACH` of it in depth). A vertex
     not in ``near`` (default: all), or more than :data:`DEPTH_REACH` off the brow line other than
     vertically (behind it: the eye sockets' lining; beyond its ends), keeps the sign of its w and
@@ -186,7 +204,8 @@ def band_coordinates(V: np.ndarray, lm: np.ndarray, thick: float, arch: float, m
         on = np.flatnonzero(left == side)
         s, v, d = _brow_coords(V[on], line)
         centre, h = brow_shape(s, thick, arch)
-        w = np.clip((v - centre) / (0.5 * h), -FAR, FAR)
+        lo, hi = centre - 0.5 * h, centre + 0.5 * h + hair_reach(s)
+        w = np.clip((v - 0.5 * (lo + hi)) / (0.5 * (hi - lo)), -FAR, FAR)
         off = ~keep[on] | (d * d - v * v > DEPTH_REACH ** 2)
         out[on, 0] = np.clip(s, -0.5, 1.5)
         out[on, 1] = np.where(off, np.where(w < 0.0, -FAR, FAR), w)
