@@ -31,7 +31,9 @@ def band_nodes(mat, depth: float, mono_share: float, seed: int = 0):
     s, w, g = sep.outputs["X"], sep.outputs["Y"], sep.outputs["Z"]
     across = m(mat, "MULTIPLY", _smoothstep(mat, w, -fe.BAND_LOW[1], -fe.BAND_LOW[0]),
                _smoothstep(mat, w, fe.BAND_UP[1], fe.BAND_UP[0]))
-    ends = m(mat, "MULTIPLY", _smoothstep(mat, s, -fe.BAND_END, fe.BAND_HEAD), _smoothstep(mat, s, 1.0 + fe.BAND_END, 1.0))
+    head = m(mat, "SUBTRACT", s, m(mat, "MULTIPLY", m(mat, "MULTIPLY", w, w), fe.BAND_ROUND))
+    ends = m(mat, "MULTIPLY", _smoothstep(mat, head, -fe.BAND_END, fe.BAND_HEAD),
+             _smoothstep(mat, s, 1.0 + fe.BAND_END, 1.0))
     tail = m(mat, "SUBTRACT", 1.0, m(mat, "MULTIPLY", m(mat, "MINIMUM", m(mat, "MAXIMUM", s, 0.0), 1.0), fe.BAND_TAIL))
     shape = m(mat, "MULTIPLY", m(mat, "MULTIPLY", across, ends), tail)
     nt = mat.node_tree

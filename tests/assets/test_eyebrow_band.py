@@ -97,7 +97,7 @@ def _offsets(p, cov, c, roots, rc):
 def test_the_band_follows_a_brow_raise(default_head, built, case):
     """Built on a face at rest, then the brows raised (the worker changes expressions in place):
     the band, carried by the vertices, lies where the strands are and rises with the brows as
-    their roots do, along the whole brow, to a fraction of a millimetre."""
+    their roots do, along the whole brow, to a millimetre (the skin stretches under the raise)."""
     hm = default_head
     ctx, g, b = _band(hm, case=built)
     surface, tri, bary, p0 = _skin_samples(ctx)
@@ -115,7 +115,7 @@ def test_the_band_follows_a_brow_raise(default_head, built, case):
     rise_band = float((cov * (p1[:, 2] - p0[:, 2])).sum() / cov.sum())
     assert rise_lm > 0.003 and rise_band > 0.5 * rise_lm, (rise_lm, rise_band)  # the expression does raise them
     after = _offsets(p1, cov, c, moved.points(g.tri, g.bary), rc)
-    assert np.abs(after - before).max() < 0.0005, after - before
+    assert np.abs(after - before).max() < 0.001, after - before  # a band left in place: the rise, 3-5 mm
 
 
 def test_the_band_tops_up_the_strands_to_the_styles_depth(default_head):

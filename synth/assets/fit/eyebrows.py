@@ -43,6 +43,11 @@ BAND_FULL, BAND_EDGE = 0.6, 1.35
 #: along it: faded in from the head's end (s = -BAND_END) to s = BAND_HEAD (a feathered head), out
 #: over BAND_END after the tail
 BAND_END, BAND_HEAD = 0.04, 0.1
+#: the head's outline is rounded: its fade moves along the brow by BAND_ROUND x w^2 (at the
+#: band's upper and lower edges, |w| = 1, about 4 mm toward the tail)
+BAND_ROUND = 0.1
+#: the share of a hair's mean tip height (:func:`hair_reach`) the band covers above the roots
+REACH_SHARE = 0.6
 #: the tail carries this much less density than the head
 BAND_TAIL = 0.35
 #: the monobrow's glabella patch at this share of the brows' density (the groom keeps half its roots)
@@ -85,10 +90,11 @@ def hair_length(s) -> np.ndarray:
 
 
 def hair_reach(s) -> np.ndarray:
-    """How far (m) above its root a brow hair's tip lies on average at ``s`` (0 where they point
-    down): the band covers the roots' band and this much above it."""
+    """How far (m) above its root a brow hair reaches densely at ``s`` (0 where the hairs point
+    down): :data:`REACH_SHARE` of its mean tip height (the groom's length factor averages 0.9;
+    a hair thins toward its tip). The band covers the roots' band and this much above it."""
     s = np.clip(s, 0, 1)
-    return 0.9 * hair_length(s) * np.maximum(np.sin(hair_direction(s)), 0.0)
+    return REACH_SHARE * hair_length(s) * np.maximum(np.sin(hair_direction(s)), 0.0)
 
 
 def _brow_coords(p, line):
@@ -218,14 +224,16 @@ def band_coordinates(V: np.ndarray, lm: np.ndarray, thick: float, arch: float, m
 
 def band_shape(coords: np.ndarray, mono_share: float = MONO_SHARE) -> np.ndarray:
     """The band's relative density (0..1) at brow coordinates (..., 3): across, :data:`BAND_LOW`
-    and :data:`BAND_UP`; along, faded in over the head (:data:`BAND_END`, :data:`BAND_HEAD`) and
+    and :data:`BAND_UP`; along, faded in over the head (:data:`BAND_END`, :data:`BAND_HEAD`,
+    rounded by :data:`BAND_ROUND`) and
     out after the tail, the tail :data:`BAND_TAIL` lighter; the glabella patch at ``mono_share``.
     The shader evaluates the same formula per shading point (``blender_scripts.assets.eyebrows
     .band_nodes``), times its mean-one texture."""
     c = np.asarray(coords, np.float64)
     s, w, g = c[..., 0], c[..., 1], c[..., 2]
     across = smoothstep(w, -BAND_LOW[1], -BAND_LOW[0]) * smoothstep(w, BAND_UP[1], BAND_UP[0])
-    ends = smoothstep(s, -BAND_END, BAND_HEAD) * smoothstep(s, 1.0 + BAND_END, 1.0)
+    head = s - BAND_ROUND * w * w
+    ends = smoothstep(head, -BAND_END, BAND_HEAD) * smoothstep(s, 1.0 + BAND_END, 1.0)
     tail = 1.0 - BAND_TAIL * np.clip(s, 0.0, 1.0)
     return np.maximum(across * ends * tail, mono_share * smoothstep(g, BAND_EDGE, BAND_FULL))
 
