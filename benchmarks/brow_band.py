@@ -238,6 +238,8 @@ def main(argv=None) -> int:
                     "renders' median)")
     ap.add_argument("--sheet", type=Path, help="crops of every face's brows (contains the photos: keep it local)")
     ap.add_argument("--renders-sheet", type=Path, help="crops of the renders' brows only")
+    ap.add_argument("--columns", type=int, default=4, help="sheet columns (the frames of one dataset per row: "
+                    "its frame count)")
     ap.add_argument("--no-photos", action="store_true", help="renders only")
     a = ap.parse_args(argv)
     rend = render_faces(a.renders)
@@ -268,9 +270,9 @@ def main(argv=None) -> int:
             cols.append(f"{np.median(v):.3f} ({v.min():.3f}-{v.max():.3f})")
         print(f"| {kind}s | {len(ms)} | " + " | ".join(cols) + " |")
     if a.sheet:
-        sheet(rend + real, iod, a.sheet)
+        sheet(rend + real, iod, a.sheet, columns=a.columns)
     if a.renders_sheet:
-        sheet(rend, iod, a.renders_sheet)
+        sheet(rend, iod, a.renders_sheet, columns=a.columns)
     return 0
 
 
