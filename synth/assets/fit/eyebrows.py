@@ -8,7 +8,8 @@ fraction of a pixel wide at ``preview``: together they cover about a third of th
 read as a thin, faint line whatever its thickness (docs/realism.md, "Eyebrows at the render's
 resolution"). Real brows read as a dense band at that size. The band is the optical density the
 strands do not carry: a coverage layer on the skin material in the brow's own shape
-(:func:`brow_shape`: the strands' thickness profile and arch, the monobrow's glabella patch), with an
+(:func:`brow_shape`: the strands' thickness profile and arch, :func:`hair_reach` above the roots,
+the monobrow's glabella patch), with an
 optical depth of :data:`BAND_DEPTH` x density at full coverage, less what the strands of this
 render already give (:func:`strand_depth`: their projected area over the brow's, which grows with
 the strand count and so with the resolution). So the brow's total optical depth is the style's at
@@ -20,9 +21,9 @@ number."""
 
 from __future__ import annotations
 
-import numpy as np
-
 from dataclasses import dataclass
+
+import numpy as np
 
 from synth.appearance import pigment as pig
 from synth.assets.fit.groom import Groom, Styling, setup
@@ -55,14 +56,15 @@ MONO_SHARE = 0.5
 #: what a vertex far from the brows gets as its across-coordinate (no band)
 FAR = 8.0
 #: how far (m) a vertex may lie from the brow line other than vertically and still carry the band
+#: (faded out over the last 3 mm)
 DEPTH_REACH = 0.012
 #: the hair mass's colour (:func:`band_colour`): the share of light a fibre scatters back after
 #: twice its absorption, the specular reflection of its cuticle, an unpigmented fibre's albedo
 MASS_SCATTER, MASS_SHEEN, WHITE_MASS = 0.6, 0.03, 0.3
-TEXTURE, TEXTURE_SCALE = 0.35, (30.0, 2.5)
 #: the shader's texture (``blender_scripts.assets.eyebrows.band_nodes``): the shape times
 #: 1 + TEXTURE x (2 noise - 1), a Noise texture over the brow coordinates, TEXTURE_SCALE cells per
 #: unit of s and w (about 1.5 mm along, 1-2 mm across): hair-scale unevenness, mean one
+TEXTURE, TEXTURE_SCALE = 0.35, (30.0, 2.5)
 
 
 def counts(resolution: int, density: float = 1.0) -> int:
@@ -191,15 +193,19 @@ class BrowBand:
 def band_coordinates(V: np.ndarray, lm: np.ndarray, thick: float, arch: float, mono: bool,
                      near: np.ndarray | None = None) -> np.ndarray:
     """(V, 3) brow coordinates of the vertices ``V`` for the ibug68 points ``lm`` (the strands'
-    :func:`brow_shape`): s in [-0.5, 1.5] along the vertex's own side's brow (x below the brows'
-    midpoint: the subject's right; at it exactly: the left), w the offset from the middle of what
-    the hairs cover (the roots' band and :func:`hair_reach` above it) over half its height, clipped to +-:data:`FAR`, and g (monobrow only, else :data:`FAR`) the larger
-    of the offsets from the glabella patch's centre over its half width and half height (within :data:`DEPTH_REACH` of it in depth). A vertex
-    not in ``near`` (default: all), or more than :data:`DEPTH_REACH` off the brow line other than
-    vertically (behind it: the eye sockets' lining; beyond its ends), keeps the sign of its w and
-    gets |w| = g = FAR, so that no triangle between it and the brow interpolates a band it does
-    not have. Smooth in the vertex positions elsewhere, so that linear interpolation over a
-    triangle gives the brow's outline finer than the triangles."""
+    :func:`brow_shape`): s in [-0.5, 1.5] along the vertex's own side's brow; w the offset from
+    the middle of what the hairs cover (the roots' band and :func:`hair_reach` above it) over half
+    its height, clipped to +-:data:`FAR`; g (monobrow only, else :data:`FAR`) the larger of the
+    offsets from the glabella patch's centre over its half width and half height.
+
+    A vertex not in ``near`` (default: all) gets |w| = g = FAR, keeping the sign of its w (w = 0:
+    up), so that no triangle between it and the brow interpolates a band it does not have; so,
+    gradually, does one that lies off the brow line other than vertically (behind it: the eye
+    sockets' lining; beyond its ends), over the last 3 mm before :data:`DEPTH_REACH` (g: off the
+    glabella in depth). Continuous in the vertex positions, so that no last-bit difference flips
+    a vertex in or out, and linear interpolation over a triangle draws the brow's outline finer
+    than the triangles. The side: x below the brows' midpoint is the subject's right, at it or
+    above the left (both give no band there: the midline lies beyond both brows' heads)."""
     V = np.asarray(V, np.float64)
     out = np.zeros((len(V), 3))
     out[:, 1:] = FAR
@@ -212,21 +218,23 @@ def band_coordinates(V: np.ndarray, lm: np.ndarray, thick: float, arch: float, m
         centre, h = brow_shape(s, thick, arch)
         lo, hi = centre - 0.5 * h, centre + 0.5 * h + hair_reach(s)
         w = np.clip((v - 0.5 * (lo + hi)) / (0.5 * (hi - lo)), -FAR, FAR)
-        off = ~keep[on] | (d * d - v * v > DEPTH_REACH ** 2)
+        off = np.where(keep[on], smoothstep(np.sqrt(np.maximum(d * d - v * v, 0.0)), DEPTH_REACH - 0.003,
+                                            DEPTH_REACH), 1.0)
         out[on, 0] = np.clip(s, -0.5, 1.5)
-        out[on, 1] = np.where(off, np.where(w < 0.0, -FAR, FAR), w)
+        out[on, 1] = np.clip(w + np.where(w < 0.0, -FAR, FAR) * off, -FAR, FAR)
     if mono:
         half_w = 0.5 * abs(lm[22, 0] - lm[21, 0])
         g = np.maximum(np.abs(V[:, 0] - mid[0]) / half_w, np.abs(V[:, 2] - mid[2]) / (0.004 * thick))
-        out[:, 2] = np.where(keep & (np.abs(V[:, 1] - mid[1]) < DEPTH_REACH), np.minimum(g, FAR), FAR)
+        off = np.where(keep, smoothstep(np.abs(V[:, 1] - mid[1]), DEPTH_REACH - 0.003, DEPTH_REACH), 1.0)
+        out[:, 2] = np.minimum(g + FAR * off, FAR)
     return out
 
 
 def band_shape(coords: np.ndarray, mono_share: float = MONO_SHARE) -> np.ndarray:
     """The band's relative density (0..1) at brow coordinates (..., 3): across, :data:`BAND_LOW`
     and :data:`BAND_UP`; along, faded in over the head (:data:`BAND_END`, :data:`BAND_HEAD`,
-    rounded by :data:`BAND_ROUND`) and
-    out after the tail, the tail :data:`BAND_TAIL` lighter; the glabella patch at ``mono_share``.
+    rounded by :data:`BAND_ROUND`) and out after the tail, the tail :data:`BAND_TAIL` lighter;
+    the glabella patch at ``mono_share``.
     The shader evaluates the same formula per shading point (``blender_scripts.assets.eyebrows
     .band_nodes``), times its mean-one texture."""
     c = np.asarray(coords, np.float64)
