@@ -50,7 +50,8 @@ def band_nodes(mat, depth: float, mono_share: float, seed: int = 0):
     tex.node.inputs[2].default_value = 1.0 - fe.TEXTURE
     shape = m(mat, "MULTIPLY", shape, tex)
     if mono_share > 0.0:
-        shape = m(mat, "MAXIMUM", shape, m(mat, "MULTIPLY", _smoothstep(mat, g, fe.BAND_EDGE, fe.BAND_FULL), mono_share))
+        glabella = _smoothstep(mat, g, fe.BAND_EDGE, fe.BAND_FULL)
+        shape = m(mat, "MAXIMUM", shape, m(mat, "MULTIPLY", glabella, mono_share))
     return m(mat, "SUBTRACT", 1.0, m(mat, "EXPONENT", m(mat, "MULTIPLY", shape, -float(depth))))
 
 
