@@ -21,27 +21,24 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("plan")
-    ap.add_argument("--rounds", type=int, default=2)
-    args = ap.parse_args()
-
+def cpu_by_mode(plan_path: str, rounds: int, modes: dict) -> dict[str, list[float]]:
+    """Cycles CPU seconds of every frame of the plan per mode: ``modes`` maps a name to a function
+    that sets the module state of that mode; the modes are taken in alternating order over
+    ``rounds`` rounds (also used by benchmarks/brow_band.py ``--cost``)."""
     from blender_scripts import scene as bscene
     from blender_scripts.worker import IdentityScene, software_versions
     from synth.model.head import HeadModel
     from synth.plan.io import load_plan
     from synth.plan.records import RenderSettings
 
-    sd = importlib.import_module("blender_scripts.assets.skin_detail")
-    planned = {"on": (sd.UNDER_EYE, sd.VELLUS_SHEEN), "off": ((0.0, 0.0), (0.0, 0.0))}
-    plan = load_plan(args.plan)
+    plan = load_plan(plan_path)
     hm = HeadModel(plan.model_data())
-    cpu: dict[str, list[float]] = {"on": [], "off": []}
-    with tempfile.TemporaryDirectory(prefix="synth-skin-") as d:
-        for rnd in range(args.rounds):
-            for mode in (("on", "off") if rnd % 2 == 0 else ("off", "on")):
-                sd.UNDER_EYE, sd.VELLUS_SHEEN = planned[mode]
+    names = list(modes)
+    cpu: dict[str, list[float]] = {k: [] for k in names}
+    with tempfile.TemporaryDirectory(prefix="synth-cost-") as d:
+        for rnd in range(rounds):
+            for mode in (names if rnd % 2 == 0 else names[::-1]):
+                modes[mode]()
                 for sid in plan.shard_ids():
                     spec = plan.shard_spec(sid)
                     ident = spec.identities[0]
@@ -54,6 +51,24 @@ def main() -> None:
                     finally:
                         sc.close()
                         bscene.reset()
+    return cpu
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("plan")
+    ap.add_argument("--rounds", type=int, default=2)
+    args = ap.parse_args()
+
+    sd = importlib.import_module("blender_scripts.assets.skin_detail")
+    planned = {"on": (sd.UNDER_EYE, sd.VELLUS_SHEEN), "off": ((0.0, 0.0), (0.0, 0.0))}
+
+    def setter(mode):
+        def f():
+            sd.UNDER_EYE, sd.VELLUS_SHEEN = planned[mode]
+        return f
+
+    cpu = cpu_by_mode(args.plan, args.rounds, {m: setter(m) for m in ("on", "off")})
     on, off = np.mean(cpu["on"]), np.mean(cpu["off"])
     print("| skin layers | frames | Cycles CPU s / frame |\n|---|---:|---:|")
     print(f"| planned strengths | {len(cpu['on'])} | {on:.2f} |\n| strengths 0 | {len(cpu['off'])} | {off:.2f} |")
