@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from synth.assets.fit.attach import push_out
-from synth.assets.fit.body import Body, Parts, WaveNoise
+from synth.assets.fit.body import Body, Parts
 from synth.assets.fit.hem import CAP_INSET, HEM_BAND, cap, hem_loops, smooth_loops
 from synth.assets.fit.masks import jaw_line
 
@@ -26,9 +26,11 @@ V_TIP_RADIUS = 0.01
 #: an opening of a torso shell's field must span this many body vertices (smaller ones are closed)
 MIN_OPENING = 8
 #: a torso shell is subdivided once where it lies less than this far (m) under the neck's base (its
-#: lowest vertex; the shell's necklines, collars, lapels and shoulders); further down (the bust's
-#: chest, back and arms, about 2 cm triangles) it keeps the body's triangles
-REFINE_BELOW_NECK = 0.2
+#: lowest vertex): the whole bust, to its waist (the body's 2 cm triangles halved: 8-10 mm edges,
+#: five or more a fold's wavelength, synth.assets.fit.folds)
+REFINE_BELOW_NECK = 0.6
+#: passes of averaging along the hem (then evenly respaced), on those finer triangles
+HEM_SMOOTHING = 16
 from synth.assets.fit.meshops import (grid_faces, icosphere, laplacian_smooth, negative_regions,
                                       oriented_boundary_loops, sweep_tube)
 
@@ -57,14 +59,6 @@ def vee_neckline(body: Body, rise: float, depth: float, half_angle: float):
         v = depth * np.maximum(0.0, 1.0 - (np.sqrt(np.asarray(th) ** 2 + a * a) - a) / half_angle)
         return np.minimum(fr.z_ring(th) + rise + 0.008 * (1 - np.cos(th)) - v, fr.z_cap(th))
     return z
-
-
-def wrinkle_offset(rng, base_off: float, amp: float, wavelength: float = 0.05):
-    noise = WaveNoise(rng, wavelength, 14, stretch=(1.0, 1.0, 0.35))
-
-    def off(P, N):
-        return base_off + amp * (0.5 + 0.5 * noise(P))
-    return off
 
 
 def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None, rim: float = 0.0,
@@ -96,7 +90,7 @@ def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None
         return C[:, 2] > z_refine
     P, F, cut, W = body.shell(body.torso_tris, np.minimum(f, hem_f), off_fn, weights=True, refine=near_neck)
     on_hem = cut & (np.abs(np.asarray(W @ hem_f)) < 1e-7)
-    P = smooth_loops(P, F, on_hem)
+    P = smooth_loops(P, F, on_hem, HEM_SMOOTHING, resample=True)
     # every other boundary loop (the neckline, a tank top's arm holes), spread evenly along itself
     P = smooth_loops(P, F, ~on_hem, NECK_SMOOTHING, min_fraction=1.0, resample=True)
     # the rim tubes are laid on the necklines after the fit (``trim.add_rims``): the trim and the
@@ -107,45 +101,6 @@ def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None
         Vc, Fc = cap(P, loop, inset=CAP_INSET)
         parts.add(Vc, Fc, slot, inside=True)
     return P, F, cut
-
-
-def shirt_collar(body: Body, parts: Parts, slot: int, base_off: float, open_front: bool, band_h: float = 0.03,
-                  leaf: float = 0.045, n: int = 56):
-    """Standing band on the neck (clipped from the neck surface) + leaves folded down/out."""
-    fr = body.frame
-    gap = 0.22 if open_front else 0.07
-
-    def z_lo(t):
-        return np.minimum(fr.z_ring(t) + 0.004 + 0.008 * (1 - np.cos(t)), fr.z_cap(t) - band_h)
-
-    def z_hi(t):
-        return np.minimum(z_lo(t) + band_h, fr.z_cap(t))
-
-    th = fr.theta(body.V)
-    z = body.V[:, 2]
-    f = np.minimum(np.minimum(z - z_lo(th), z_hi(th) - z), np.abs(th) - gap)
-    P, F, _ = body.shell(body.torso_tris, f, lambda p, nrm: np.full(len(p), base_off + 0.002))
-    parts.add(P, F, slot, trim=True)
-    # leaves: from the band top outward and down
-    top = body.neck_loop(z_hi, n, angle0=np.pi)  # index 0 at theta = 0 (front), seam in front
-    tt = fr.theta(top)
-    keep = np.abs(tt) >= gap
-    # order from +gap ... around the back ... to -gap
-    order = np.argsort(np.mod(tt[keep], 2 * np.pi))
-    top = top[keep][order]
-    top = body.query.query(top).point + fr.outward(top) * (base_off + 0.004)
-    out = fr.outward(top)
-    front = front_weight(fr.theta(top))
-    rows = []
-    for s in np.linspace(0.0, 1.0, 5):
-        down = leaf * (1.0 + 0.5 * front ** 4) * np.sin(s * np.pi / 2)
-        o = (0.004 + 0.018 * s) * (1.0 + 0.5 * front)
-        rows.append(top + out * o[:, None] - np.outer(down, [0.0, 0.0, 1.0]))
-    G = np.stack(rows, 1)  # (n_around, 5, 3)
-    Pl = G.reshape(-1, 3)
-    Pl = push_out(Pl, body.query, base_off + 0.003)
-    parts.add(Pl, grid_faces(G.shape[0], G.shape[1]), slot)
-    return top
 
 
 def necktie(body: Body, parts: Parts, slot: int, base_off: float):
