@@ -10,8 +10,8 @@ worn garment has them, on the body it is built on (no cloth solve):
   back per metre down, :data:`BRIDGE_SLOPE` sideways) leaves it; the gap to the skin, softly
   capped at the garment's ``bridge`` (``bridge * tanh(gap / bridge)``), faded where the skin
   turns to the side and averaged over the mesh, moves the shell forward (along -y), down to the
-  hem's band (:data:`HEM_FLAT`); there
-  the offset and the folds turn forward too (:data:`BRIDGE_TURN`). Vertical folds hang from there down to the waist.
+  hem's band (:data:`HEM_FLAT`); there the offset and the folds turn forward too
+  (:data:`BRIDGE_TURN`). Vertical folds hang from there down to the waist.
 * **waist**: horizontal compression folds over the last :data:`WAIST_BAND` above the hem.
 * **armpits**: tension folds radiating from each armpit over the chest and back (the lowest
   point where the arm meets the torso), strongest 3-10 cm from it.
@@ -64,6 +64,9 @@ DRAPES = {
 KIND = {"sweater": "knit", "turtleneck": "knit", "scarf_over_sweater": "knit", "shirt_collar": "shirt",
         "uniform:work_shirt": "shirt", "hoodie": "loose", "jacket_blazer": "tailored", "coat": "coat"}
 
+#: the chest's high point is the mean height of the front vertices this close (m) to the furthest
+#: forward
+CHEST_TOLERANCE = 0.003
 #: the sheet hanging from the chest moves back this much (m) per metre down
 DRAPE_SLOPE = 0.3
 #: ... and this much per metre sideways (the cloth spans the hollow between the breasts)
@@ -170,7 +173,8 @@ class Folds:
     """The offset of a torso shell (a callable for :meth:`Body.shell`, with per-body-vertex
     ``fields``): ``base`` (m, the fabric thickness and clearance) plus ``extra(P, N)`` (a
     garment's own shaping: lapels, a turtleneck's collar) along the normals, plus the folds of
-    ``drape`` and its bridge along -y. ``rng`` draws the meanders (5 plane-wave noises)."""
+    ``drape`` and its bridge along -y. ``rng`` draws the crests' meanders and heights, the
+    wrinkles (plane-wave noises) and the patterns' phases."""
 
     def __init__(self, body: Body, rng: np.random.Generator, base: float, drape: Drape, extra=None):
         self.base, self.drape, self.extra = float(base), drape, extra
@@ -180,7 +184,6 @@ class Folds:
         self.height = WaveNoise(rng, 2.0 * lam, 8)
         self.wrinkle = WaveNoise(rng, 0.6 * lam, 12, stretch=(1.0, 1.0, 0.4))
         self.phase = rng.uniform(0.0, 2.0 * np.pi, 4)
-        self.noise = WaveNoise(rng, lam, 8)
         V = body.V
         n = len(V)
         fr = body.frame
@@ -191,18 +194,21 @@ class Folds:
         t = np.zeros(n) if arms is None else arms.t
         gap = body.bridge_gap if drape.bridge > 0 else np.zeros(n)
         gap = drape.bridge * np.tanh(gap / drape.bridge) if drape.bridge > 0 else gap
-        # the chest's high point: the front torso vertex furthest forward
+        # the chest's high point: the mean height of the front torso vertices within CHEST_TOLERANCE
+        # of the furthest forward (no single vertex decides it)
         front = (member < 0.3) & (body.N[:, 1] < -0.5) & (V[:, 2] < self.z_neck - 0.05) & (body.hem > 0.05)
-        self.z_chest = float(V[front, 2][np.argmin(V[front, 1])]) if front.any() else self.z_neck - 0.15
+        if front.any():
+            y = V[front, 1]
+            self.z_chest = float(V[front, 2][y < y.min() + CHEST_TOLERANCE].mean())
+        else:
+            self.z_chest = self.z_neck - 0.15
         self.pits = _armpits(body)
-        self.pit_length = np.array([arms.length[s] for s in ("L", "R")]) if arms is not None else np.zeros(0)
         room = smoothstep(crease_room(body), *CREASE_ROOM)
         #: (V, 6) per body vertex: arm membership, place down the arm, hem distance, bridge gap,
         #: arm length (0 off the arms), room to fold (0 in a crease .. 1)
         alen = np.zeros(n) if arms is None else np.where(arms.side > 0, arms.length["L"],
                                                          np.where(arms.side < 0, arms.length["R"], 0.0))
         self.fields = np.stack([member, t, body.hem, gap, alen, room], 1)
-        self._V, self._tree = V, None
 
     def folds(self, P: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, dict]:
         """(n,) the fold displacement (m, >= 0, along the normal) at base points ``P`` with their
@@ -241,16 +247,6 @@ class Folds:
         body = parts["drape"] + parts["waist"] + parts["armpit"] + parts["elbow"]
         wr = WRINKLE_SHARE * (0.5 + 0.5 * self.wrinkle(P))
         return room * fade * d.amp * (hgt * np.minimum(body, 1.0) + wr), parts
-
-    def at(self, P: np.ndarray, N: np.ndarray) -> np.ndarray:
-        """(n, 3) the displacement off the skin at skin points ``P`` with normals ``N`` (the fields
-        of the nearest body vertex): where a shell built with these folds stands there."""
-        if self._tree is None:
-            from scipy.spatial import cKDTree
-
-            self._tree = cKDTree(self._V)
-        _, k = self._tree.query(np.asarray(P, np.float64))
-        return self(np.asarray(P, np.float64), np.asarray(N, np.float64), self.fields[k])
 
     def reach(self) -> float:
         """The largest offset (m) off the skin on the arms (the hair's keep-out): base + folds."""

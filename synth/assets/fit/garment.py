@@ -8,13 +8,18 @@ fits any identity (tested at +-3 SD):
    model's bust: the torso to the waist and the upper arms) are clipped exactly at a neckline
    field ``z_nl(theta) - z`` (``meshops.clip_by_field``; theta is the angle around the neck base
    ring, ``body.NeckFrame``), at the hem and at the garment's sleeves (:data:`SLEEVES`,
-   :mod:`synth.assets.fit.arms`), subdivided once within 20 cm of the neck's base, and offset
-   along the interpolated body normals by the fabric thickness plus small outward-only wrinkles. The
+   :mod:`synth.assets.fit.arms`), subdivided once (8-10 mm edges; but within 3 cm of the hem),
+   and offset along the interpolated body normals by the fabric thickness plus folds and drape
+   (:class:`synth.assets.fit.folds.Folds`: the cloth hanging from the chest, vertical folds under
+   it, compression folds at the waist and above the elbows, tension folds from the armpits; their
+   height and wavelength per kind of garment, :data:`synth.assets.fit.folds.DRAPES`). The
    neckline per garment: crew, V (depth from ``neckline_depth_m``), turtleneck collar
    (``collar_height_m``, capped 1.2 cm under the jaw line), deep V with raised lapels
    (``lapel_width_m``) for jackets and coats, scoop + straps (``strap_width_m``) for tank tops.
-2. **Add-ons** (:mod:`synth.assets.fit.garment_parts`): ribbed / rolled rims as tubes along
-   the neckline loop, shirt collars, hoods (up: a smoothed offset of the head behind the face
+2. **Add-ons** (:mod:`synth.assets.fit.garment_parts`, :mod:`synth.assets.fit.collars`): ribbed
+   rims as tubes along the neckline loop, shirt collars (a band standing round the neck and a leaf
+   folded over it, resting 1.2 mm over the band and the shirt's shell), a turtleneck's roll (its
+   top folded down over the collar, ribbed and creased), hoods (up: a smoothed offset of the head behind the face
    opening; down: a flattened tube on the upper back), drawstrings, ties, scarves (loop /
    drape / knot, ``scarf_thickness_m``) as swept tubes.
 3. **Fit** (:func:`synth.assets.fit.body.fit_shell`): the torso shell is clipped where it runs

@@ -3,8 +3,8 @@
 Necklines are height functions ``z(theta)`` around the neck base (``theta`` from
 :class:`~synth.assets.fit.body.NeckFrame`: 0 in front); the torso shell is the skin of the
 ``neck`` and ``shoulders`` regions clipped under a neckline and offset along the normals by
-the fabric thickness plus outward-only wrinkles. Add-ons: rim tubes on the cut, shirt
-collars (a band clipped from the neck surface plus swept leaves folded outward), ties,
+the fabric thickness plus folds (:mod:`synth.assets.fit.folds`). Add-ons: rim tubes on the cut
+(shirt collars and a turtleneck's roll: :mod:`synth.assets.fit.collars`), ties,
 tubes around the neck (rolled collars, scarves, hoods down), strips hanging down the chest
 (scarf ends, drawstrings) and a raised hood. Each adds its mesh to a
 :class:`~synth.assets.fit.body.Parts` with a material slot.
@@ -25,12 +25,10 @@ NECK_SMOOTHING = 12
 V_TIP_RADIUS = 0.01
 #: an opening of a torso shell's field must span this many body vertices (smaller ones are closed)
 MIN_OPENING = 8
-#: a torso shell is subdivided once where it lies less than this far (m) under the neck's base (its
-#: lowest vertex): the whole bust, to its waist (the body's 2 cm triangles halved: 8-10 mm edges,
-#: five or more a fold's wavelength, synth.assets.fit.folds)
-REFINE_BELOW_NECK = 0.6
-#: passes of averaging along the hem (then evenly respaced), on those finer triangles
-HEM_SMOOTHING = 16
+#: a torso shell is subdivided once (the body's 2 cm triangles halved: 8-10 mm edges, five or more
+#: a fold's wavelength, synth.assets.fit.folds) but within this distance (m, along the body) of
+#: the hem: the hem keeps the body's triangles, so it is smoothed and pushed out as before
+HEM_COARSE = 0.03
 from synth.assets.fit.meshops import (grid_faces, icosphere, laplacian_smooth, negative_regions,
                                       oriented_boundary_loops, sweep_tube)
 
@@ -83,14 +81,17 @@ def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None
     lab = negative_regions(body.F[body.torso_tris], np.where(np.isin(np.arange(len(f)), body.F[body.torso_tris]), f, 1.0))
     size = np.bincount(lab)
     f = np.where((f < 0) & (size[lab] < MIN_OPENING), 0.0, f)
-    # a plain height test (no angle): the same faces on every machine for the same vertices
-    z_refine = float(body.V[body.frame.ring, 2].min()) - REFINE_BELOW_NECK
+    # off the hem's band: the nearest body vertex's hem distance (ties to the lowest index: the
+    # same faces on every machine for the same vertices)
+    from scipy.spatial import cKDTree
 
-    def near_neck(C):
-        return C[:, 2] > z_refine
-    P, F, cut, W = body.shell(body.torso_tris, np.minimum(f, hem_f), off_fn, weights=True, refine=near_neck)
+    tree = cKDTree(body.V)
+
+    def off_hem(C):
+        return hem_f[tree.query(C)[1]] > HEM_COARSE
+    P, F, cut, W = body.shell(body.torso_tris, np.minimum(f, hem_f), off_fn, weights=True, refine=off_hem)
     on_hem = cut & (np.abs(np.asarray(W @ hem_f)) < 1e-7)
-    P = smooth_loops(P, F, on_hem, HEM_SMOOTHING, resample=True)
+    P = smooth_loops(P, F, on_hem)
     # every other boundary loop (the neckline, a tank top's arm holes), spread evenly along itself
     P = smooth_loops(P, F, ~on_hem, NECK_SMOOTHING, min_fraction=1.0, resample=True)
     # the rim tubes are laid on the necklines after the fit (``trim.add_rims``): the trim and the
