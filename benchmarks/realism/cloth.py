@@ -112,6 +112,9 @@ def sheet(args) -> None:
                  if (d / f"{aid}_{v}_{tag}.png").exists()]
         if tiles:
             rows.append(np.concatenate(tiles, 1))
+    if not rows:
+        raise SystemExit(f"cloth sheet: no renders <garment>_<view>_<tag>.png in {d} for tags {args.tags}; "
+                         "run `renders` first")
     w = max(r.shape[1] for r in rows)
     rows = [np.pad(r, ((0, 0), (0, w - r.shape[1]), (0, 0)), constant_values=128) for r in rows]
     img = np.concatenate(rows, 0)
