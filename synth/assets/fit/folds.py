@@ -88,8 +88,9 @@ ARMPIT_RISE, ARMPIT_REACH = (0.015, 0.04), (0.08, 0.15)
 #: radial folds from an armpit: this many per half turn around it (crests about ``wavelength``
 #: apart 9 cm from it)
 ARMPIT_RAYS = 6
-#: the sleeve's compression folds span this part of the upper arm (t, 0 armhole .. 1 elbow)
-ELBOW_T = (0.5, 0.85)
+#: the sleeve's compression folds span this part of the upper arm (t, 0 armhole .. 1 elbow; a short
+#: sleeve ends before it)
+ELBOW_T = (0.6, 0.85)
 #: folds shrink to nothing where the skin across a crease (an arm resting on the torso) is nearer
 #: than the first distance (m), and have their full height from the second on
 CREASE_ROOM = (0.012, 0.035)
@@ -248,9 +249,10 @@ class Folds:
         wr = WRINKLE_SHARE * (0.5 + 0.5 * self.wrinkle(P))
         return room * fade * d.amp * (hgt * np.minimum(body, 1.0) + wr), parts
 
-    def reach(self) -> float:
-        """The largest offset (m) off the skin on the arms (the hair's keep-out): base + folds."""
-        return self.base + self.drape.amp * (1.0 + WRINKLE_SHARE)
+    def reach(self, elbow: bool = True) -> float:
+        """The largest offset (m) off the skin on the upper arms (the hair's keep-out): base plus the
+        rings above the elbow (``elbow``: a sleeve that reaches them) and the wrinkles."""
+        return self.base + self.drape.amp * ((1.0 if elbow else 0.0) + WRINKLE_SHARE)
 
     def __call__(self, P: np.ndarray, N: np.ndarray, f: np.ndarray) -> np.ndarray:
         s = self.base + self.folds(P, f)[0]

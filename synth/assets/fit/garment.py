@@ -135,7 +135,7 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
 
     def wr(base, extra=None):  # the outer cloth's offset: thickness + folds (synth.assets.fit.folds)
         folds = Folds(body, rng, base, drape, extra)
-        reach.append(folds.reach())
+        reach.append(folds.reach(elbow=sleeves == "long"))
         return folds
 
     if aid in ("tshirt_crew", "sweater", "hoodie", "scarf_over_sweater") or (aid == "uniform" and style not in (
