@@ -117,6 +117,8 @@ class Body:
         self.lm = np.asarray(ibug68, np.float64)
         self._hem = None
         self._arms = False
+        self._bridge = None
+        self._torso_query = None
 
     @classmethod
     def of(cls, head) -> "Body":
@@ -144,6 +146,24 @@ class Body:
         return self._arms
 
     @property
+    def torso_query(self):
+        """Signed distance to the neck and shoulders' skin only (``torso_tris``: no chin or jaw
+        near a collar), built once."""
+        if self._torso_query is None:
+            self._torso_query = body_query(self.V, self.F, self.torso_tris)
+        return self._torso_query
+
+    @property
+    def bridge_gap(self) -> np.ndarray:
+        """(V,) how far a sheet hanging from the chest stands in front of the skin
+        (:func:`synth.assets.fit.folds.bridge_gap`), computed once."""
+        if self._bridge is None:
+            from synth.assets.fit.folds import bridge_gap
+
+            self._bridge = bridge_gap(self)
+        return self._bridge
+
+    @property
     def arm_faces(self) -> np.ndarray | None:
         """(T,) bool: the triangles of the bust's upper arms (None for a model without them)."""
         if self.arms is None:
@@ -156,7 +176,10 @@ class Body:
 
     def shell(self, tris: np.ndarray, field: np.ndarray, offset_fn, subdiv: int = 1, weights: bool = False,
               refine=None):
-        """Clip ``tris`` at ``field >= 0``, subdivide, offset by ``offset_fn(base points, normals)``.
+        """Clip ``tris`` at ``field >= 0``, subdivide, offset by ``offset_fn(base points, normals)``
+        (a distance along the normals, or (n, 3) displacements; an ``offset_fn`` with ``fields``,
+        (V, k) per body vertex, gets them interpolated as a third argument:
+        :class:`synth.assets.fit.folds.Folds`).
         Returns (P, faces, cut mask), and the (M, V) combination matrix of the body vertices
         giving each point's base position when ``weights``. ``refine``: subdivide only the faces
         for whose base centroids (n, 3) it returns True (and their neighbours as the mesh needs:
@@ -173,7 +196,9 @@ class Body:
                 W, faces, cut = subdivide_where(W, faces, cut, np.asarray(refine(base[faces].mean(1)), bool))
         base = np.asarray(W @ self.V)
         nrm = normalize(np.asarray(W @ self.N))
-        P = base + nrm * np.asarray(offset_fn(base, nrm))[:, None]
+        fields = getattr(offset_fn, "fields", None)
+        off = np.asarray(offset_fn(base, nrm) if fields is None else offset_fn(base, nrm, np.asarray(W @ fields)))
+        P = base + (off if off.ndim == 2 else nrm * off[:, None])
         return (P, faces, cut, W) if weights else (P, faces, cut)
 
     def neck_loop(self, z_fn, n: int = 48, angle0: float = 0.0) -> np.ndarray:

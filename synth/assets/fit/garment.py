@@ -8,13 +8,18 @@ fits any identity (tested at +-3 SD):
    model's bust: the torso to the waist and the upper arms) are clipped exactly at a neckline
    field ``z_nl(theta) - z`` (``meshops.clip_by_field``; theta is the angle around the neck base
    ring, ``body.NeckFrame``), at the hem and at the garment's sleeves (:data:`SLEEVES`,
-   :mod:`synth.assets.fit.arms`), subdivided once within 20 cm of the neck's base, and offset
-   along the interpolated body normals by the fabric thickness plus small outward-only wrinkles. The
+   :mod:`synth.assets.fit.arms`), subdivided once (8-10 mm edges; but within 3 cm of the hem),
+   and offset along the interpolated body normals by the fabric thickness plus folds and drape
+   (:class:`synth.assets.fit.folds.Folds`: the cloth hanging from the chest, vertical folds under
+   it, compression folds at the waist and above the elbows, tension folds from the armpits; their
+   height and wavelength per kind of garment, :data:`synth.assets.fit.folds.DRAPES`). The
    neckline per garment: crew, V (depth from ``neckline_depth_m``), turtleneck collar
    (``collar_height_m``, capped 1.2 cm under the jaw line), deep V with raised lapels
    (``lapel_width_m``) for jackets and coats, scoop + straps (``strap_width_m``) for tank tops.
-2. **Add-ons** (:mod:`synth.assets.fit.garment_parts`): ribbed / rolled rims as tubes along
-   the neckline loop, shirt collars, hoods (up: a smoothed offset of the head behind the face
+2. **Add-ons** (:mod:`synth.assets.fit.garment_parts`, :mod:`synth.assets.fit.collars`): ribbed
+   rims as tubes along the neckline loop, shirt collars (a band standing round the neck and a leaf
+   folded over it, resting 1.2 mm over the band and the shirt's shell), a turtleneck's roll (its
+   top folded down over the collar, ribbed and creased), hoods (up: a smoothed offset of the head behind the face
    opening; down: a flattened tube on the upper back), drawstrings, ties, scarves (loop /
    drape / knot, ``scarf_thickness_m``) as swept tubes.
 3. **Fit** (:func:`synth.assets.fit.body.fit_shell`): the torso shell is clipped where it runs
@@ -39,9 +44,10 @@ import numpy as np
 
 from synth.assets.fit.attach import push_out
 from synth.assets.fit.body import Body, Cloth, Parts, Shell
+from synth.assets.fit.collars import rolled_collar, shirt_collar
+from synth.assets.fit.folds import DRAPES, Folds, kind_of
 from synth.assets.fit.garment_parts import (crew_neckline, front_weight, hanging_strip, hood_up, neck_tube,
-                                            necktie, shirt_collar, torso_shell, vee_neckline,
-                                            wrinkle_offset)
+                                            necktie, torso_shell, vee_neckline)
 from synth.assets.fit.meshops import icosphere, smooth_max, smooth_min
 from synth.assets.params import AssetPick
 from synth.model.meshutil import smoothstep
@@ -124,9 +130,13 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
     sleeves = sleeves_of(aid, style if aid == "uniform" else None)
     reach = []  # the outer cloth's largest offset from the skin (base + wrinkles): hair keeps off it
 
-    def wr(base, amp=0.0015):
-        reach.append(base + amp)
-        return wrinkle_offset(rng, base, amp)
+    drape = DRAPES[kind_of(aid, style if aid == "uniform" else None)]
+    info["drape"] = {"amp_m": drape.amp, "wavelength_m": drape.wavelength, "bridge_m": drape.bridge}
+
+    def wr(base, extra=None):  # the outer cloth's offset: thickness + folds (synth.assets.fit.folds)
+        folds = Folds(body, rng, base, drape, extra)
+        reach.append(folds.reach(elbow=sleeves == "long"))
+        return folds
 
     if aid in ("tshirt_crew", "sweater", "hoodie", "scarf_over_sweater") or (aid == "uniform" and style not in (
             "scrubs", "work_shirt", "polo")):
@@ -180,25 +190,23 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
     elif aid == "turtleneck":
         h = float(p.collar_height_m)
         base = thick + 0.0015
-        wrf = wr(base, 0.002)
-
-        def off(P, N):
-            up = smoothstep(P[:, 2] - (fr.z_ring(fr.theta(P)) + 0.005), 0.0, 0.02)
-            return wrf(P, N) + 0.003 * up
+        def collar(P, N):  # the collar stands a little off the neck
+            return 0.003 * smoothstep(P[:, 2] - (fr.z_ring(fr.theta(P)) + 0.005), 0.0, 0.02)
         def z(t):  # the collar's top: h above the neck base, under the jaw, the corner between rounded
             top = fr.z_ring(t) + h
             return smooth_min(top, np.minimum(fr.z_cap(t), top + 1.0), COLLAR_ROUND)
-        torso_shell(body, parts, z, off, rim=0.006, rim_flatten=0.9, sleeves=sleeves)
-        # folded roll: a second tube a little under the top
-        neck_tube(body, parts, 0, lambda t: z(t) - 0.018, base + 0.009, 0.012)
+        torso_shell(body, parts, z, wr(base, collar), rim=0.006, rim_flatten=0.9, sleeves=sleeves)
+        # the top folded down over the collar's outside
+        rolled_collar(body, parts, 0, z, base + 0.003, thick, min(0.45 * h, 0.03), rng, ribbed=fabric == "wool_knit")
         info["collar_height_m"] = h
     elif aid in ("shirt_collar",) or (aid == "uniform" and style in ("work_shirt", "polo")):
         tie = bool(p.tie) and aid == "shirt_collar"
         open_top = bool(p.top_button_open) and not tie
         base = thick + 0.001
         depth = 0.045 if open_top else 0.0
-        torso_shell(body, parts, vee_neckline(body, 0.006, depth, 0.35), wr(base, 0.001), rim=0.0, sleeves=sleeves)
-        shirt_collar(body, parts, 0, base, open_top, leaf=0.035 if style == "polo" else 0.045)
+        P, F, _ = torso_shell(body, parts, vee_neckline(body, 0.006, depth, 0.35), wr(base), rim=0.0,
+                              sleeves=sleeves)
+        shirt_collar(body, parts, 0, base, open_top, (P, F), leaf=0.035 if style == "polo" else 0.045)
         if tie:
             cloths.append(Cloth("garment_tie", (rng.uniform(), 0.7, 0.5), "linen", 0.005, seed + 2))
             necktie(body, parts, 1, base + 0.004)
@@ -210,19 +218,19 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
             cloths.append(Cloth("garment_under", "white" if under == "shirt" else "grey", ufab, 0.005, seed + 3))
             ub = FABRICS[ufab][0] + 0.001
             if under == "shirt":
-                torso_shell(body, parts, vee_neckline(body, 0.006, 0.0, 0.35), wrinkle_offset(rng, ub, 0.0008), slot=1)
-                shirt_collar(body, parts, 1, ub, False, band_h=0.028, leaf=0.035)
+                P, F, _ = torso_shell(body, parts, vee_neckline(body, 0.006, 0.0, 0.35),
+                                      Folds(body, rng, ub, DRAPES["under"]), slot=1)
+                shirt_collar(body, parts, 1, ub, False, (P, F), band_h=0.028, leaf=0.035)
             else:
-                torso_shell(body, parts, crew_neckline(body, 0.006, 0.01), wrinkle_offset(rng, ub, 0.0008), slot=1,
-                            rim=0.002)
+                torso_shell(body, parts, crew_neckline(body, 0.006, 0.01), Folds(body, rng, ub, DRAPES["under"]),
+                            slot=1, rim=0.002)
         coat = aid == "coat"
         base = (0.014 if coat else 0.009) + thick
         lw = float(p.lapel_width_m)
         depth, half = (0.10, 0.9) if coat else (0.14, 0.85)
         zfn = vee_neckline(body, 0.02, depth, half)
-        wrf = wr(base, 0.002)
         # lapels: a raised band (+5 mm) along the V edge on the front
-        def off(P, N):
+        def lapels(P, N):
             th = fr.theta(P)
             r = fr.rxy(P)
             zr = fr.z_ring(th) + 0.02 + 0.008 * (1 - np.cos(th))
@@ -231,8 +239,8 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
             s = (np.abs(th) - edge) * r
             band = smoothstep(s, -0.002, 0.004) * (1.0 - smoothstep(s, lw - 0.008, lw))
             band = band * (np.cos(th) > 0.2) * (frac < 0.999)
-            return wrf(P, N) + 0.005 * band
-        torso_shell(body, parts, zfn, off, rim=0.003, rim_flatten=0.7, sleeves=sleeves)
+            return 0.005 * band
+        torso_shell(body, parts, zfn, wr(base, lapels), rim=0.003, rim_flatten=0.7, sleeves=sleeves)
         if coat and bool(p.collar_up):
             neck_tube(body, parts, 0, lambda t: np.minimum(fr.z_ring(t) + 0.04, fr.z_cap(t) - 0.02), base, 0.03,
                        angles=(0.6, 2 * np.pi - 0.6))
@@ -254,7 +262,7 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
             band = TANK_BAND - body.hem  # a band along the hem (the cut's arm stumps without the bust)
             # the openings' corners (strap on torso, torso on band) rounded: arm holes, not notches
             return smooth_max(smooth_max(torso, strap, TANK_ROUND), band, TANK_ROUND)
-        torso_shell(body, parts, lambda t: fr.z_ring(t), wr(base, 0.001), extra_field=extra, rim=0.0, sleeves=sleeves)
+        torso_shell(body, parts, lambda t: fr.z_ring(t), wr(base), extra_field=extra, rim=0.0, sleeves=sleeves)
         info["strap_width_m"] = w
     else:
         raise ValueError(f"unknown garment id '{aid}'")
@@ -264,6 +272,6 @@ def garment_shell(body: Body, entry: AssetPick | Mapping, rng: np.random.Generat
         from synth.assets.fit.arms import SHORT_SLEEVE_T, sleeve_end
 
         info["sleeve_end_t"] = round(sleeve_end(body.arms, SHORT_SLEEVE_T), 4)
-    info["cloth_reach_m"] = round(float(reach[0]), 6)  # the outer shell's (its first wrinkle offset)
+    info["cloth_reach_m"] = round(float(reach[0]), 6)  # the outer shell's (its first Folds)
     anchors = np.union1d(body.torso_tris, body.head_tris) if aid == "hoodie" else body.torso_tris
     return Shell("garment", f"garment_{aid}", parts, anchors, cloths, info)

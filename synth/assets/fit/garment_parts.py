@@ -3,8 +3,8 @@
 Necklines are height functions ``z(theta)`` around the neck base (``theta`` from
 :class:`~synth.assets.fit.body.NeckFrame`: 0 in front); the torso shell is the skin of the
 ``neck`` and ``shoulders`` regions clipped under a neckline and offset along the normals by
-the fabric thickness plus outward-only wrinkles. Add-ons: rim tubes on the cut, shirt
-collars (a band clipped from the neck surface plus swept leaves folded outward), ties,
+the fabric thickness plus folds (:mod:`synth.assets.fit.folds`). Add-ons: rim tubes on the cut
+(shirt collars and a turtleneck's roll: :mod:`synth.assets.fit.collars`), ties,
 tubes around the neck (rolled collars, scarves, hoods down), strips hanging down the chest
 (scarf ends, drawstrings) and a raised hood. Each adds its mesh to a
 :class:`~synth.assets.fit.body.Parts` with a material slot.
@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from synth.assets.fit.attach import push_out
-from synth.assets.fit.body import Body, Parts, WaveNoise
+from synth.assets.fit.body import Body, Parts
 from synth.assets.fit.hem import CAP_INSET, HEM_BAND, cap, hem_loops, smooth_loops
 from synth.assets.fit.masks import jaw_line
 
@@ -25,10 +25,10 @@ NECK_SMOOTHING = 12
 V_TIP_RADIUS = 0.01
 #: an opening of a torso shell's field must span this many body vertices (smaller ones are closed)
 MIN_OPENING = 8
-#: a torso shell is subdivided once where it lies less than this far (m) under the neck's base (its
-#: lowest vertex; the shell's necklines, collars, lapels and shoulders); further down (the bust's
-#: chest, back and arms, about 2 cm triangles) it keeps the body's triangles
-REFINE_BELOW_NECK = 0.2
+#: a torso shell is subdivided once (the body's 2 cm triangles halved: 8-10 mm edges, five or more
+#: a fold's wavelength, synth.assets.fit.folds) but within this distance (m, along the body) of
+#: the hem: the hem keeps the body's triangles, so it is smoothed and pushed out as before
+HEM_COARSE = 0.03
 from synth.assets.fit.meshops import (grid_faces, icosphere, laplacian_smooth, negative_regions,
                                       oriented_boundary_loops, sweep_tube)
 
@@ -59,14 +59,6 @@ def vee_neckline(body: Body, rise: float, depth: float, half_angle: float):
     return z
 
 
-def wrinkle_offset(rng, base_off: float, amp: float, wavelength: float = 0.05):
-    noise = WaveNoise(rng, wavelength, 14, stretch=(1.0, 1.0, 0.35))
-
-    def off(P, N):
-        return base_off + amp * (0.5 + 0.5 * noise(P))
-    return off
-
-
 def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None, rim: float = 0.0,
                 rim_slot=None, rim_flatten: float = 1.0, sleeves: str = "long"):
     """Torso shell under the neckline ``z_fn`` and above the hem (:mod:`synth.assets.fit.hem`),
@@ -89,12 +81,15 @@ def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None
     lab = negative_regions(body.F[body.torso_tris], np.where(np.isin(np.arange(len(f)), body.F[body.torso_tris]), f, 1.0))
     size = np.bincount(lab)
     f = np.where((f < 0) & (size[lab] < MIN_OPENING), 0.0, f)
-    # a plain height test (no angle): the same faces on every machine for the same vertices
-    z_refine = float(body.V[body.frame.ring, 2].min()) - REFINE_BELOW_NECK
+    # off the hem's band: the nearest body vertex's hem distance (ties to the lowest index: the
+    # same faces on every machine for the same vertices)
+    from scipy.spatial import cKDTree
 
-    def near_neck(C):
-        return C[:, 2] > z_refine
-    P, F, cut, W = body.shell(body.torso_tris, np.minimum(f, hem_f), off_fn, weights=True, refine=near_neck)
+    tree = cKDTree(body.V)
+
+    def off_hem(C):
+        return hem_f[tree.query(C)[1]] > HEM_COARSE
+    P, F, cut, W = body.shell(body.torso_tris, np.minimum(f, hem_f), off_fn, weights=True, refine=off_hem)
     on_hem = cut & (np.abs(np.asarray(W @ hem_f)) < 1e-7)
     P = smooth_loops(P, F, on_hem)
     # every other boundary loop (the neckline, a tank top's arm holes), spread evenly along itself
@@ -107,45 +102,6 @@ def torso_shell(body: Body, parts: Parts, z_fn, off_fn, slot=0, extra_field=None
         Vc, Fc = cap(P, loop, inset=CAP_INSET)
         parts.add(Vc, Fc, slot, inside=True)
     return P, F, cut
-
-
-def shirt_collar(body: Body, parts: Parts, slot: int, base_off: float, open_front: bool, band_h: float = 0.03,
-                  leaf: float = 0.045, n: int = 56):
-    """Standing band on the neck (clipped from the neck surface) + leaves folded down/out."""
-    fr = body.frame
-    gap = 0.22 if open_front else 0.07
-
-    def z_lo(t):
-        return np.minimum(fr.z_ring(t) + 0.004 + 0.008 * (1 - np.cos(t)), fr.z_cap(t) - band_h)
-
-    def z_hi(t):
-        return np.minimum(z_lo(t) + band_h, fr.z_cap(t))
-
-    th = fr.theta(body.V)
-    z = body.V[:, 2]
-    f = np.minimum(np.minimum(z - z_lo(th), z_hi(th) - z), np.abs(th) - gap)
-    P, F, _ = body.shell(body.torso_tris, f, lambda p, nrm: np.full(len(p), base_off + 0.002))
-    parts.add(P, F, slot, trim=True)
-    # leaves: from the band top outward and down
-    top = body.neck_loop(z_hi, n, angle0=np.pi)  # index 0 at theta = 0 (front), seam in front
-    tt = fr.theta(top)
-    keep = np.abs(tt) >= gap
-    # order from +gap ... around the back ... to -gap
-    order = np.argsort(np.mod(tt[keep], 2 * np.pi))
-    top = top[keep][order]
-    top = body.query.query(top).point + fr.outward(top) * (base_off + 0.004)
-    out = fr.outward(top)
-    front = front_weight(fr.theta(top))
-    rows = []
-    for s in np.linspace(0.0, 1.0, 5):
-        down = leaf * (1.0 + 0.5 * front ** 4) * np.sin(s * np.pi / 2)
-        o = (0.004 + 0.018 * s) * (1.0 + 0.5 * front)
-        rows.append(top + out * o[:, None] - np.outer(down, [0.0, 0.0, 1.0]))
-    G = np.stack(rows, 1)  # (n_around, 5, 3)
-    Pl = G.reshape(-1, 3)
-    Pl = push_out(Pl, body.query, base_off + 0.003)
-    parts.add(Pl, grid_faces(G.shape[0], G.shape[1]), slot)
-    return top
 
 
 def necktie(body: Body, parts: Parts, slot: int, base_off: float):
