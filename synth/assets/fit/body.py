@@ -18,11 +18,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from synth.assets.fit.attach import Binding, body_query, push_out
+from synth.assets.fit.hem import neighbour_mean_matrix
 from synth.assets.fit.masks import jaw_line, region_mask
 from synth.assets.fit.meshops import (clip_by_field, level_points, oriented_boundary_loops, resample_loop, subdivide,
                                       subdivide_where)
 from synth.assets.fit.trim import Rim, add_rims, place_rims, push_out_edges, trim_part
 from synth.geometry.normals import normalize, vertex_normals
+from synth.model.meshutil import smoothstep
 
 
 class WaveNoise:
@@ -156,10 +158,8 @@ class Body:
     @property
     def bridge_gap(self) -> np.ndarray:
         """(V,) how far a sheet hanging from the chest stands in front of the skin
-        (:func:`synth.assets.fit.folds.bridge_gap`), computed once."""
+        (:func:`bridge_gap`), computed once."""
         if self._bridge is None:
-            from synth.assets.fit.folds import bridge_gap
-
             self._bridge = bridge_gap(self)
         return self._bridge
 
@@ -361,3 +361,43 @@ def fit_shell(body: Body, shell: Shell, clearance: float) -> FittedShell:
     info = dict(shell.info, vertices=int(len(P)), faces=int(len(F)), trimmed_vertices=int(trimmed))
     return FittedShell(shell.cls, shell.name, P, F, M, shell.cloths, binding, body.skin_tris, clearance, info,
                        R if R.any() else None, loops, rims, body.V.copy())
+
+
+#: the sheet hanging from the chest moves back this much (m) per metre down
+DRAPE_SLOPE = 0.3
+#: ... and this much per metre sideways (the cloth spans the hollow between the breasts)
+BRIDGE_SLOPE = 0.8
+#: averaging passes of the bridge gap over the body's mesh
+BRIDGE_SMOOTHING = 12
+
+
+def bridge_gap(body: Body) -> np.ndarray:
+    """(V,) how far (m, >= 0, uncapped) a sheet hanging from the chest stands in front of each
+    front torso vertex (0 elsewhere): see :mod:`synth.assets.fit.folds`."""
+    V, N = body.V, body.N
+    n = len(V)
+    on = np.zeros(n, bool)
+    on[np.unique(body.F[body.torso_tris])] = True
+    arms = body.arms
+    if arms is not None:
+        on &= arms.member < 0.3
+    z_neck = float(V[body.frame.ring, 2].min())
+    on &= (N[:, 1] < -0.2) & (V[:, 2] < z_neck - 0.03)
+    idx = np.nonzero(on)[0]
+    gap = np.zeros(n)
+    if len(idx) == 0:
+        return gap
+    P = V[idx]
+    y_cloth = np.empty(len(idx))
+    for s in range(0, len(idx), 512):
+        p = P[s:s + 512, None, :]
+        dz = P[None, :, 2] - p[..., 2]
+        cand = P[None, :, 1] + DRAPE_SLOPE * dz + BRIDGE_SLOPE * np.abs(P[None, :, 0] - p[..., 0])
+        cand = np.where(dz >= 0.0, cand, np.inf)
+        y_cloth[s:s + 512] = cand.min(1)
+    # fading out where the skin turns sideways (no step at the edge of the front)
+    gap[idx] = np.maximum(P[:, 1] - y_cloth, 0.0) * smoothstep(-N[idx, 1], 0.2, 0.7)
+    M = neighbour_mean_matrix(body.F[body.torso_tris], n)
+    for _ in range(BRIDGE_SMOOTHING):
+        gap = M @ gap
+    return gap

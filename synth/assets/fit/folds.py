@@ -6,8 +6,8 @@ worn garment has them, on the body it is built on (no cloth solve):
 
 * **drape** (below the chest's high point): the cloth hangs from the chest instead of following
   the skin into the hollow under it and between the breasts. Per front vertex, the cloth's
-  front lies where a sheet falling from every higher vertex (a slope of :data:`DRAPE_SLOPE`
-  back per metre down, :data:`BRIDGE_SLOPE` sideways) leaves it; the gap to the skin, softly
+  front lies where a sheet falling from every higher vertex (a slope of :data:`~synth.assets.fit.body.DRAPE_SLOPE`
+  back per metre down, :data:`~synth.assets.fit.body.BRIDGE_SLOPE` sideways) leaves it; the gap to the skin, softly
   capped at the garment's ``bridge`` (``bridge * tanh(gap / bridge)``), faded where the skin
   turns to the side and averaged over the mesh, moves the shell forward (along -y), down to the
   hem's band (:data:`HEM_FLAT`); there the offset and the folds turn forward too
@@ -67,15 +67,9 @@ KIND = {"sweater": "knit", "turtleneck": "knit", "scarf_over_sweater": "knit", "
 #: the chest's high point is the mean height of the front vertices this close (m) to the furthest
 #: forward
 CHEST_TOLERANCE = 0.003
-#: the sheet hanging from the chest moves back this much (m) per metre down
-DRAPE_SLOPE = 0.3
-#: ... and this much per metre sideways (the cloth spans the hollow between the breasts)
-BRIDGE_SLOPE = 0.8
 #: where the bridge's gap passes this (m), the offset and the folds go forward (-y), not along the
 #: skin's normal
 BRIDGE_TURN = 0.006
-#: averaging passes of the bridge gap over the body's mesh
-BRIDGE_SMOOTHING = 12
 #: the folds grow from nothing at the neck's base to full height this far (m) under it
 NECK_FADE = 0.06
 #: height (m) of the band above the hem with horizontal (compression) folds
@@ -101,40 +95,6 @@ WRINKLE_SHARE = 0.25
 def kind_of(aid: str, style: str | None = None) -> str:
     """The kind of :data:`DRAPES` of garment ``aid`` (a uniform's ``style``)."""
     return KIND.get(f"{aid}:{style}", KIND.get(aid, "fitted"))
-
-
-def bridge_gap(body: Body) -> np.ndarray:
-    """(V,) how far (m, >= 0, uncapped) a sheet hanging from the chest stands in front of each
-    front torso vertex (0 elsewhere): see the module docstring."""
-    from synth.assets.fit.hem import neighbour_mean_matrix
-
-    V, N = body.V, body.N
-    n = len(V)
-    on = np.zeros(n, bool)
-    on[np.unique(body.F[body.torso_tris])] = True
-    arms = body.arms
-    if arms is not None:
-        on &= arms.member < 0.3
-    z_neck = float(V[body.frame.ring, 2].min())
-    on &= (N[:, 1] < -0.2) & (V[:, 2] < z_neck - 0.03)
-    idx = np.nonzero(on)[0]
-    gap = np.zeros(n)
-    if len(idx) == 0:
-        return gap
-    P = V[idx]
-    y_cloth = np.empty(len(idx))
-    for s in range(0, len(idx), 512):
-        p = P[s:s + 512, None, :]
-        dz = P[None, :, 2] - p[..., 2]
-        cand = P[None, :, 1] + DRAPE_SLOPE * dz + BRIDGE_SLOPE * np.abs(P[None, :, 0] - p[..., 0])
-        cand = np.where(dz >= 0.0, cand, np.inf)
-        y_cloth[s:s + 512] = cand.min(1)
-    # fading out where the skin turns sideways (no step at the edge of the front)
-    gap[idx] = np.maximum(P[:, 1] - y_cloth, 0.0) * smoothstep(-N[idx, 1], 0.2, 0.7)
-    M = neighbour_mean_matrix(body.F[body.torso_tris], n)
-    for _ in range(BRIDGE_SMOOTHING):
-        gap = M @ gap
-    return gap
 
 
 def crease_room(body: Body) -> np.ndarray:
