@@ -69,7 +69,7 @@ def crops(args) -> None:
 
 
 def cost(args) -> None:
-    import render as rb
+    from benchmarks import render as rb
 
     from synth.model.head import HeadModel
 
@@ -80,7 +80,7 @@ def cost(args) -> None:
         times = []
         for sid in plan.shard_ids()[: args.identities]:
             sc, ident = rb._scene(plan, sid, hm)
-            for f in ident["expressions"][0]["frames"]:
+            for f in ident.expressions[0].frames:
                 t = [sc.render(f, tmp)[0]["render_seconds"] for _ in range(args.repeats)]
                 times.append(min(t))
             sc.close()
