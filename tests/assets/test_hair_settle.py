@@ -1,7 +1,7 @@
 """Loose hair over the bust (synth.assets.fit.strands.settle, the parting in hair._free):
-children blended from guides that drape over a shoulder on different sides, or that are combed
-to opposite sides of a parting, used to run through the body and were then pushed out point by
-point, which folded them into hooks."""
+a child blended from guides that drape over a shoulder on different sides, or that are combed to
+opposite sides of a parting, runs through the body; pushed out point by point it folds into hooks,
+laid over the body from the root it does not."""
 
 from __future__ import annotations
 
@@ -48,9 +48,9 @@ def test_settle_drapes_a_strand_through_the_body_and_keeps_its_length(default_he
 def test_loose_hair_lies_over_the_bust_without_hooks(default_head, style, params):
     """Three draws each: no strand point more than 0.5 mm inside the body, and at most 2.5 % of
     the strands turn by more than 120 degrees anywhere past their first joint (where a strand
-    leaves the scalp along its normal). Before the settle and the parting split: 50 points
-    inside and 168 strands of 5,760 (2.9 %) for long_straight; the ears' thin shells are where
-    most remaining turns are."""
+    leaves the scalp along its normal). Without the settle and the parting split the same
+    long_straight draws have 50 points inside and 168 of 5,760 strands (2.9 %) turning so; the
+    ears' thin shells are where most of the turns left lie."""
     hooks = n = 0
     for ident in (1, 2, 3):
         ctx = asset_scene.head_arrays(default_head, "neutral", 64, ident, 0)

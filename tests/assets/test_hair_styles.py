@@ -28,7 +28,7 @@ def test_short_back_and_sides_tapers_from_the_top_to_the_nape(ctx):
     hardly any strand is longer than the top's length (the final push-out out of the head
     stretches a few children, as it does those of short_straight). The sides and back lie along
     the scalp at their 1 mm layer, and laying them over it joint by joint (strands.settle)
-    stretches them a little: the back's median is 8.8 mm (8.6 without the settle; drawn at
+    stretches them a little: the back's median is 8.8 mm (8.6 if they are not settled; drawn at
     0.85-1 x 8 mm)."""
     g = hair.groom(ctx, {"id": "short_back_and_sides",
                          "params": {"top_length_m": 0.06, "side_length_m": 0.008, "parting": "left"}})

@@ -87,8 +87,8 @@ def test_dressed_hair_keeps_off_the_sleeves():
     """Hair is groomed before the garment, clear of the skin; once the garment exists (``dress``) its
     strands keep the sleeves' reach off the upper arms (synth.assets.fit.arms.ArmKeepOut), also
     after an expression change. Long straight hair on this head lies on a sweater's sleeves
-    otherwise (the groom keeps it off the skin, not off the cloth; a T-shirt's short sleeve no
-    longer reaches it since the groom lays strands over the body, strands.settle)."""
+    otherwise (the groom keeps it off the skin, not off the cloth; a T-shirt's short sleeve does
+    not reach it: the groom lays strands over the body, strands.settle)."""
     from tests.support import asset_scene
     from blender_scripts.assets import dress, update
     from synth.assets.fit.arms import HAIR_MAX_DEPTH
