@@ -230,6 +230,10 @@ class _AfroField:
         return (1.0 - shell) * normalize(d) + shell * (normalize(t) - 0.3 * u)
 
 
+#: roots this close (m) to a parting's line are ties between its sides (broken by index)
+PARTING_TIE_M = 1e-9
+
+
 def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
     c = hf["centre"]
     gr = surface.points(g_tri, g_bary)
@@ -244,7 +248,10 @@ def _free(ctx, sid, prm, surface, hf, g_tri, g_bary, c_tri, c_bary, P, rng):
     rel = gr - c
     front = np.clip((-rel[:, 1] - 0.02) / 0.05, 0.0, 1.0) * (gr[:, 2] > hf["brow_z"] + 0.01)
     top = np.clip((gr[:, 2] - (c[2] + 0.0)) / 0.04, 0.0, 1.0)
-    side_sign = np.where(gr[:, 0] >= (xp if xp is not None else c[0]), 1.0, -1.0)
+    # each guide's side of the parting (its sweep and its children's blend): a root within
+    # PARTING_TIE_M of the line is a tie, broken by the guide's index
+    dx = gr[:, 0] - (xp if xp is not None else c[0])
+    side_sign = np.where(np.abs(dx) > PARTING_TIE_M, np.sign(dx), np.where(np.arange(G) % 2 == 0, 1.0, -1.0))
 
     group = np.zeros(G, np.int64)  # interpolation groups (children never mix groups)
     side_floor, volume = -0.03, 0.15  # buzz cut, undercut, afro; the loose styles set their own below
